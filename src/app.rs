@@ -1,0 +1,135 @@
+//! What `valgi render` does, as a library call: load the scene, pick the camera, build the
+//! method, render, write the files, and report. The binary only parses arguments.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use crate::gpu::{GpuContext, GpuError};
+use crate::image_io::{ensure_writable, ImageError};
+use crate::method;
+use crate::raster::{RenderError, RenderSettings};
+use crate::scene::{self, builtin::BuiltinParams, SceneError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum AppError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Image(#[from] ImageError),
+}
+
+/// One `valgi render` invocation.
+#[derive(Clone, Debug)]
+pub struct RenderRequest {
+    /// Built-in scene name or a `.gltf`/`.glb` path.
+    pub scene: String,
+    pub method: String,
+    pub settings: RenderSettings,
+    /// Camera name or index; `None` = the scene's first camera (or a framing default).
+    pub camera: Option<String>,
+    /// Files to write; the extension picks EXR or PNG.
+    pub outputs: Vec<PathBuf>,
+    /// PNG exposure in stops.
+    pub exposure: f32,
+    pub indirect_only: bool,
+    /// Built-in scenes' tessellation (maximum edge length, metres).
+    pub max_edge: f32,
+    /// Animation time, seconds.
+    pub time: f32,
+}
+
+impl Default for RenderRequest {
+    fn default() -> Self {
+        Self {
+            scene: "cornell".into(),
+            method: "direct".into(),
+            settings: RenderSettings::default(),
+            camera: None,
+            outputs: vec![],
+            exposure: 0.0,
+            indirect_only: false,
+            max_edge: BuiltinParams::default().max_edge,
+            time: 0.0,
+        }
+    }
+}
+
+/// Renders and writes the request's outputs; returns the JSON report line.
+pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
+    let started = Instant::now();
+    // Fail on an unwritable output before spending time on the scene and the GPU.
+    for path in &request.outputs {
+        ensure_writable(path)?;
+        if !matches!(
+            path.extension()
+                .and_then(|e| e.to_str())
+                .map(|e| e.to_ascii_lowercase())
+                .as_deref(),
+            Some("exr") | Some("png")
+        ) {
+            return Err(ImageError::Extension { path: path.clone() }.into());
+        }
+    }
+    let scene = scene::load(
+        &request.scene,
+        &BuiltinParams {
+            max_edge: request.max_edge,
+        },
+    )?;
+    for warning in &scene.warnings {
+        log::warn!("{warning}");
+    }
+    let ctx = GpuContext::new()?;
+    let settings = request.settings;
+    let world_from_node = scene.world_from_node_at(request.time);
+    let camera = scene.camera_view(
+        request.camera.as_deref(),
+        settings.width as f32 / settings.height as f32,
+        &world_from_node,
+    )?;
+    let mut method = method::create(&request.method, &ctx, &scene, settings)?;
+    let frame = method.render(&ctx, &scene, &world_from_node, &camera)?;
+    if request.indirect_only && request.method == "direct" {
+        log::warn!("--indirect-only with method 'direct': the image is black by definition");
+    }
+    let mut image = frame.radiance(request.indirect_only);
+    let non_finite = image.sanitize();
+    if non_finite > 0 {
+        log::warn!("{non_finite} pixels had non-finite radiance; written as black");
+    }
+    for path in &request.outputs {
+        image.write(path, request.exposure)?;
+    }
+    let mut report = serde_json::json!({
+        "scene": scene.name,
+        "method": method.name(),
+        "width": settings.width,
+        "height": settings.height,
+        "ssaa": settings.ssaa,
+        "passes": frame.timings.to_json(),
+        "total_ms": crate::gpu::timing::round3(frame.timings.total_ms()),
+        "gpu_timestamps": frame.timings.gpu_timestamps,
+        "gpu_bytes": frame.gpu_bytes,
+        "adapter": ctx.adapter_label(),
+        "lights": scene.lights.len(),
+        "triangles": scene.triangle_count(),
+        "indirect_only": request.indirect_only,
+        "non_finite_pixels": non_finite,
+        "warnings": scene.warnings.len(),
+        "outputs": request.outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+    });
+    if let Some(obj) = report.as_object_mut() {
+        obj.extend(method.report());
+        obj.insert(
+            "wall_ms".into(),
+            serde_json::json!(crate::gpu::timing::round3(
+                started.elapsed().as_secs_f64() * 1000.0
+            )),
+        );
+    }
+    Ok(report)
+}

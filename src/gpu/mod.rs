@@ -1,0 +1,200 @@
+//! Headless GPU access: device creation on any adapter, per-pass timing, readback, and a count
+//! of the bytes each method owns on the GPU.
+
+pub mod readback;
+pub mod resources;
+pub mod timing;
+
+pub use readback::{read_buffer, read_texture_rgba32f};
+pub use resources::GpuBytes;
+pub use timing::{PassTimings, Passes};
+
+/// Why no GPU device could be made. The message names the remedy.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter found (backends tried: {backends}). Install a Vulkan driver; on a \
+         machine without a GPU install Mesa's software driver: `apt-get install mesa-vulkan-drivers` \
+         (README's commands do this). Set WGPU_BACKEND to try another backend."
+    )]
+    NoAdapter { backends: String },
+    #[error(
+        "WGPU_ADAPTER_NAME='{wanted}' matches no adapter; available: {available}. Unset it or \
+         name one of these."
+    )]
+    AdapterNameNotFound { wanted: String, available: String },
+    #[error("could not create a device on '{adapter}': {message}")]
+    Device { adapter: String, message: String },
+    #[error("GPU readback failed: {0}")]
+    Readback(String),
+}
+
+/// The device, its queue, and what the adapter can do.
+pub struct GpuContext {
+    pub adapter: wgpu::Adapter,
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter_info: wgpu::AdapterInfo,
+    /// Whether pass timings come from GPU timestamp queries (else from wall-clock time around
+    /// a submission per pass).
+    pub timestamps: bool,
+}
+
+impl GpuContext {
+    /// Opens a headless device. Honours `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
+    /// `WGPU_ADAPTER_NAME` (case-insensitive substring of the adapter's name); otherwise takes
+    /// the high-performance adapter, falling back to any (software drivers included).
+    pub fn new() -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async())
+    }
+
+    async fn new_async() -> Result<Self, GpuError> {
+        if std::env::var_os("WGPU_BACKEND").is_some() {
+            let backends = wgpu::Backends::from_env().unwrap_or_default();
+            return Self::on_backends(backends).await;
+        }
+        // Vulkan, Metal or DX12 first; OpenGL only when none of those has an adapter, because
+        // probing EGL without a display is slow and noisy.
+        match Self::on_backends(wgpu::Backends::PRIMARY).await {
+            Err(GpuError::NoAdapter { .. }) => {
+                Self::on_backends(wgpu::Backends::GL)
+                    .await
+                    .map_err(|e| match e {
+                        GpuError::NoAdapter { .. } => GpuError::NoAdapter {
+                            backends: format!("{:?}", wgpu::Backends::PRIMARY | wgpu::Backends::GL),
+                        },
+                        other => other,
+                    })
+            }
+            other => other,
+        }
+    }
+
+    async fn on_backends(backends: wgpu::Backends) -> Result<Self, GpuError> {
+        let mut instance_desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        instance_desc.backends = backends;
+        // Debug labels stay off unless WGPU_DEBUG=1: Mesa 22's lavapipe crashes in
+        // vkCmdBeginDebugUtilsLabelEXT, and release builds never had them.
+        instance_desc.flags = wgpu::InstanceFlags::empty().with_env();
+        let instance = wgpu::Instance::new(instance_desc);
+        let adapter = match std::env::var("WGPU_ADAPTER_NAME") {
+            Ok(wanted) if !wanted.is_empty() => {
+                let adapters = instance.enumerate_adapters(backends).await;
+                let wanted_lower = wanted.to_lowercase();
+                let names: Vec<String> = adapters
+                    .iter()
+                    .map(|a| {
+                        let i = a.get_info();
+                        format!("'{}' ({:?})", i.name, i.backend)
+                    })
+                    .collect();
+                match adapters
+                    .into_iter()
+                    .find(|a| a.get_info().name.to_lowercase().contains(&wanted_lower))
+                {
+                    Some(a) => a,
+                    None => {
+                        return Err(GpuError::AdapterNameNotFound {
+                            wanted,
+                            available: if names.is_empty() {
+                                "none".into()
+                            } else {
+                                names.join(", ")
+                            },
+                        })
+                    }
+                }
+            }
+            _ => {
+                let preferred = instance
+                    .request_adapter(&wgpu::RequestAdapterOptions {
+                        power_preference: wgpu::PowerPreference::HighPerformance,
+                        force_fallback_adapter: false,
+                        compatible_surface: None,
+                        ..Default::default()
+                    })
+                    .await;
+                match preferred {
+                    Ok(a) => a,
+                    Err(_) => instance
+                        .request_adapter(&wgpu::RequestAdapterOptions {
+                            power_preference: wgpu::PowerPreference::None,
+                            force_fallback_adapter: true,
+                            compatible_surface: None,
+                            ..Default::default()
+                        })
+                        .await
+                        .map_err(|_| GpuError::NoAdapter {
+                            backends: format!("{backends:?}"),
+                        })?,
+                }
+            }
+        };
+        Self::from_adapter(adapter).await
+    }
+
+    async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {
+        let adapter_info = adapter.get_info();
+        let available = adapter.features();
+        let timestamps = available.contains(wgpu::Features::TIMESTAMP_QUERY);
+        let mut required_features = wgpu::Features::empty();
+        if timestamps {
+            required_features |= wgpu::Features::TIMESTAMP_QUERY;
+        }
+        // Ask for what the adapter has: large scenes and high resolutions need more than the
+        // WebGPU defaults, and software drivers report generous limits.
+        let required_limits = adapter.limits();
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("valgi device"),
+                required_features,
+                required_limits,
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .map_err(|e| GpuError::Device {
+                adapter: adapter_info.name.clone(),
+                message: e.to_string(),
+            })?;
+        Ok(Self {
+            adapter,
+            device,
+            queue,
+            adapter_info,
+            timestamps,
+        })
+    }
+
+    /// "name (backend)" for reports.
+    pub fn adapter_label(&self) -> String {
+        format!(
+            "{} ({:?})",
+            self.adapter_info.name, self.adapter_info.backend
+        )
+    }
+
+    /// True when the adapter is a CPU implementation (lavapipe, SwiftShader, WARP …).
+    pub fn is_software(&self) -> bool {
+        self.adapter_info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Blocks until all submitted work is done.
+    pub fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Readback(e.to_string()))
+    }
+
+    /// Compiles a WGSL shader from `shaders/`, with its `#include` lines resolved.
+    pub fn shader(&self, name: &str) -> wgpu::ShaderModule {
+        let source = crate::shaders::source(name);
+        self.device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(name),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            })
+    }
+}

@@ -1,0 +1,103 @@
+//! GPU resources created through these helpers are counted, so every method can report the
+//! bytes of GPU memory it owns (buffers and textures, mip chains included).
+
+use wgpu::util::DeviceExt;
+
+/// Running total of the bytes a method has allocated on the GPU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct GpuBytes(pub u64);
+
+impl GpuBytes {
+    pub fn buffer(&mut self, device: &wgpu::Device, desc: &wgpu::BufferDescriptor) -> wgpu::Buffer {
+        self.0 += desc.size;
+        device.create_buffer(desc)
+    }
+
+    pub fn buffer_init(
+        &mut self,
+        device: &wgpu::Device,
+        label: &str,
+        contents: &[u8],
+        usage: wgpu::BufferUsages,
+    ) -> wgpu::Buffer {
+        // wgpu rejects empty buffers bound as storage; keep one element's worth instead.
+        let padded;
+        let contents = if contents.is_empty() {
+            padded = [0u8; 16];
+            &padded[..]
+        } else {
+            contents
+        };
+        self.0 += contents.len() as u64;
+        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents,
+            usage,
+        })
+    }
+
+    pub fn texture(
+        &mut self,
+        device: &wgpu::Device,
+        desc: &wgpu::TextureDescriptor,
+    ) -> wgpu::Texture {
+        self.0 += texture_bytes(desc);
+        device.create_texture(desc)
+    }
+
+    pub fn add(&mut self, other: GpuBytes) {
+        self.0 += other.0;
+    }
+}
+
+/// Bytes a texture occupies: every mip level of every layer, at the format's block size.
+pub fn texture_bytes(desc: &wgpu::TextureDescriptor) -> u64 {
+    let block = desc
+        .format
+        .block_copy_size(Some(wgpu::TextureAspect::All))
+        .or_else(|| {
+            desc.format
+                .block_copy_size(Some(wgpu::TextureAspect::DepthOnly))
+        })
+        .unwrap_or(4) as u64;
+    let (bw, bh) = desc.format.block_dimensions();
+    let mut total = 0u64;
+    for level in 0..desc.mip_level_count {
+        let size = desc.size.mip_level_size(level, desc.dimension);
+        let blocks_x = size.width.div_ceil(bw) as u64;
+        let blocks_y = size.height.div_ceil(bh) as u64;
+        total += blocks_x * blocks_y * size.depth_or_array_layers as u64 * block;
+    }
+    total * desc.sample_count as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn texture_bytes_counts_mips_and_layers() {
+        let desc = wgpu::TextureDescriptor {
+            label: None,
+            size: wgpu::Extent3d {
+                width: 4,
+                height: 4,
+                depth_or_array_layers: 6,
+            },
+            mip_level_count: 3,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        };
+        // (16 + 4 + 1) texels × 6 layers × 8 bytes.
+        assert_eq!(texture_bytes(&desc), 21 * 6 * 8);
+        let depth = wgpu::TextureDescriptor {
+            format: wgpu::TextureFormat::Depth32Float,
+            mip_level_count: 1,
+            ..desc
+        };
+        assert_eq!(texture_bytes(&depth), 16 * 6 * 4);
+    }
+}

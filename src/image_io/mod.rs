@@ -1,0 +1,230 @@
+//! Linear HDR images and their files: 32-bit float EXR (the product) and tone-mapped PNG (for
+//! people).
+//!
+//! The PNG tone map is fixed and documented: `png = srgb_oetf(clamp(radiance · 2^exposure, 0, 1))`
+//! per channel, with `exposure` in stops (0 by default) and the sRGB OETF of IEC 61966-2-1.
+
+use std::path::{Path, PathBuf};
+
+/// A linear RGBA float image, row-major from the top-left pixel. Alpha is 1 where a surface
+/// was rendered and 0 on the background.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<[f32; 4]>,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    #[error("{path}: cannot write: {message}")]
+    Write { path: PathBuf, message: String },
+    #[error("{path}: cannot read: {message}")]
+    Read { path: PathBuf, message: String },
+    #[error("{path}: unsupported image extension (use .exr or .png)")]
+    Extension { path: PathBuf },
+}
+
+impl Image {
+    pub fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            pixels: vec![[0.0; 4]; (width * height) as usize],
+        }
+    }
+
+    pub fn from_rgba(width: u32, height: u32, pixels: Vec<[f32; 4]>) -> Self {
+        assert_eq!(pixels.len(), (width * height) as usize);
+        Self {
+            width,
+            height,
+            pixels,
+        }
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> [f32; 4] {
+        self.pixels[(y * self.width + x) as usize]
+    }
+
+    /// Pixel-wise sum of the colour channels; alpha is the maximum of both coverages.
+    pub fn add(&self, other: &Image) -> Image {
+        assert_eq!((self.width, self.height), (other.width, other.height));
+        let pixels = self
+            .pixels
+            .iter()
+            .zip(&other.pixels)
+            .map(|(a, b)| [a[0] + b[0], a[1] + b[1], a[2] + b[2], a[3].max(b[3])])
+            .collect();
+        Image::from_rgba(self.width, self.height, pixels)
+    }
+
+    /// Number of pixels with a NaN or infinite colour channel.
+    pub fn non_finite_count(&self) -> usize {
+        self.pixels
+            .iter()
+            .filter(|p| p[..3].iter().any(|c| !c.is_finite()))
+            .count()
+    }
+
+    /// Replaces non-finite channels by 0 and returns how many pixels were touched, so no NaN
+    /// ever reaches a file.
+    pub fn sanitize(&mut self) -> usize {
+        let mut count = 0;
+        for p in &mut self.pixels {
+            if p[..3].iter().any(|c| !c.is_finite()) {
+                count += 1;
+                for c in &mut p[..3] {
+                    if !c.is_finite() {
+                        *c = 0.0;
+                    }
+                }
+            }
+        }
+        count
+    }
+
+    /// Mean of the RGB channels over all pixels.
+    pub fn mean_rgb(&self) -> [f64; 3] {
+        let mut sum = [0.0f64; 3];
+        for p in &self.pixels {
+            for c in 0..3 {
+                sum[c] += p[c] as f64;
+            }
+        }
+        let n = self.pixels.len().max(1) as f64;
+        sum.map(|s| s / n)
+    }
+
+    /// Writes by extension: `.exr` (32-bit float RGBA) or `.png` (tone-mapped, 8-bit sRGB).
+    pub fn write(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
+        match extension(path).as_deref() {
+            Some("exr") => self.write_exr(path),
+            Some("png") => self.write_png(path, exposure),
+            _ => Err(ImageError::Extension {
+                path: path.to_path_buf(),
+            }),
+        }
+    }
+
+    pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
+        ensure_writable(path)?;
+        let w = self.width as usize;
+        exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
+            let p = self.pixels[y * w + x];
+            (p[0], p[1], p[2], p[3])
+        })
+        .map_err(|e| ImageError::Write {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
+    }
+
+    pub fn read_exr(path: &Path) -> Result<Image, ImageError> {
+        let read = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |resolution, _| Image::new(resolution.width() as u32, resolution.height() as u32),
+            |image: &mut Image, position, (r, g, b, a): (f32, f32, f32, f32)| {
+                let i = position.y() * image.width as usize + position.x();
+                image.pixels[i] = [r, g, b, a];
+            },
+        )
+        .map_err(|e| ImageError::Read {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Ok(read.layer_data.channel_data.pixels)
+    }
+
+    /// The documented tone map: exposure in stops, clamp, sRGB OETF, 8 bits.
+    pub fn tone_map(&self, exposure: f32) -> image::RgbImage {
+        let scale = 2f32.powf(exposure);
+        let mut out = image::RgbImage::new(self.width, self.height);
+        for (i, px) in out.pixels_mut().enumerate() {
+            let p = self.pixels[i];
+            for (out, &radiance) in px.0.iter_mut().zip(&p[..3]) {
+                let v = if radiance.is_finite() {
+                    radiance * scale
+                } else {
+                    0.0
+                };
+                *out = (srgb_oetf(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8;
+            }
+        }
+        out
+    }
+
+    pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
+        ensure_writable(path)?;
+        self.tone_map(exposure)
+            .save_with_format(path, image::ImageFormat::Png)
+            .map_err(|e| ImageError::Write {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
+    }
+}
+
+/// The sRGB opto-electronic transfer function (linear → encoded), input in [0, 1].
+pub fn srgb_oetf(x: f32) -> f32 {
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+}
+
+/// Creates the parent folders and checks the file can be opened for writing, so an
+/// unwritable output path is reported before minutes of rendering rather than after.
+pub fn ensure_writable(path: &Path) -> Result<(), ImageError> {
+    let fail = |message: String| ImageError::Write {
+        path: path.to_path_buf(),
+        message,
+    };
+    if let Some(parent) = path.parent() {
+        if !parent.as_os_str().is_empty() {
+            std::fs::create_dir_all(parent)
+                .map_err(|e| fail(format!("cannot create folder {}: {e}", parent.display())))?;
+        }
+    }
+    if path.is_dir() {
+        return Err(fail("is a folder".into()));
+    }
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(path)
+        .map(|_| ())
+        .map_err(|e| fail(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tone_map_is_exposure_clamp_oetf() {
+        let img = Image::from_rgba(2, 1, vec![[0.25, 0.5, 4.0, 1.0], [0.0, -1.0, 0.002, 1.0]]);
+        let tm = img.tone_map(1.0);
+        // 0.25·2 = 0.5 → sRGB 0.7354 → 188; 0.5·2 = 1 → 255; 8 clamps to 255.
+        assert_eq!(tm.get_pixel(0, 0).0, [188, 255, 255]);
+        // Negative clamps to 0; 0.004 is on the linear segment: 12.92·0.004 = 0.0517 → 13.
+        assert_eq!(tm.get_pixel(1, 0).0, [0, 0, 13]);
+    }
+
+    #[test]
+    fn sanitize_removes_non_finite() {
+        let mut img = Image::from_rgba(2, 1, vec![[f32::NAN, 1.0, 0.0, 1.0], [1.0; 4]]);
+        assert_eq!(img.non_finite_count(), 1);
+        assert_eq!(img.sanitize(), 1);
+        assert_eq!(img.get(0, 0), [0.0, 1.0, 0.0, 1.0]);
+        assert_eq!(img.non_finite_count(), 0);
+    }
+}

@@ -1,0 +1,10 @@
+//! valgi: dynamic global illumination with virtual area lights gathered at sparse model-space
+//! points, on top of a baked multi-bounce light atlas. See README.md and DESIGN notes.
+
+pub mod app;
+pub mod gpu;
+pub mod image_io;
+pub mod method;
+pub mod raster;
+pub mod scene;
+pub mod shaders;

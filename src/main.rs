@@ -1,0 +1,152 @@
+//! `valgi` command line: argument parsing only; the work is in the library.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use valgi::app::{self, RenderRequest};
+use valgi::raster::RenderSettings;
+use valgi::scene::builtin;
+
+#[derive(Parser)]
+#[command(
+    name = "valgi",
+    version,
+    about = "Dynamic global illumination with virtual area lights"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene to linear EXR and/or tone-mapped PNG; prints one JSON line of timings.
+    Render(RenderArgs),
+    /// List the built-in scenes.
+    Scenes,
+    /// List the rendering methods.
+    Methods,
+    /// List the GPU adapters wgpu can see (honours WGPU_BACKEND).
+    Adapters,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
+    #[arg(long, default_value = "cornell")]
+    scene: String,
+    /// Rendering method (see `valgi methods`).
+    #[arg(long, default_value = "direct")]
+    method: String,
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Camera name or index (default: the scene's first camera, or one framing the scene).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Output file (.exr = linear 32-bit float, .png = tone-mapped). Repeatable. Default:
+    /// out/<scene>.exr and out/<scene>.png.
+    #[arg(long)]
+    out: Vec<PathBuf>,
+    /// PNG exposure in stops: png = sRGB(clamp(radiance × 2^E)).
+    #[arg(long, default_value_t = 0.0)]
+    exposure: f32,
+    /// Write only the indirect part of the radiance (direct light removed).
+    #[arg(long)]
+    indirect_only: bool,
+    /// N×N supersampling per pixel for anti-aliased edges.
+    #[arg(long, default_value_t = 1)]
+    ssaa: u32,
+    /// Shadow-map resolution per layer (a point light uses six layers).
+    #[arg(long, default_value_t = 1024)]
+    shadow_res: u32,
+    /// Tessellation of built-in scenes: maximum triangle edge length in metres.
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
+    /// Animation time in seconds (glTF animations).
+    #[arg(long, default_value_t = 0.0)]
+    time: f32,
+}
+
+fn main() -> ExitCode {
+    env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Render(args) => {
+            let outputs = if args.out.is_empty() {
+                let stem = scene_stem(&args.scene);
+                vec![
+                    PathBuf::from(format!("out/{stem}.exr")),
+                    PathBuf::from(format!("out/{stem}.png")),
+                ]
+            } else {
+                args.out
+            };
+            let request = RenderRequest {
+                scene: args.scene,
+                method: args.method,
+                settings: RenderSettings {
+                    width: args.width,
+                    height: args.height,
+                    ssaa: args.ssaa,
+                    shadow_resolution: args.shadow_res,
+                    ..RenderSettings::default()
+                },
+                camera: args.camera,
+                outputs,
+                exposure: args.exposure,
+                indirect_only: args.indirect_only,
+                max_edge: args.max_edge,
+                time: args.time,
+            };
+            match app::render(&request) {
+                Ok(report) => {
+                    println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Scenes => {
+            for (name, description) in builtin::names() {
+                println!("{name:<16} {description}");
+            }
+            ExitCode::SUCCESS
+        }
+        Command::Methods => {
+            for (name, description) in valgi::method::METHODS {
+                println!("{name:<16} {description}");
+            }
+            ExitCode::SUCCESS
+        }
+        Command::Adapters => {
+            let instance = wgpu::Instance::new(
+                wgpu::InstanceDescriptor::new_without_display_handle_from_env(),
+            );
+            let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::all()));
+            if adapters.is_empty() {
+                eprintln!("no GPU adapter found");
+                return ExitCode::FAILURE;
+            }
+            for adapter in adapters {
+                let info = adapter.get_info();
+                println!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
+            }
+            ExitCode::SUCCESS
+        }
+    }
+}
+
+/// `out/<stem>` for a built-in name or a file path.
+fn scene_stem(scene: &str) -> String {
+    std::path::Path::new(scene)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("render")
+        .to_string()
+}

@@ -1,0 +1,885 @@
+//! Rasterization shared by every method: shadow maps, the G-buffer, direct lighting and the
+//! SSAA resolve. Indirect methods render into [`FrameTargets::radiance_indirect`] between the
+//! direct pass and the resolve, so direct and indirect light stay separate to the end.
+
+pub mod scene_gpu;
+pub mod shadows;
+pub mod types;
+
+use glam::Mat4;
+
+use crate::gpu::{GpuBytes, GpuContext, GpuError, PassTimings, Passes};
+use crate::image_io::Image;
+use crate::scene::{CameraView, Scene};
+use scene_gpu::{SceneGpu, SceneTooLarge};
+use types::{FrameUniforms, ResolveParams, ShadowView, Vertex};
+
+/// Size and quality knobs shared by every method.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    /// N×N supersampling per output pixel (1 = none).
+    pub ssaa: u32,
+    /// Shadow-map resolution per layer.
+    pub shadow_resolution: u32,
+    /// PCF kernel radius in texels ((2r+1)² bilinear comparison taps).
+    pub pcf_radius: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            ssaa: 1,
+            shadow_resolution: 1024,
+            pcf_radius: 1,
+        }
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    SceneTooLarge(#[from] SceneTooLarge),
+    #[error("{0}")]
+    Settings(String),
+}
+
+pub const GBUFFER_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub const GBUFFER_MATERIAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+pub const RADIANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// Render targets at the supersampled resolution, plus the resolved outputs.
+pub struct FrameTargets {
+    pub render_width: u32,
+    pub render_height: u32,
+    pub depth: wgpu::TextureView,
+    pub normal: wgpu::TextureView,
+    pub diffuse: wgpu::TextureView,
+    pub specular: wgpu::TextureView,
+    pub emissive: wgpu::TextureView,
+    pub radiance_direct: wgpu::TextureView,
+    /// Indirect methods write their radiance here (render resolution).
+    pub radiance_indirect: wgpu::TextureView,
+    pub output_direct: wgpu::Texture,
+    pub output_indirect: wgpu::Texture,
+    pub bytes: GpuBytes,
+}
+
+impl FrameTargets {
+    fn new(device: &wgpu::Device, settings: &RenderSettings) -> Self {
+        let mut bytes = GpuBytes::default();
+        let (rw, rh) = (
+            settings.width * settings.ssaa,
+            settings.height * settings.ssaa,
+        );
+        let mut target = |label: &str, w: u32, h: u32, format, usage| {
+            bytes.texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                },
+            )
+        };
+        let attachment =
+            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
+        let storage = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
+        let output = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC;
+        let view = |t: wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
+        Self {
+            render_width: rw,
+            render_height: rh,
+            depth: view(target("gbuffer depth", rw, rh, DEPTH_FORMAT, attachment)),
+            normal: view(target(
+                "gbuffer normal",
+                rw,
+                rh,
+                GBUFFER_NORMAL_FORMAT,
+                attachment,
+            )),
+            diffuse: view(target(
+                "gbuffer diffuse",
+                rw,
+                rh,
+                GBUFFER_MATERIAL_FORMAT,
+                attachment,
+            )),
+            specular: view(target(
+                "gbuffer specular",
+                rw,
+                rh,
+                GBUFFER_MATERIAL_FORMAT,
+                attachment,
+            )),
+            emissive: view(target(
+                "gbuffer emissive",
+                rw,
+                rh,
+                GBUFFER_MATERIAL_FORMAT,
+                attachment,
+            )),
+            radiance_direct: view(target("radiance direct", rw, rh, RADIANCE_FORMAT, storage)),
+            radiance_indirect: view(target(
+                "radiance indirect",
+                rw,
+                rh,
+                RADIANCE_FORMAT,
+                storage,
+            )),
+            output_direct: target(
+                "output direct",
+                settings.width,
+                settings.height,
+                RADIANCE_FORMAT,
+                output,
+            ),
+            output_indirect: target(
+                "output indirect",
+                settings.width,
+                settings.height,
+                RADIANCE_FORMAT,
+                output,
+            ),
+            bytes,
+        }
+    }
+}
+
+/// One rendered frame: direct and indirect radiance at the output resolution (linear, W/(m²·sr)).
+pub struct FrameOutput {
+    pub direct: Image,
+    pub indirect: Image,
+    pub timings: PassTimings,
+    pub gpu_bytes: u64,
+}
+
+impl FrameOutput {
+    /// Direct + indirect, or the indirect part alone.
+    pub fn radiance(&self, indirect_only: bool) -> Image {
+        if indirect_only {
+            self.indirect.clone()
+        } else {
+            self.direct.add(&self.indirect)
+        }
+    }
+}
+
+/// Shadow maps, G-buffer, direct light and resolve for one scene at one output size.
+pub struct Rasterizer {
+    pub settings: RenderSettings,
+    pub scene_gpu: SceneGpu,
+    pub targets: FrameTargets,
+    frame_buffer: wgpu::Buffer,
+    lights_buffer: wgpu::Buffer,
+    shadow_views_buffer: wgpu::Buffer,
+    shadow_layer_buffers: Vec<wgpu::Buffer>,
+    shadow_layer_views: Vec<wgpu::TextureView>,
+    shadow_layer_groups: Vec<wgpu::BindGroup>,
+    shadow_pipeline: wgpu::RenderPipeline,
+    gbuffer_pipeline: wgpu::RenderPipeline,
+    gbuffer_group: wgpu::BindGroup,
+    direct_pipeline: wgpu::ComputePipeline,
+    direct_group: wgpu::BindGroup,
+    resolve_pipeline: wgpu::ComputePipeline,
+    resolve_params_buffer: wgpu::Buffer,
+    resolve_group: wgpu::BindGroup,
+    light_count: u32,
+    shadow_bytes: GpuBytes,
+}
+
+impl Rasterizer {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        settings: RenderSettings,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        let limits = device.limits();
+        if settings.width == 0 || settings.height == 0 || settings.ssaa == 0 {
+            return Err(RenderError::Settings(
+                "width, height and ssaa must be at least 1".into(),
+            ));
+        }
+        let (rw, rh) = (
+            settings.width * settings.ssaa,
+            settings.height * settings.ssaa,
+        );
+        if rw > limits.max_texture_dimension_2d || rh > limits.max_texture_dimension_2d {
+            return Err(RenderError::Settings(format!(
+                "{rw}×{rh} render targets (output × SSAA) exceed the device's limit of {} texels per side; lower --width/--height or --ssaa",
+                limits.max_texture_dimension_2d
+            )));
+        }
+        let shadow_resolution = settings
+            .shadow_resolution
+            .clamp(16, limits.max_texture_dimension_2d);
+        let layer_count: u32 = scene
+            .lights
+            .iter()
+            .map(|l| match l.kind {
+                crate::scene::LightKind::Point => 6,
+                _ => 1,
+            })
+            .sum();
+        if layer_count > limits.max_texture_array_layers {
+            return Err(RenderError::Settings(format!(
+                "scene '{}' has {} lights needing {layer_count} shadow-map layers; the device allows {}",
+                scene.name,
+                scene.lights.len(),
+                limits.max_texture_array_layers
+            )));
+        }
+        let scene_gpu = SceneGpu::upload(ctx, scene)?;
+        let targets = FrameTargets::new(device, &settings);
+        let mut shadow_bytes = GpuBytes::default();
+
+        let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let frame_buffer = shadow_bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("frame uniforms"),
+                size: std::mem::size_of::<FrameUniforms>() as u64,
+                usage: uniform,
+                mapped_at_creation: false,
+            },
+        );
+        let lights_buffer = shadow_bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("lights"),
+                size: (scene.lights.len().max(1) * std::mem::size_of::<types::GpuLight>()) as u64,
+                usage: storage,
+                mapped_at_creation: false,
+            },
+        );
+        let layers = layer_count.max(1);
+        let shadow_views_buffer = shadow_bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("shadow views"),
+                size: layers as u64 * std::mem::size_of::<ShadowView>() as u64,
+                usage: storage,
+                mapped_at_creation: false,
+            },
+        );
+        let shadow_texture = shadow_bytes.texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("shadow maps"),
+                size: wgpu::Extent3d {
+                    width: shadow_resolution,
+                    height: shadow_resolution,
+                    depth_or_array_layers: layers,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: DEPTH_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+        );
+        let shadow_array_view = shadow_texture.create_view(&wgpu::TextureViewDescriptor {
+            label: Some("shadow maps array"),
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        });
+        let shadow_layer_views: Vec<wgpu::TextureView> = (0..layer_count)
+            .map(|layer| {
+                shadow_texture.create_view(&wgpu::TextureViewDescriptor {
+                    label: Some("shadow layer"),
+                    dimension: Some(wgpu::TextureViewDimension::D2),
+                    base_array_layer: layer,
+                    array_layer_count: Some(1),
+                    ..Default::default()
+                })
+            })
+            .collect();
+        let shadow_layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
+            .map(|_| {
+                shadow_bytes.buffer(
+                    device,
+                    &wgpu::BufferDescriptor {
+                        label: Some("shadow layer view"),
+                        size: std::mem::size_of::<ShadowView>() as u64,
+                        usage: uniform,
+                        mapped_at_creation: false,
+                    },
+                )
+            })
+            .collect();
+
+        // Shadow pipeline: depth only, slope-scaled bias against acne on sloped receivers.
+        let shadow_module = ctx.shader("shadow_depth.wgsl");
+        let shadow_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("shadow layer"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::VERTEX),
+                storage_entry(1, wgpu::ShaderStages::VERTEX),
+            ],
+        });
+        let shadow_layer_groups = shadow_layer_buffers
+            .iter()
+            .map(|buffer| {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("shadow layer"),
+                    layout: &shadow_bgl,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: buffer.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: scene_gpu.instance_buffer.as_entire_binding(),
+                        },
+                    ],
+                })
+            })
+            .collect();
+        let shadow_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("shadow"),
+            bind_group_layouts: &[Some(&shadow_bgl)],
+            immediate_size: 0,
+        });
+        let position_only = wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<Vertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &[wgpu::VertexAttribute {
+                format: wgpu::VertexFormat::Float32x3,
+                offset: 0,
+                shader_location: 0,
+            }],
+        };
+        let shadow_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("shadow"),
+            layout: Some(&shadow_layout),
+            vertex: wgpu::VertexState {
+                module: &shadow_module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(position_only)],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState {
+                    constant: 2,
+                    slope_scale: 1.5,
+                    clamp: 0.0,
+                },
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: None,
+            multiview_mask: None,
+            cache: None,
+        });
+
+        // G-buffer pipeline.
+        let gbuffer_module = ctx.shader("gbuffer.wgsl");
+        let frame_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("gbuffer frame"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::VERTEX),
+                storage_entry(1, wgpu::ShaderStages::VERTEX),
+            ],
+        });
+        let gbuffer_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gbuffer frame"),
+            layout: &frame_bgl,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: frame_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: scene_gpu.instance_buffer.as_entire_binding(),
+                },
+            ],
+        });
+        let gbuffer_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("gbuffer"),
+            bind_group_layouts: &[Some(&frame_bgl), Some(&scene_gpu.material_layout)],
+            immediate_size: 0,
+        });
+        let color_target = |format| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })
+        };
+        let gbuffer_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("gbuffer"),
+            layout: Some(&gbuffer_layout),
+            vertex: wgpu::VertexState {
+                module: &gbuffer_module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(Vertex::layout())],
+            },
+            // No culling: open and single-sided geometry shade its back faces with a flipped
+            // normal rather than showing holes.
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &gbuffer_module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[
+                    color_target(GBUFFER_NORMAL_FORMAT),
+                    color_target(GBUFFER_MATERIAL_FORMAT),
+                    color_target(GBUFFER_MATERIAL_FORMAT),
+                    color_target(GBUFFER_MATERIAL_FORMAT),
+                ],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        // Direct lighting.
+        let direct_module = ctx.shader("direct_light.wgsl");
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let direct_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("direct light"),
+            entries: &[
+                uniform_entry(0, cs),
+                storage_entry(1, cs),
+                storage_entry(2, cs),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2Array,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 4,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 5,
+                    visibility: cs,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Depth,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                texture_entry(6, cs),
+                texture_entry(7, cs),
+                texture_entry(8, cs),
+                texture_entry(9, cs),
+                storage_texture_entry(10, cs),
+            ],
+        });
+        let comparison_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("shadow comparison"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            compare: Some(wgpu::CompareFunction::LessEqual),
+            ..Default::default()
+        });
+        let direct_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("direct light"),
+            layout: &direct_bgl,
+            entries: &[
+                buffer_binding(0, &frame_buffer),
+                buffer_binding(1, &lights_buffer),
+                buffer_binding(2, &shadow_views_buffer),
+                view_binding(3, &shadow_array_view),
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::Sampler(&comparison_sampler),
+                },
+                view_binding(5, &targets.depth),
+                view_binding(6, &targets.normal),
+                view_binding(7, &targets.diffuse),
+                view_binding(8, &targets.specular),
+                view_binding(9, &targets.emissive),
+                view_binding(10, &targets.radiance_direct),
+            ],
+        });
+        let direct_pipeline = compute_pipeline(device, "direct light", &direct_module, &direct_bgl);
+
+        // Resolve.
+        let resolve_module = ctx.shader("resolve.wgsl");
+        let resolve_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("resolve"),
+            entries: &[
+                uniform_entry(0, cs),
+                texture_entry(1, cs),
+                texture_entry(2, cs),
+                storage_texture_entry(3, cs),
+                storage_texture_entry(4, cs),
+            ],
+        });
+        let resolve_params_buffer = shadow_bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("resolve params"),
+                size: std::mem::size_of::<ResolveParams>() as u64,
+                usage: uniform,
+                mapped_at_creation: false,
+            },
+        );
+        let out_direct_view = targets
+            .output_direct
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let out_indirect_view = targets
+            .output_indirect
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("resolve"),
+            layout: &resolve_bgl,
+            entries: &[
+                buffer_binding(0, &resolve_params_buffer),
+                view_binding(1, &targets.radiance_direct),
+                view_binding(2, &targets.radiance_indirect),
+                view_binding(3, &out_direct_view),
+                view_binding(4, &out_indirect_view),
+            ],
+        });
+        let resolve_pipeline = compute_pipeline(device, "resolve", &resolve_module, &resolve_bgl);
+
+        if scene.lights.is_empty() {
+            log::warn!(
+                "scene '{}' has no lights: direct light is black (emission only)",
+                scene.name
+            );
+        }
+
+        Ok(Self {
+            settings: RenderSettings {
+                shadow_resolution,
+                ..settings
+            },
+            scene_gpu,
+            targets,
+            frame_buffer,
+            lights_buffer,
+            shadow_views_buffer,
+            shadow_layer_buffers,
+            shadow_layer_views,
+            shadow_layer_groups,
+            shadow_pipeline,
+            gbuffer_pipeline,
+            gbuffer_group,
+            direct_pipeline,
+            direct_group,
+            resolve_pipeline,
+            resolve_params_buffer,
+            resolve_group,
+            light_count: scene.lights.len() as u32,
+            shadow_bytes,
+        })
+    }
+
+    /// GPU bytes of everything the rasterizer owns: scene, targets, shadow maps, uniforms.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.scene_gpu.bytes.0 + self.targets.bytes.0 + self.shadow_bytes.0
+    }
+
+    /// Uploads this frame's transforms, lights, shadow views and camera.
+    pub fn prepare(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: &CameraView,
+    ) {
+        let queue = &ctx.queue;
+        self.scene_gpu
+            .update_transforms(ctx, scene, world_from_node);
+        let bounds = scene.world_bounds(world_from_node);
+        let setup = shadows::setup_lights(
+            scene,
+            world_from_node,
+            &bounds,
+            self.settings.shadow_resolution,
+            self.settings.pcf_radius,
+        );
+        if !setup.lights.is_empty() {
+            queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
+            queue.write_buffer(
+                &self.shadow_views_buffer,
+                0,
+                bytemuck::cast_slice(&setup.views),
+            );
+        }
+        for (buffer, view) in self.shadow_layer_buffers.iter().zip(&setup.views) {
+            queue.write_buffer(buffer, 0, bytemuck::bytes_of(view));
+        }
+        let clip_from_world = camera.clip_from_world();
+        let frame = FrameUniforms {
+            clip_from_world: clip_from_world.to_cols_array_2d(),
+            world_from_clip: clip_from_world.inverse().to_cols_array_2d(),
+            camera_position: camera.position().extend(1.0).to_array(),
+            render_size: [self.targets.render_width, self.targets.render_height],
+            light_count: self.light_count,
+            shadow_pcf_radius: self.settings.pcf_radius,
+        };
+        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+    }
+
+    /// Shadow maps of every light (pass "shadow").
+    pub fn record_shadows(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        for (view, group) in self
+            .shadow_layer_views
+            .iter()
+            .zip(&self.shadow_layer_groups)
+        {
+            passes.render(
+                "shadow",
+                &[],
+                Some(wgpu::RenderPassDepthStencilAttachment {
+                    view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                |pass| {
+                    pass.set_pipeline(&self.shadow_pipeline);
+                    pass.set_bind_group(0, group, &[]);
+                    self.scene_gpu.draw(pass, None);
+                },
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Normals and materials of the visible surfaces (pass "gbuffer").
+    pub fn record_gbuffer(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        let clear = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        let t = &self.targets;
+        passes.render(
+            "gbuffer",
+            &[
+                clear(&t.normal),
+                clear(&t.diffuse),
+                clear(&t.specular),
+                clear(&t.emissive),
+            ],
+            Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &t.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            |pass| {
+                pass.set_pipeline(&self.gbuffer_pipeline);
+                pass.set_bind_group(0, &self.gbuffer_group, &[]);
+                self.scene_gpu.draw(pass, Some(1));
+            },
+        )
+    }
+
+    /// Direct light and emission per pixel (pass "direct").
+    pub fn record_direct(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        let (w, h) = (self.targets.render_width, self.targets.render_height);
+        passes.compute("direct", |pass| {
+            pass.set_pipeline(&self.direct_pipeline);
+            pass.set_bind_group(0, &self.direct_group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        })
+    }
+
+    /// SSAA box filter of direct and indirect radiance to the output size (pass "resolve").
+    pub fn record_resolve(
+        &self,
+        ctx: &GpuContext,
+        passes: &mut Passes,
+        has_indirect: bool,
+    ) -> Result<(), GpuError> {
+        let params = ResolveParams {
+            output_size: [self.settings.width, self.settings.height],
+            ssaa: self.settings.ssaa,
+            has_indirect: has_indirect as u32,
+        };
+        ctx.queue
+            .write_buffer(&self.resolve_params_buffer, 0, bytemuck::bytes_of(&params));
+        let (w, h) = (self.settings.width, self.settings.height);
+        passes.compute("resolve", |pass| {
+            pass.set_pipeline(&self.resolve_pipeline);
+            pass.set_bind_group(0, &self.resolve_group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        })
+    }
+
+    /// Reads the resolved direct and indirect images back.
+    pub fn read_outputs(&self, ctx: &GpuContext) -> Result<(Image, Image), GpuError> {
+        let (w, h) = (self.settings.width, self.settings.height);
+        let direct = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_direct)?;
+        let indirect = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_indirect)?;
+        Ok((
+            Image::from_rgba(w, h, direct),
+            Image::from_rgba(w, h, indirect),
+        ))
+    }
+
+    /// Shadows, G-buffer, direct light and resolve: the whole direct-only frame.
+    pub fn render_direct(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: &CameraView,
+    ) -> Result<FrameOutput, RenderError> {
+        self.prepare(ctx, scene, world_from_node, camera);
+        let mut passes = Passes::new(ctx, self.shadow_layer_views.len() as u32 + 8);
+        self.record_shadows(&mut passes)?;
+        self.record_gbuffer(&mut passes)?;
+        self.record_direct(&mut passes)?;
+        self.record_resolve(ctx, &mut passes, false)?;
+        let timings = passes.finish()?;
+        let (direct, indirect) = self.read_outputs(ctx)?;
+        Ok(FrameOutput {
+            direct,
+            indirect,
+            timings,
+            gpu_bytes: self.gpu_bytes(),
+        })
+    }
+}
+
+pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Uniform,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+/// A float texture read with `textureLoad` (no filtering needed).
+pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+pub fn storage_texture_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: RADIANCE_FORMAT,
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+        count: None,
+    }
+}
+
+pub fn buffer_binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::TextureView(view),
+    }
+}
+
+pub fn compute_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::BindGroupLayout,
+) -> wgpu::ComputePipeline {
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        module,
+        entry_point: Some("cs_main"),
+        compilation_options: Default::default(),
+        cache: None,
+    })
+}

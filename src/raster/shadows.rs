@@ -1,0 +1,168 @@
+//! Shadow-map views for every light, all in one depth texture array: a spot light takes one
+//! perspective layer, a point light six (a cube's faces as layers), a directional light one
+//! orthographic layer fitted to the scene's bounding sphere.
+
+use glam::{Mat4, Vec3};
+
+use super::types::{GpuLight, ShadowView, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT};
+use crate::scene::{Aabb, LightKind, Scene};
+
+/// Lights in world space and the shadow views they need.
+pub struct LightSetup {
+    pub lights: Vec<GpuLight>,
+    pub views: Vec<ShadowView>,
+}
+
+/// A light's world position and the unit direction it points along (node −z).
+pub fn light_frame(world_from_node: Mat4) -> (Vec3, Vec3) {
+    let position = world_from_node.transform_point3(Vec3::ZERO);
+    let direction = world_from_node
+        .transform_vector3(Vec3::NEG_Z)
+        .try_normalize()
+        .unwrap_or(Vec3::NEG_Z);
+    (position, direction)
+}
+
+/// Builds the light records and shadow views. `pcf_radius` widens point-light cube faces a
+/// little so filter kernels near a face's edge stay inside that face.
+pub fn setup_lights(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    bounds: &Aabb,
+    resolution: u32,
+    pcf_radius: u32,
+) -> LightSetup {
+    let (center, radius) = if bounds.is_empty() {
+        (Vec3::ZERO, 1.0)
+    } else {
+        (bounds.center(), (bounds.extent().length() * 0.5).max(1e-4))
+    };
+    let res = resolution as f32;
+    let mut lights = Vec::new();
+    let mut views = Vec::new();
+    for light in &scene.lights {
+        let (position, direction) = light_frame(world_from_node[light.node]);
+        let shadow_layer = views.len() as u32;
+        // Far enough to see everything, near as far out as possible for depth precision.
+        let far = ((position - center).length() + radius) * 1.01;
+        let near = (far * 1e-4).max(1e-5);
+        let (kind, cone_scale, cone_offset) = match light.kind {
+            LightKind::Point => {
+                let fov = 2.0 * (1.0 + 2.0 * (pcf_radius as f32 + 1.0) / res).atan();
+                for (forward, up) in CUBE_FACES {
+                    views.push(perspective_view(position, forward, up, fov, near, far, res));
+                }
+                (LIGHT_POINT, 0.0, 1.0)
+            }
+            LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => {
+                let outer = outer_cone_angle.clamp(1e-3, std::f32::consts::FRAC_PI_2);
+                let inner = inner_cone_angle.clamp(0.0, outer);
+                let margin = 2.0 * (pcf_radius as f32 + 1.0) / res;
+                let fov = (2.0 * ((outer.tan() * (1.0 + margin)).atan())).min(170f32.to_radians());
+                views.push(perspective_view(
+                    position,
+                    direction,
+                    any_perpendicular(direction),
+                    fov,
+                    near,
+                    far,
+                    res,
+                ));
+                // KHR_lights_punctual reference implementation.
+                let scale = 1.0 / (inner.cos() - outer.cos()).max(0.001);
+                (LIGHT_SPOT, scale, -outer.cos() * scale)
+            }
+            LightKind::Directional => {
+                let eye = center - direction * (2.0 * radius);
+                let view_from_world =
+                    glam::camera::rh::view::look_at_mat4(eye, center, any_perpendicular(direction));
+                let clip_from_view = glam::camera::rh::proj::directx::orthographic(
+                    -radius,
+                    radius,
+                    -radius,
+                    radius,
+                    radius * 0.5,
+                    radius * 3.5,
+                );
+                views.push(ShadowView {
+                    clip_from_world: (clip_from_view * view_from_world).to_cols_array_2d(),
+                    origin: [0.0; 4],
+                    texel: [2.0 * radius / res, res, radius * 0.5, radius * 3.5],
+                });
+                (LIGHT_DIRECTIONAL, 0.0, 1.0)
+            }
+        };
+        let intensity = light.radiometric();
+        lights.push(GpuLight {
+            position: position.extend(1.0).to_array(),
+            direction: direction.extend(light.range.unwrap_or(0.0)).to_array(),
+            intensity: intensity.extend(0.0).to_array(),
+            kind,
+            shadow_layer,
+            cone_scale,
+            cone_offset,
+        });
+    }
+    LightSetup { lights, views }
+}
+
+/// Cube faces in the order the shader's `cube_face` picks them: +X, −X, +Y, −Y, +Z, −Z.
+const CUBE_FACES: [(Vec3, Vec3); 6] = [
+    (Vec3::X, Vec3::Y),
+    (Vec3::NEG_X, Vec3::Y),
+    (Vec3::Y, Vec3::Z),
+    (Vec3::NEG_Y, Vec3::Z),
+    (Vec3::Z, Vec3::Y),
+    (Vec3::NEG_Z, Vec3::Y),
+];
+
+fn perspective_view(
+    position: Vec3,
+    forward: Vec3,
+    up: Vec3,
+    fov: f32,
+    near: f32,
+    far: f32,
+    res: f32,
+) -> ShadowView {
+    let view_from_world = glam::camera::rh::view::look_at_mat4(position, position + forward, up);
+    let clip_from_view = glam::camera::rh::proj::directx::perspective(fov, 1.0, near, far);
+    ShadowView {
+        clip_from_world: (clip_from_view * view_from_world).to_cols_array_2d(),
+        origin: position.extend(1.0).to_array(),
+        texel: [2.0 * (fov * 0.5).tan() / res, res, near, far],
+    }
+}
+
+/// An up vector that is not parallel to `d`.
+fn any_perpendicular(d: Vec3) -> Vec3 {
+    if d.y.abs() < 0.99 {
+        Vec3::Y
+    } else {
+        Vec3::Z
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cube_faces_cover_their_axis() {
+        // The centre of each face's frustum is its axis; the shader's face choice must agree.
+        for (i, (forward, up)) in CUBE_FACES.iter().enumerate() {
+            let v = perspective_view(Vec3::ZERO, *forward, *up, 1.6, 0.01, 10.0, 256.0);
+            let m = Mat4::from_cols_array_2d(&v.clip_from_world);
+            let clip = m * (*forward * 2.0).extend(1.0);
+            let ndc = clip.truncate() / clip.w;
+            assert!(
+                ndc.x.abs() < 1e-5 && ndc.y.abs() < 1e-5,
+                "face {i}: {ndc:?}"
+            );
+            assert!(ndc.z > 0.0 && ndc.z < 1.0);
+        }
+    }
+}

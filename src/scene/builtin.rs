@@ -1,0 +1,622 @@
+//! Procedural scenes that need no files: the measured Cornell box and a few analytic test
+//! scenes (a plane under a point or spot light, with and without a blocker) whose direct
+//! lighting has closed forms, so methods can be checked against formulas as well as against the
+//! path-traced reference.
+//!
+//! Everything is in metres. Every surface is tessellated by [`MeshBuilder`] so that no triangle
+//! edge exceeds [`BuiltinParams::max_edge`]: per-vertex methods (sparse-point interpolation,
+//! light atlas texels) need vertices on the big flat walls, which two triangles would not give.
+
+use super::mesh::MeshBuilder;
+use super::{Camera, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs};
+use glam::{Quat, Vec3};
+
+/// Knobs shared by all built-in scenes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuiltinParams {
+    /// Longest triangle edge, metres.
+    pub max_edge: f32,
+}
+
+impl Default for BuiltinParams {
+    fn default() -> Self {
+        Self { max_edge: 0.05 }
+    }
+}
+
+/// Name and one-line description of every built-in scene, in the order `valgi scenes` lists
+/// them.
+pub fn names() -> &'static [(&'static str, &'static str)] {
+    &[
+        (
+            "cornell",
+            "measured Cornell box (Lambertian walls and boxes), spot light under the ceiling",
+        ),
+        (
+            "cornell-point",
+            "measured Cornell box lit by a point light (0.5 W/sr) in the upper middle",
+        ),
+        (
+            "plane-point",
+            "4 m grey plane under a 1 W/sr point light 1 m above, camera looking down",
+        ),
+        (
+            "plane-spot",
+            "4 m grey plane under a spot light (inner 20°, outer 35°) 1 m above",
+        ),
+        (
+            "plane-blocker",
+            "plane-point with a 0.4 m square blocker at 0.5 m casting a shadow",
+        ),
+        (
+            "plane-directional",
+            "the plane and blocker under a 2 W/m² directional light 30° from vertical",
+        ),
+        (
+            "box-point",
+            "closed 2 m cube of albedo 0.5 (inward-facing) with a 1 W/sr point light at its centre",
+        ),
+    ]
+}
+
+/// Builds the built-in scene `name`.
+pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
+    if !(params.max_edge.is_finite() && params.max_edge > 0.0) {
+        return Err(SceneError::Other {
+            path: name.into(),
+            message: format!(
+                "max_edge must be a positive length in metres, got {}",
+                params.max_edge
+            ),
+        });
+    }
+    let max_edge = params.max_edge;
+    match name {
+        "cornell" => Ok(cornell(name, CornellLight::Spot, max_edge)),
+        "cornell-point" => Ok(cornell(name, CornellLight::Point, max_edge)),
+        "plane-point" => Ok(plane(name, PlaneLight::Point, false, max_edge)),
+        "plane-spot" => Ok(plane(name, PlaneLight::Spot, false, max_edge)),
+        "plane-blocker" => Ok(plane(name, PlaneLight::Point, true, max_edge)),
+        "plane-directional" => Ok(plane(name, PlaneLight::Directional, true, max_edge)),
+        "box-point" => Ok(closed_box(name, max_edge)),
+        _ => Err(SceneError::UnknownBuiltin { name: name.into() }),
+    }
+}
+
+/// Incrementally assembles a scene from named objects, each on its own node.
+struct SceneBuilder {
+    scene: Scene,
+}
+
+impl SceneBuilder {
+    fn new(name: &str) -> Self {
+        Self {
+            scene: Scene {
+                name: name.into(),
+                ..Scene::default()
+            },
+        }
+    }
+
+    fn material(&mut self, material: Material) -> usize {
+        self.scene.materials.push(material);
+        self.scene.materials.len() - 1
+    }
+
+    fn node(&mut self, name: &str, local: Trs) -> usize {
+        self.scene.nodes.push(Node {
+            name: name.into(),
+            parent: None,
+            local,
+        });
+        self.scene.nodes.len() - 1
+    }
+
+    /// Adds `mesh` on a new node named `name` at `local`.
+    fn object(&mut self, name: &str, mesh: Mesh, local: Trs) {
+        let node = self.node(name, local);
+        self.scene.meshes.push(mesh);
+        self.scene.instances.push(Instance {
+            mesh: self.scene.meshes.len() - 1,
+            node,
+        });
+    }
+
+    fn light(&mut self, name: &str, position: Vec3, kind: LightKind, intensity: f32) {
+        self.light_along(name, position, Vec3::NEG_Y, kind, intensity);
+    }
+
+    /// A light at `position` pointing along `direction`.
+    fn light_along(
+        &mut self,
+        name: &str,
+        position: Vec3,
+        direction: Vec3,
+        kind: LightKind,
+        intensity: f32,
+    ) {
+        let node = self.node(
+            name,
+            Trs {
+                translation: position,
+                rotation: Quat::from_rotation_arc(Vec3::NEG_Z, direction.normalize()),
+                ..Trs::default()
+            },
+        );
+        self.scene.lights.push(Light {
+            name: name.into(),
+            node,
+            kind,
+            color: Vec3::ONE,
+            intensity,
+            range: None,
+        });
+    }
+
+    fn camera(&mut self, camera: Camera, local: Trs) {
+        let node = self.node(&camera.name, local);
+        self.scene.cameras.push(Camera { node, ..camera });
+    }
+}
+
+/// Rotation taking a node's −z axis (the direction lights and cameras look along) to −y.
+fn looking_down() -> Quat {
+    Quat::from_rotation_arc(Vec3::NEG_Z, Vec3::NEG_Y)
+}
+
+/// Millimetres (the source data's unit) to metres.
+fn mm(x: f32, y: f32, z: f32) -> Vec3 {
+    Vec3::new(x, y, z) * 0.001
+}
+
+#[derive(Clone, Copy)]
+enum CornellLight {
+    Spot,
+    Point,
+}
+
+/// The measured Cornell box.
+///
+/// Geometry and reflectances: Cornell Program of Computer Graphics measured Cornell box, as
+/// carried by mitsuba-data (`cornell-measured/meshes/*.obj`, millimetres there; converted to
+/// metres here). The original luminaire is left out: the scene is lit by a punctual light so
+/// every method (RSM-based ones included) sees the same light.
+fn cornell(name: &str, light: CornellLight, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = b.material(Material::lambert(
+        "white",
+        Vec3::new(0.885809, 0.698859, 0.666422),
+    ));
+    let red = b.material(Material::lambert(
+        "red",
+        Vec3::new(0.570068, 0.0430135, 0.0443706),
+    ));
+    let green = b.material(Material::lambert(
+        "green",
+        Vec3::new(0.105421, 0.37798, 0.076425),
+    ));
+
+    // Room surfaces face the interior.
+    let room_centre = mm(278.0, 274.0, 280.0);
+    let walls: [(&str, usize, [Vec3; 4]); 5] = [
+        (
+            "floor",
+            white,
+            [
+                mm(552.8, 0.0, 0.0),
+                mm(0.0, 0.0, 0.0),
+                mm(0.0, 0.0, 559.2),
+                mm(549.6, 0.0, 559.2),
+            ],
+        ),
+        (
+            "ceiling",
+            white,
+            [
+                mm(556.0, 548.8, 0.0),
+                mm(556.0, 548.8, 559.2),
+                mm(0.0, 548.8, 559.2),
+                mm(0.0, 548.8, 0.0),
+            ],
+        ),
+        (
+            "back_wall",
+            white,
+            [
+                mm(549.6, 0.0, 559.2),
+                mm(0.0, 0.0, 559.2),
+                mm(0.0, 548.8, 559.2),
+                mm(556.0, 548.8, 559.2),
+            ],
+        ),
+        (
+            "green_wall",
+            green,
+            [
+                mm(0.0, 0.0, 559.2),
+                mm(0.0, 0.0, 0.0),
+                mm(0.0, 548.8, 0.0),
+                mm(0.0, 548.8, 559.2),
+            ],
+        ),
+        (
+            "red_wall",
+            red,
+            [
+                mm(552.8, 0.0, 0.0),
+                mm(549.6, 0.0, 559.2),
+                mm(556.0, 548.8, 559.2),
+                mm(556.0, 548.8, 0.0),
+            ],
+        ),
+    ];
+    for (object, material, [p0, p1, p2, p3]) in walls {
+        let mut mb = MeshBuilder::new(object, material);
+        mb.add_quad(p0, p1, p2, p3, room_centre, max_edge);
+        b.object(object, mb.build(), Trs::default());
+    }
+
+    // Boxes: model space centred under the top face at y = 0, so moving a box's node moves
+    // (and rotates) it about its own base.
+    let boxes: [(&str, [Vec3; 4]); 2] = [
+        (
+            "short_box",
+            [
+                mm(130.0, 165.0, 65.0),
+                mm(82.0, 165.0, 225.0),
+                mm(240.0, 165.0, 272.0),
+                mm(290.0, 165.0, 114.0),
+            ],
+        ),
+        (
+            "tall_box",
+            [
+                mm(423.0, 330.0, 247.0),
+                mm(265.0, 330.0, 296.0),
+                mm(314.0, 330.0, 456.0),
+                mm(472.0, 330.0, 406.0),
+            ],
+        ),
+    ];
+    for (object, top_world) in boxes {
+        let centre = (top_world[0] + top_world[1] + top_world[2] + top_world[3]) * 0.25;
+        let origin = Vec3::new(centre.x, 0.0, centre.z);
+        let top_model = top_world.map(|p| p - origin);
+        let mut mb = MeshBuilder::new(object, white);
+        mb.add_box_from_top(top_model, 0.0, max_edge);
+        b.object(
+            object,
+            mb.build(),
+            Trs {
+                translation: origin,
+                ..Trs::default()
+            },
+        );
+    }
+
+    // Camera of the original measurement setup, looking into the box along +z.
+    b.camera(
+        Camera {
+            name: "camera".into(),
+            node: 0,
+            yfov: 39.3077f32.to_radians(),
+            aspect: None,
+            znear: 0.01,
+            zfar: Some(3.0),
+        },
+        Trs {
+            translation: Vec3::new(0.278, 0.273, -0.8),
+            rotation: Quat::from_rotation_y(std::f32::consts::PI),
+            ..Trs::default()
+        },
+    );
+
+    match light {
+        // Just under the ceiling, pointing down; the 70° outer cone reaches the walls and the
+        // whole floor while the ceiling, behind the light, stays unlit directly.
+        CornellLight::Spot => b.light(
+            "spot",
+            Vec3::new(0.278, 0.5478 - 0.005, 0.2795),
+            LightKind::Spot {
+                inner_cone_angle: 50f32.to_radians(),
+                outer_cone_angle: 70f32.to_radians(),
+            },
+            1.0,
+        ),
+        CornellLight::Point => b.light(
+            "point",
+            Vec3::new(0.278, 0.45, 0.2795),
+            LightKind::Point,
+            0.5,
+        ),
+    }
+    b.scene
+}
+
+#[derive(Clone, Copy)]
+enum PlaneLight {
+    Point,
+    Spot,
+    Directional,
+}
+
+/// A 4 m × 4 m grey (ρ = 0.8) Lambertian plane at y = 0 under a light 1 m above its centre,
+/// seen from straight above. Direct irradiance has the closed form E = I·h/(h² + r²)^{3/2}.
+fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let grey = b.material(Material::lambert("grey", Vec3::splat(0.8)));
+    let mut mb = MeshBuilder::new("plane", grey);
+    mb.add_quad(
+        Vec3::new(-2.0, 0.0, -2.0),
+        Vec3::new(2.0, 0.0, -2.0),
+        Vec3::new(2.0, 0.0, 2.0),
+        Vec3::new(-2.0, 0.0, 2.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        max_edge,
+    );
+    b.object("plane", mb.build(), Trs::default());
+
+    if blocker {
+        // A thin closed slab: the top shadows the plane, the bottom receives the plane's
+        // bounce light, so both sides take part in the lighting.
+        let (top_y, bottom_y, half) = (0.5, 0.49, 0.2);
+        let top = [
+            Vec3::new(-half, top_y, -half),
+            Vec3::new(half, top_y, -half),
+            Vec3::new(half, top_y, half),
+            Vec3::new(-half, top_y, half),
+        ];
+        let mut mb = MeshBuilder::new("blocker", grey);
+        mb.add_box_from_top(top, bottom_y, max_edge);
+        let bottom = top.map(|p| Vec3::new(p.x, bottom_y, p.z));
+        mb.add_quad(
+            bottom[0],
+            bottom[1],
+            bottom[2],
+            bottom[3],
+            Vec3::new(0.0, bottom_y - 1.0, 0.0),
+            max_edge,
+        );
+        b.object("blocker", mb.build(), Trs::default());
+    }
+
+    b.camera(
+        Camera {
+            name: "camera".into(),
+            node: 0,
+            yfov: 60f32.to_radians(),
+            aspect: None,
+            znear: 0.05,
+            zfar: Some(10.0),
+        },
+        Trs {
+            translation: Vec3::new(0.0, 2.5, 0.0001),
+            rotation: looking_down(),
+            ..Trs::default()
+        },
+    );
+
+    let position = Vec3::new(0.0, 1.0, 0.0);
+    match light {
+        PlaneLight::Point => b.light("point", position, LightKind::Point, 1.0),
+        PlaneLight::Spot => b.light(
+            "spot",
+            position,
+            LightKind::Spot {
+                inner_cone_angle: 20f32.to_radians(),
+                outer_cone_angle: 35f32.to_radians(),
+            },
+            1.0,
+        ),
+        PlaneLight::Directional => b.light_along(
+            "sun",
+            Vec3::new(0.0, 3.0, 0.0),
+            Vec3::new(30f32.to_radians().sin(), -30f32.to_radians().cos(), 0.0),
+            LightKind::Directional,
+            2.0,
+        ),
+    }
+    b.scene
+}
+
+/// A closed cube [−1, 1]³ m, every face Lambertian with albedo 0.5 and facing inwards, lit by
+/// a 1 W/sr point light at its centre. Direct light reaches every wall through a different
+/// face of the light's cube shadow map; with no occluders, radiance is ρ/π · I·cosθ/d²
+/// everywhere, and the closed box's multi-bounce radiance is a geometric series in ρ.
+/// Two cameras look at opposite walls.
+fn closed_box(name: &str, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let grey = b.material(Material::lambert("grey", Vec3::splat(0.5)));
+    let mut mb = MeshBuilder::new("box", grey);
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let faces = [
+        [
+            c(1., -1., -1.),
+            c(1., 1., -1.),
+            c(1., 1., 1.),
+            c(1., -1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., -1., 1.),
+            c(-1., 1., 1.),
+            c(-1., 1., -1.),
+        ],
+        [
+            c(-1., 1., -1.),
+            c(-1., 1., 1.),
+            c(1., 1., 1.),
+            c(1., 1., -1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(1., -1., -1.),
+            c(1., -1., 1.),
+            c(-1., -1., 1.),
+        ],
+        [
+            c(-1., -1., 1.),
+            c(1., -1., 1.),
+            c(1., 1., 1.),
+            c(-1., 1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., 1., -1.),
+            c(1., 1., -1.),
+            c(1., -1., -1.),
+        ],
+    ];
+    for [p0, p1, p2, p3] in faces {
+        mb.add_quad(p0, p1, p2, p3, Vec3::ZERO, max_edge);
+    }
+    b.object("box", mb.build(), Trs::default());
+    // Rotations about y keep both cameras' up vector +y.
+    let toward_neg_z = Quat::IDENTITY;
+    let toward_pos_z = Quat::from_rotation_y(std::f32::consts::PI);
+    for (camera_name, z, rotation) in [
+        ("toward -z", 0.9, toward_neg_z),
+        ("toward +z", -0.9, toward_pos_z),
+    ] {
+        b.camera(
+            Camera {
+                name: camera_name.into(),
+                node: 0,
+                yfov: 100f32.to_radians(),
+                aspect: None,
+                znear: 0.01,
+                zfar: Some(4.0),
+            },
+            Trs {
+                translation: Vec3::new(0.0, 0.0, z),
+                rotation,
+                ..Trs::default()
+            },
+        );
+    }
+    b.light("point", Vec3::ZERO, LightKind::Point, 1.0);
+    b.scene
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::mesh::longest_edge;
+
+    fn mesh_normal_mean(scene: &Scene, name: &str) -> Vec3 {
+        let mesh = scene
+            .meshes
+            .iter()
+            .find(|m| m.name == name)
+            .unwrap_or_else(|| panic!("no mesh {name}"));
+        let sum: Vec3 = mesh.normals.iter().copied().sum();
+        sum.normalize()
+    }
+
+    #[test]
+    fn every_builtin_loads_with_unit_normals_and_bounded_edges() {
+        let params = BuiltinParams { max_edge: 0.1 };
+        for (name, description) in names() {
+            assert!(!description.is_empty());
+            let scene = load(name, &params).unwrap();
+            assert_eq!(scene.name, *name);
+            assert!(!scene.meshes.is_empty());
+            assert_eq!(scene.lights.len(), 1, "{name}");
+            assert!(!scene.cameras.is_empty(), "{name}");
+            for mesh in &scene.meshes {
+                assert_eq!(mesh.normals.len(), mesh.positions.len());
+                for n in &mesh.normals {
+                    assert!((n.length() - 1.0).abs() < 1e-5, "{name}/{}", mesh.name);
+                }
+                assert!(
+                    longest_edge(mesh) <= params.max_edge * (1.0 + 1e-4),
+                    "{name}/{}: longest edge {}",
+                    mesh.name,
+                    longest_edge(mesh)
+                );
+                assert!(mesh
+                    .indices
+                    .iter()
+                    .all(|&i| (i as usize) < mesh.positions.len()));
+            }
+            for inst in &scene.instances {
+                assert!(inst.mesh < scene.meshes.len() && inst.node < scene.nodes.len());
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_builtin_is_an_error() {
+        let err = load("nope", &BuiltinParams::default()).unwrap_err();
+        assert!(matches!(err, SceneError::UnknownBuiltin { .. }));
+        assert!(load("cornell", &BuiltinParams { max_edge: 0.0 }).is_err());
+    }
+
+    #[test]
+    fn cornell_layout() {
+        let scene = load("cornell", &BuiltinParams::default()).unwrap();
+        assert_eq!(scene.meshes.len(), 7);
+        assert_eq!(scene.instances.len(), 7);
+        assert!(matches!(
+            scene.lights[0].kind,
+            LightKind::Spot { outer_cone_angle, .. } if (outer_cone_angle - 70f32.to_radians()).abs() < 1e-6
+        ));
+        let world = scene.world_from_node();
+        // The spot points straight down, the camera into the box (+z).
+        let light_dir = world[scene.lights[0].node].transform_vector3(Vec3::NEG_Z);
+        assert!((light_dir - Vec3::NEG_Y).length() < 1e-5);
+        let cam = scene.camera_view(None, 1.0, &world).unwrap();
+        let forward = cam.world_from_view.transform_vector3(Vec3::NEG_Z);
+        assert!((forward - Vec3::Z).length() < 1e-5, "{forward}");
+        let up = cam.world_from_view.transform_vector3(Vec3::Y);
+        assert!((up - Vec3::Y).length() < 1e-5);
+        // Wall orientation: into the room.
+        assert!(mesh_normal_mean(&scene, "red_wall").x < -0.99);
+        assert!(mesh_normal_mean(&scene, "green_wall").x > 0.99);
+        assert!(mesh_normal_mean(&scene, "floor").y > 0.99);
+        assert!(mesh_normal_mean(&scene, "ceiling").y < -0.99);
+        assert!(mesh_normal_mean(&scene, "back_wall").z < -0.99);
+        // Boxes sit on the floor inside the room.
+        let bounds = scene.world_bounds(&world);
+        assert!(bounds.min.y.abs() < 1e-6 && (bounds.max.y - 0.5488).abs() < 1e-6);
+        for (i, inst) in scene.instances.iter().enumerate() {
+            let name = &scene.nodes[inst.node].name;
+            if name.ends_with("_box") {
+                let m = world[inst.node];
+                let low = scene.meshes[inst.mesh]
+                    .positions
+                    .iter()
+                    .map(|p| m.transform_point3(*p).y)
+                    .fold(f32::INFINITY, f32::min);
+                assert!(low.abs() < 1e-6, "instance {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn plane_scenes_light_and_camera() {
+        let scene = load("plane-blocker", &BuiltinParams::default()).unwrap();
+        let world = scene.world_from_node();
+        let cam = scene.camera_view(None, 1.0, &world).unwrap();
+        let forward = cam.world_from_view.transform_vector3(Vec3::NEG_Z);
+        assert!((forward - Vec3::NEG_Y).length() < 1e-5);
+        assert!((cam.position() - Vec3::new(0.0, 2.5, 0.0001)).length() < 1e-6);
+        let blocker = scene.meshes.iter().find(|m| m.name == "blocker").unwrap();
+        assert!(
+            blocker.normals.iter().any(|n| n.y < -0.99),
+            "blocker has a bottom"
+        );
+        assert!(
+            blocker.normals.iter().any(|n| n.y > 0.99),
+            "blocker has a top"
+        );
+        let spot = load("plane-spot", &BuiltinParams::default()).unwrap();
+        assert_eq!(
+            spot.lights[0].kind,
+            LightKind::Spot {
+                inner_cone_angle: 20f32.to_radians(),
+                outer_cone_angle: 35f32.to_radians()
+            }
+        );
+    }
+}

@@ -1,0 +1,477 @@
+//! Scene model shared by every method: meshes in model space, node hierarchy with TRS animation,
+//! metallic-roughness materials reduced to DESIGN §3's Lambert + normalized Phong, punctual lights
+//! in radiometric units, and perspective cameras.
+//!
+//! Units: metres, seconds, linear RGB. Light `intensity × color` is radiant intensity in W/sr
+//! (point, spot) or irradiance in W/m² (directional).
+
+pub mod animation;
+pub mod builtin;
+pub mod gltf_import;
+pub mod mesh;
+
+use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
+
+pub use animation::{Animation, Channel, Interpolation, Property};
+
+/// Errors raised while building or loading a scene. Every variant names the file (or built-in)
+/// and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: cannot read glTF: {message}")]
+    Gltf { path: String, message: String },
+    #[error("{path}: required glTF extension(s) not supported by valgi: {extensions}")]
+    UnsupportedRequiredExtension { path: String, extensions: String },
+    #[error("{path}: invalid geometry in {what}: {message}")]
+    InvalidGeometry {
+        path: String,
+        what: String,
+        message: String,
+    },
+    #[error("unknown built-in scene '{name}' (run `valgi scenes` for the list)")]
+    UnknownBuiltin { name: String },
+    #[error("{path}: {message}")]
+    Other { path: String, message: String },
+}
+
+/// Translation, rotation, scale of a node relative to its parent.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Trs {
+    pub translation: Vec3,
+    pub rotation: Quat,
+    pub scale: Vec3,
+}
+
+impl Default for Trs {
+    fn default() -> Self {
+        Self {
+            translation: Vec3::ZERO,
+            rotation: Quat::IDENTITY,
+            scale: Vec3::ONE,
+        }
+    }
+}
+
+impl Trs {
+    pub fn matrix(&self) -> Mat4 {
+        Mat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
+    }
+}
+
+/// A node of the transform hierarchy. Parents always come before their children in
+/// `Scene::nodes`, so world transforms are computed in one forward sweep.
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub name: String,
+    pub parent: Option<usize>,
+    pub local: Trs,
+}
+
+/// One triangle mesh with a single material, in model space.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub name: String,
+    pub positions: Vec<Vec3>,
+    /// Unit vertex normals (computed from the triangles when the source has none).
+    pub normals: Vec<Vec3>,
+    /// Tangent xyz and handedness w (MikkTSpace convention), present when the material has a
+    /// normal map (computed when the source has none).
+    pub tangents: Vec<Vec4>,
+    pub uv0: Vec<Vec2>,
+    /// Light-map UVs (glTF TEXCOORD_1) when the source has them.
+    pub uv1: Option<Vec<Vec2>>,
+    /// Triangle list, three indices per triangle, degenerate triangles already removed.
+    pub indices: Vec<u32>,
+    pub material: usize,
+}
+
+impl Mesh {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// Which colour space a texture's texels are stored in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorSpace {
+    Srgb,
+    Linear,
+}
+
+/// An RGBA8 texture as decoded from the source file.
+#[derive(Clone, Debug)]
+pub struct Texture {
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub rgba8: Vec<u8>,
+    pub color_space: ColorSpace,
+}
+
+/// glTF metallic-roughness material with the extensions valgi reads. The reduction to the
+/// shading model of DESIGN §3 lives in [`Material::diffuse_albedo`] and friends, so every
+/// method and the reference derive ρ_d, ρ_s and k the same way.
+#[derive(Clone, Debug)]
+pub struct Material {
+    pub name: String,
+    pub base_color: Vec4,
+    pub base_color_texture: Option<usize>,
+    pub metallic: f32,
+    pub roughness: f32,
+    /// Texture with roughness in G and metallic in B (glTF convention).
+    pub metallic_roughness_texture: Option<usize>,
+    pub normal_texture: Option<usize>,
+    pub normal_scale: f32,
+    /// Emitted radiance, W/(m²·sr) per channel: `emissiveFactor × emissive_strength`.
+    pub emissive: Vec3,
+    pub emissive_texture: Option<usize>,
+    /// `KHR_materials_specular.specularFactor`: scales ρ_s; 0 gives a pure Lambertian surface.
+    pub specular_factor: f32,
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Self {
+            name: "default".into(),
+            base_color: Vec4::ONE,
+            base_color_texture: None,
+            metallic: 1.0,
+            roughness: 1.0,
+            metallic_roughness_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
+            emissive: Vec3::ZERO,
+            emissive_texture: None,
+            specular_factor: 1.0,
+            double_sided: false,
+        }
+    }
+}
+
+impl Material {
+    /// A pure Lambertian material of albedo `rho` (no specular lobe).
+    pub fn lambert(name: &str, rho: Vec3) -> Self {
+        Self {
+            name: name.into(),
+            base_color: rho.extend(1.0),
+            metallic: 0.0,
+            roughness: 1.0,
+            specular_factor: 0.0,
+            ..Self::default()
+        }
+    }
+
+    /// ρ_d = base·(1−metallic) (DESIGN §3), for given base colour and metallic values.
+    pub fn diffuse_albedo(base: Vec3, metallic: f32) -> Vec3 {
+        base * (1.0 - metallic)
+    }
+
+    /// ρ_s = specular_factor · mix(0.04, base, metallic) (DESIGN §3 and KHR_materials_specular).
+    pub fn specular_albedo(base: Vec3, metallic: f32, specular_factor: f32) -> Vec3 {
+        Vec3::splat(0.04).lerp(base, metallic) * specular_factor
+    }
+
+    /// Phong exponent k = clamp(2/α² − 2, 1, 10000) with α = roughness² (DESIGN §3).
+    pub fn phong_exponent(roughness: f32) -> f32 {
+        let alpha = (roughness * roughness).max(1e-4);
+        (2.0 / (alpha * alpha) - 2.0).clamp(1.0, 10000.0)
+    }
+}
+
+/// A punctual light's shape. Angles in radians.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    Point,
+    Spot {
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
+    Directional,
+}
+
+/// A KHR_lights_punctual light attached to a node. It sits at the node's origin and points
+/// down the node's −z axis.
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub name: String,
+    pub node: usize,
+    pub kind: LightKind,
+    pub color: Vec3,
+    /// W/sr (point, spot) or W/m² (directional), multiplied by `color`.
+    pub intensity: f32,
+    /// Distance at which the light's influence reaches zero (KHR smooth window), when set.
+    pub range: Option<f32>,
+}
+
+impl Light {
+    /// Radiant intensity (W/sr) or irradiance (W/m²) per channel.
+    pub fn radiometric(&self) -> Vec3 {
+        self.color * self.intensity
+    }
+}
+
+/// A perspective camera attached to a node; it looks down the node's −z axis with +y up.
+#[derive(Clone, Debug)]
+pub struct Camera {
+    pub name: String,
+    pub node: usize,
+    /// Vertical field of view, radians.
+    pub yfov: f32,
+    /// Width / height; `None` takes the output image's aspect.
+    pub aspect: Option<f32>,
+    pub znear: f32,
+    pub zfar: Option<f32>,
+}
+
+/// A mesh placed in the world by a node.
+#[derive(Clone, Copy, Debug)]
+pub struct Instance {
+    pub mesh: usize,
+    pub node: usize,
+}
+
+/// Everything a method needs to render a frame.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    pub name: String,
+    pub nodes: Vec<Node>,
+    pub meshes: Vec<Mesh>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub instances: Vec<Instance>,
+    pub lights: Vec<Light>,
+    pub cameras: Vec<Camera>,
+    pub animations: Vec<Animation>,
+    /// Non-fatal problems found while loading (ignored extensions, repaired geometry, …).
+    pub warnings: Vec<String>,
+}
+
+/// World-space placement of a camera, ready to build view and projection matrices.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraView {
+    pub world_from_view: Mat4,
+    pub yfov: f32,
+    pub aspect: f32,
+    pub znear: f32,
+    pub zfar: f32,
+}
+
+impl CameraView {
+    pub fn position(&self) -> Vec3 {
+        self.world_from_view.w_axis.truncate()
+    }
+
+    pub fn view_from_world(&self) -> Mat4 {
+        self.world_from_view.inverse()
+    }
+
+    /// Right-handed projection with depth in [0, 1] (wgpu's clip space).
+    pub fn clip_from_view(&self) -> Mat4 {
+        // glam 0.34 moved projections to `glam::camera`; `directx` is wgpu's convention
+        // (right-handed view space, NDC z in [0, 1], y up), the old `Mat4::perspective_rh`.
+        glam::camera::rh::proj::directx::perspective(self.yfov, self.aspect, self.znear, self.zfar)
+    }
+
+    pub fn clip_from_world(&self) -> Mat4 {
+        self.clip_from_view() * self.view_from_world()
+    }
+}
+
+/// Axis-aligned bounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
+
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x
+    }
+
+    pub fn grow(&mut self, p: Vec3) {
+        self.min = self.min.min(p);
+        self.max = self.max.max(p);
+    }
+
+    pub fn center(&self) -> Vec3 {
+        (self.min + self.max) * 0.5
+    }
+
+    pub fn extent(&self) -> Vec3 {
+        self.max - self.min
+    }
+}
+
+impl Scene {
+    /// World transform of every node at animation time `time` (seconds). Animations override
+    /// the animated TRS components of their target nodes; with no animations the result is the
+    /// rest pose.
+    pub fn world_from_node_at(&self, time: f32) -> Vec<Mat4> {
+        let mut locals: Vec<Trs> = self.nodes.iter().map(|n| n.local).collect();
+        for animation in &self.animations {
+            animation.apply(time, &mut locals);
+        }
+        let mut world = Vec::with_capacity(self.nodes.len());
+        for (i, node) in self.nodes.iter().enumerate() {
+            let local = locals[i].matrix();
+            let m = match node.parent {
+                Some(p) => world[p] * local,
+                None => local,
+            };
+            world.push(m);
+        }
+        world
+    }
+
+    /// World transforms in the rest pose.
+    pub fn world_from_node(&self) -> Vec<Mat4> {
+        self.world_from_node_at(0.0)
+    }
+
+    /// Bounds of all instanced geometry in world space.
+    pub fn world_bounds(&self, world_from_node: &[Mat4]) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for inst in &self.instances {
+            let m = world_from_node[inst.node];
+            for p in &self.meshes[inst.mesh].positions {
+                b.grow(m.transform_point3(*p));
+            }
+        }
+        b
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh].triangle_count())
+            .sum()
+    }
+
+    /// Duration of the longest animation, seconds (0 when there are none).
+    pub fn animation_duration(&self) -> f32 {
+        self.animations
+            .iter()
+            .map(|a| a.duration())
+            .fold(0.0, f32::max)
+    }
+
+    /// Resolves a camera by name or index. `None` picks the scene's first camera, or a default
+    /// camera framing the scene when it has none.
+    pub fn camera_view(
+        &self,
+        selector: Option<&str>,
+        output_aspect: f32,
+        world_from_node: &[Mat4],
+    ) -> Result<CameraView, SceneError> {
+        let bounds = self.world_bounds(world_from_node);
+        let camera = match selector {
+            None => self.cameras.first(),
+            Some(sel) => {
+                let found = match sel.parse::<usize>() {
+                    Ok(i) => self.cameras.get(i),
+                    Err(_) => self.cameras.iter().find(|c| c.name == sel),
+                };
+                if found.is_none() {
+                    let names: Vec<String> = self
+                        .cameras
+                        .iter()
+                        .enumerate()
+                        .map(|(i, c)| format!("{i}:{}", c.name))
+                        .collect();
+                    return Err(SceneError::Other {
+                        path: self.name.clone(),
+                        message: format!(
+                            "no camera '{sel}' (cameras: {})",
+                            if names.is_empty() {
+                                "none".to_string()
+                            } else {
+                                names.join(", ")
+                            }
+                        ),
+                    });
+                }
+                found
+            }
+        };
+        let radius = if bounds.is_empty() {
+            1.0
+        } else {
+            (bounds.extent().length() * 0.5).max(1e-3)
+        };
+        Ok(match camera {
+            Some(c) => {
+                let world_from_view = world_from_node[c.node];
+                let eye = world_from_view.w_axis.truncate();
+                // Without a far plane (infinite glTF projection) bound depth by the scene.
+                let far_needed = if bounds.is_empty() {
+                    1000.0
+                } else {
+                    (eye - bounds.center()).length() + radius
+                };
+                CameraView {
+                    world_from_view: orthonormalize(world_from_view),
+                    yfov: c.yfov,
+                    aspect: c.aspect.unwrap_or(output_aspect),
+                    znear: c.znear.max(1e-4),
+                    zfar: c.zfar.unwrap_or(far_needed * 1.5).max(c.znear * 2.0),
+                }
+            }
+            None => default_camera(&bounds, radius, output_aspect),
+        })
+    }
+}
+
+/// Removes scale from a camera's transform so the view matrix is a rigid motion.
+fn orthonormalize(m: Mat4) -> Mat4 {
+    let (_, rotation, translation) = m.to_scale_rotation_translation();
+    Mat4::from_rotation_translation(rotation, translation)
+}
+
+/// A camera framing the bounds from the +z side, slightly above, with a 45° vertical fov.
+fn default_camera(bounds: &Aabb, radius: f32, aspect: f32) -> CameraView {
+    let yfov = 45f32.to_radians();
+    let center = if bounds.is_empty() {
+        Vec3::ZERO
+    } else {
+        bounds.center()
+    };
+    // Distance at which the bounding sphere fits the narrower of the two fields of view.
+    let half_vertical = yfov * 0.5;
+    let half_horizontal = (aspect.max(1e-3) * half_vertical.tan()).atan();
+    let fit = radius / half_vertical.min(half_horizontal).sin();
+    let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
+    let eye = center + dir * fit * 1.05;
+    let view_from_world = glam::camera::rh::view::look_at_mat4(eye, center, Vec3::Y);
+    CameraView {
+        world_from_view: view_from_world.inverse(),
+        yfov,
+        aspect,
+        znear: (fit - radius).max(radius * 1e-3),
+        zfar: fit + radius * 2.0,
+    }
+}
+
+/// Loads a scene from a spec: a path ending in `.gltf` / `.glb` (any case) is imported from
+/// disk, anything else names a built-in scene (see [`builtin::names`]).
+pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneError> {
+    let lower = spec.to_ascii_lowercase();
+    if lower.ends_with(".gltf") || lower.ends_with(".glb") {
+        let path = std::path::Path::new(spec);
+        if !path.is_file() {
+            return Err(SceneError::Gltf {
+                path: spec.to_string(),
+                message: "file not found".into(),
+            });
+        }
+        gltf_import::load(path)
+    } else {
+        builtin::load(spec, params)
+    }
+}

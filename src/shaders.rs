@@ -1,0 +1,67 @@
+//! The WGSL sources in `shaders/`, embedded in the binary. A line `#include "file.wgsl"` is
+//! replaced by that file's text (once per shader), because WGSL has no include of its own;
+//! tests validate every resolved shader with naga.
+
+/// Every shader file, by name.
+pub const FILES: &[(&str, &str)] = &[
+    ("common.wgsl", include_str!("../shaders/common.wgsl")),
+    (
+        "shadow_depth.wgsl",
+        include_str!("../shaders/shadow_depth.wgsl"),
+    ),
+    ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
+    (
+        "direct_light.wgsl",
+        include_str!("../shaders/direct_light.wgsl"),
+    ),
+    ("resolve.wgsl", include_str!("../shaders/resolve.wgsl")),
+];
+
+/// Files that are only included by others (no entry points of their own).
+pub const INCLUDES: &[&str] = &["common.wgsl"];
+
+fn raw(name: &str) -> &'static str {
+    FILES
+        .iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, s)| *s)
+        .unwrap_or_else(|| panic!("shader '{name}' is not listed in shaders::FILES"))
+}
+
+/// The shader's source with its includes resolved.
+pub fn source(name: &str) -> String {
+    let mut seen = Vec::new();
+    let mut out = String::new();
+    expand(name, &mut seen, &mut out);
+    out
+}
+
+fn expand(name: &str, seen: &mut Vec<String>, out: &mut String) {
+    if seen.iter().any(|s| s == name) {
+        return;
+    }
+    seen.push(name.to_string());
+    for line in raw(name).lines() {
+        match line.trim().strip_prefix("#include") {
+            Some(rest) => expand(rest.trim().trim_matches('"'), seen, out),
+            None => {
+                out.push_str(line);
+                out.push('\n');
+            }
+        }
+    }
+}
+
+/// Parses and validates a shader with naga, returning the module for reflection.
+pub fn validate(name: &str) -> Result<naga::Module, String> {
+    let src = source(name);
+    let module = naga::front::wgsl::parse_str(&src)
+        .map_err(|e| format!("{name}: {}", e.emit_to_string(&src)))?;
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::all(),
+    )
+    .validate(&module)
+    .map_err(|e| format!("{name}: {}", e.emit_to_string(&src)))?;
+    Ok(module)
+}

@@ -1,0 +1,85 @@
+//! Shared test helpers.
+#![allow(dead_code)]
+
+use valgi::gpu::GpuContext;
+
+/// The GPU device, or `None` (with a loud message) when there is none. Under CI
+/// (`CI=true`) a missing adapter fails the test: CI must never pass while testing nothing.
+pub fn gpu() -> Option<GpuContext> {
+    match GpuContext::new() {
+        Ok(ctx) => Some(ctx),
+        Err(e) => {
+            if std::env::var("CI")
+                .map(|v| v == "true" || v == "1")
+                .unwrap_or(false)
+            {
+                panic!("CI=true but no GPU adapter: {e}");
+            }
+            eprintln!("SKIPPED (no GPU adapter; set up Mesa's lavapipe to run it): {e}");
+            None
+        }
+    }
+}
+
+/// A fresh folder for one test's files.
+pub fn temp_dir(test: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("valgi-{test}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("create temp dir");
+    dir
+}
+
+/// Compares a rendered image, tone-mapped at `exposure`, with the stored reference
+/// `data/references/<name>.png` by mean FLIP. On failure it writes the actual image and the
+/// FLIP error map to `target/image-test-failures/`. `VALGI_UPDATE_REFERENCES=1` rewrites the
+/// reference instead (review the new image before committing it).
+pub fn assert_matches_reference(
+    name: &str,
+    image: &valgi::image_io::Image,
+    exposure: f32,
+    max_mean_flip: f32,
+) {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let reference_path = root.join("data/references").join(format!("{name}.png"));
+    let actual = image.tone_map(exposure);
+    if std::env::var("VALGI_UPDATE_REFERENCES").is_ok_and(|v| v == "1") {
+        std::fs::create_dir_all(reference_path.parent().unwrap()).unwrap();
+        actual.save(&reference_path).expect("write reference");
+        eprintln!("updated {}", reference_path.display());
+        return;
+    }
+    let reference = image::open(&reference_path)
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (create it with VALGI_UPDATE_REFERENCES=1)",
+                reference_path.display()
+            )
+        })
+        .to_rgb8();
+    assert_eq!(
+        reference.dimensions(),
+        actual.dimensions(),
+        "{name}: size differs from the reference"
+    );
+    let (w, h) = actual.dimensions();
+    let error_map = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, reference.as_raw()),
+        nv_flip::FlipImageRgb8::with_data(w, h, actual.as_raw()),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    let mean = nv_flip::FlipPool::from_image(&error_map).mean();
+    if mean > max_mean_flip {
+        let out = root.join("target/image-test-failures");
+        std::fs::create_dir_all(&out).unwrap();
+        actual.save(out.join(format!("{name}.actual.png"))).unwrap();
+        let diff = error_map.apply_color_lut(&nv_flip::magma_lut());
+        image::RgbImage::from_raw(w, h, diff.to_vec())
+            .unwrap()
+            .save(out.join(format!("{name}.flip.png")))
+            .unwrap();
+        panic!(
+            "{name}: mean FLIP {mean:.4} > {max_mean_flip} against {}; actual and error map in {}",
+            reference_path.display(),
+            out.display()
+        );
+    }
+}

@@ -1,0 +1,73 @@
+//! Every WGSL file parses and validates with naga, and every `#[repr(C)]` struct shared with
+//! WGSL has the size and field offsets naga computes for it. No GPU needed.
+
+use valgi::raster::types::shared_layouts;
+use valgi::shaders;
+
+#[test]
+fn every_wgsl_file_validates() {
+    let mut failures = Vec::new();
+    for (name, _) in shaders::FILES {
+        if let Err(e) = shaders::validate(name) {
+            failures.push(e);
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n\n"));
+}
+
+#[test]
+fn every_shader_in_the_folder_is_listed() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    for entry in std::fs::read_dir(&dir).expect("shaders folder") {
+        let name = entry
+            .expect("entry")
+            .file_name()
+            .to_string_lossy()
+            .to_string();
+        if name.ends_with(".wgsl") {
+            assert!(
+                shaders::FILES.iter().any(|(n, _)| *n == name),
+                "shaders/{name} is not in shaders::FILES, so it is neither embedded nor validated"
+            );
+        }
+    }
+}
+
+#[test]
+fn rust_structs_match_naga_layout() {
+    for layout in shared_layouts() {
+        let (wgsl_name, file, rust_size, rust_fields) =
+            (layout.wgsl_name, layout.file, layout.size, layout.fields);
+        let module = shaders::validate(file).unwrap_or_else(|e| panic!("{e}"));
+        let ty = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(wgsl_name))
+            .unwrap_or_else(|| panic!("struct {wgsl_name} not found in {file}"))
+            .1;
+        let naga::TypeInner::Struct { members, span } = &ty.inner else {
+            panic!("{wgsl_name} is not a struct");
+        };
+        assert_eq!(
+            *span as usize, rust_size,
+            "{wgsl_name}: WGSL size {span} vs Rust {rust_size}"
+        );
+        assert_eq!(
+            members.len(),
+            rust_fields.len(),
+            "{wgsl_name}: member count differs"
+        );
+        for (member, (rust_name, rust_offset)) in members.iter().zip(&rust_fields) {
+            assert_eq!(
+                member.name.as_deref(),
+                Some(*rust_name),
+                "{wgsl_name}: field order differs"
+            );
+            assert_eq!(
+                member.offset as usize, *rust_offset,
+                "{wgsl_name}.{rust_name}: WGSL offset {} vs Rust {rust_offset}",
+                member.offset
+            );
+        }
+    }
+}
