@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use crate::gpu::{GpuContext, GpuError};
-use crate::image_io::{ensure_writable, ImageError};
+use crate::image_io::{prepare_output, ImageError};
 use crate::method;
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, builtin::BuiltinParams, SceneError};
@@ -63,16 +63,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let started = Instant::now();
     // Fail on an unwritable output before spending time on the scene and the GPU.
     for path in &request.outputs {
-        ensure_writable(path)?;
-        if !matches!(
-            path.extension()
-                .and_then(|e| e.to_str())
-                .map(|e| e.to_ascii_lowercase())
-                .as_deref(),
-            Some("exr") | Some("png")
-        ) {
-            return Err(ImageError::Extension { path: path.clone() }.into());
-        }
+        prepare_output(path)?;
     }
     let scene = scene::load(
         &request.scene,

@@ -134,25 +134,36 @@ impl<'a> Passes<'a> {
         Ok(())
     }
 
+    /// Opens a pass: finishes earlier work in wall-clock mode, takes a timestamp slot, pushes
+    /// the debug group. Returns the start time and the (begin, end) query indices.
+    fn begin_pass(&mut self, label: &str) -> Result<(Instant, Option<(u32, u32)>), GpuError> {
+        self.flush_for_wall_clock()?;
+        let started = Instant::now();
+        let query = self.next_query(label).map(|q| (2 * q, 2 * q + 1));
+        self.encoder.push_debug_group(label);
+        Ok((started, query))
+    }
+
+    fn end_pass(&mut self, label: &str, started: Instant) -> Result<(), GpuError> {
+        self.encoder.pop_debug_group();
+        self.time_wall_clock(label, started)
+    }
+
     /// Records one compute pass named `label`.
     pub fn compute(
         &mut self,
         label: &str,
         record: impl FnOnce(&mut wgpu::ComputePass<'_>),
     ) -> Result<(), GpuError> {
-        self.flush_for_wall_clock()?;
-        let started = Instant::now();
-        let query = self.next_query(label);
-        self.encoder.push_debug_group(label);
+        let (started, query) = self.begin_pass(label)?;
         {
-            let timestamp_writes = match (&self.query_set, query) {
-                (Some(set), Some(q)) => Some(wgpu::ComputePassTimestampWrites {
+            let timestamp_writes = self.query_set.as_ref().zip(query).map(|(set, (b, e))| {
+                wgpu::ComputePassTimestampWrites {
                     query_set: set,
-                    beginning_of_pass_write_index: Some(2 * q),
-                    end_of_pass_write_index: Some(2 * q + 1),
-                }),
-                _ => None,
-            };
+                    beginning_of_pass_write_index: Some(b),
+                    end_of_pass_write_index: Some(e),
+                }
+            });
             let mut pass = self
                 .encoder
                 .begin_compute_pass(&wgpu::ComputePassDescriptor {
@@ -161,8 +172,7 @@ impl<'a> Passes<'a> {
                 });
             record(&mut pass);
         }
-        self.encoder.pop_debug_group();
-        self.time_wall_clock(label, started)
+        self.end_pass(label, started)
     }
 
     /// Records one render pass named `label` into the given attachments.
@@ -173,19 +183,15 @@ impl<'a> Passes<'a> {
         depth_stencil_attachment: Option<wgpu::RenderPassDepthStencilAttachment<'_>>,
         record: impl FnOnce(&mut wgpu::RenderPass<'_>),
     ) -> Result<(), GpuError> {
-        self.flush_for_wall_clock()?;
-        let started = Instant::now();
-        let query = self.next_query(label);
-        self.encoder.push_debug_group(label);
+        let (started, query) = self.begin_pass(label)?;
         {
-            let timestamp_writes = match (&self.query_set, query) {
-                (Some(set), Some(q)) => Some(wgpu::RenderPassTimestampWrites {
+            let timestamp_writes = self.query_set.as_ref().zip(query).map(|(set, (b, e))| {
+                wgpu::RenderPassTimestampWrites {
                     query_set: set,
-                    beginning_of_pass_write_index: Some(2 * q),
-                    end_of_pass_write_index: Some(2 * q + 1),
-                }),
-                _ => None,
-            };
+                    beginning_of_pass_write_index: Some(b),
+                    end_of_pass_write_index: Some(e),
+                }
+            });
             let mut pass = self.encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some(label),
                 color_attachments,
@@ -196,8 +202,7 @@ impl<'a> Passes<'a> {
             });
             record(&mut pass);
         }
-        self.encoder.pop_debug_group();
-        self.time_wall_clock(label, started)
+        self.end_pass(label, started)
     }
 
     /// Submits the frame, waits for it, and returns the per-pass times.

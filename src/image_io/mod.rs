@@ -180,6 +180,16 @@ fn extension(path: &Path) -> Option<String> {
         .map(|e| e.to_ascii_lowercase())
 }
 
+/// Checks an output path before rendering: a supported extension and a writable location.
+pub fn prepare_output(path: &Path) -> Result<(), ImageError> {
+    match extension(path).as_deref() {
+        Some("exr") | Some("png") => ensure_writable(path),
+        _ => Err(ImageError::Extension {
+            path: path.to_path_buf(),
+        }),
+    }
+}
+
 /// Creates the parent folders and checks the file can be opened for writing, so an
 /// unwritable output path is reported before minutes of rendering rather than after.
 pub fn ensure_writable(path: &Path) -> Result<(), ImageError> {
@@ -196,13 +206,17 @@ pub fn ensure_writable(path: &Path) -> Result<(), ImageError> {
     if path.is_dir() {
         return Err(fail("is a folder".into()));
     }
+    // Probe without leaving an empty file behind if rendering fails later.
+    let existed = path.exists();
     std::fs::OpenOptions::new()
-        .write(true)
+        .append(true)
         .create(true)
-        .truncate(false)
         .open(path)
-        .map(|_| ())
-        .map_err(|e| fail(e.to_string()))
+        .map_err(|e| fail(e.to_string()))?;
+    if !existed {
+        let _ = std::fs::remove_file(path);
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -217,6 +231,27 @@ mod tests {
         assert_eq!(tm.get_pixel(0, 0).0, [188, 255, 255]);
         // Negative clamps to 0; 0.004 is on the linear segment: 12.92·0.004 = 0.0517 → 13.
         assert_eq!(tm.get_pixel(1, 0).0, [0, 0, 13]);
+    }
+
+    #[test]
+    fn output_paths_are_checked_without_leaving_files() {
+        let dir = std::env::temp_dir().join(format!("valgi-out-{}", std::process::id()));
+        let fresh = dir.join("sub/fresh.exr");
+        prepare_output(&fresh).unwrap();
+        assert!(
+            fresh.parent().unwrap().is_dir(),
+            "parent folders are created"
+        );
+        assert!(!fresh.exists(), "the probe leaves no empty file behind");
+        let err = prepare_output(&dir.join("x.tiff")).unwrap_err().to_string();
+        assert!(err.contains("x.tiff") && err.contains("extension"), "{err}");
+        let err = prepare_output(Path::new("/proc/valgi-none/x.png"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("/proc/valgi-none/x.png"), "{err}");
+        std::fs::create_dir_all(dir.join("a.png")).unwrap();
+        let err = prepare_output(&dir.join("a.png")).unwrap_err().to_string();
+        assert!(err.contains("folder"), "{err}");
     }
 
     #[test]

@@ -475,3 +475,68 @@ pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneE
         builtin::load(spec, params)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cornell() -> Scene {
+        builtin::load("cornell", &builtin::BuiltinParams::default()).unwrap()
+    }
+
+    #[test]
+    fn cameras_are_chosen_by_name_index_or_default() {
+        let scene = builtin::load("box-point", &builtin::BuiltinParams::default()).unwrap();
+        let world = scene.world_from_node();
+        let first = scene.camera_view(None, 1.5, &world).unwrap();
+        let by_index = scene.camera_view(Some("1"), 1.5, &world).unwrap();
+        let by_name = scene.camera_view(Some("toward +z"), 1.5, &world).unwrap();
+        assert_eq!(first.position(), Vec3::new(0.0, 0.0, 0.9));
+        assert_eq!(by_index.position(), by_name.position());
+        // No aspect in the camera: the output's is used.
+        assert_eq!(first.aspect, 1.5);
+        let err = scene.camera_view(Some("nope"), 1.0, &world).unwrap_err();
+        assert!(err.to_string().contains("toward -z"), "{err}");
+    }
+
+    #[test]
+    fn default_camera_frames_the_whole_scene() {
+        let mut scene = cornell();
+        scene.cameras.clear();
+        let world = scene.world_from_node();
+        let bounds = scene.world_bounds(&world);
+        for aspect in [0.5, 1.0, 2.0] {
+            let view = scene.camera_view(None, aspect, &world).unwrap();
+            let clip_from_world = view.clip_from_world();
+            for i in 0..8 {
+                let corner = Vec3::new(
+                    if i & 1 == 0 {
+                        bounds.min.x
+                    } else {
+                        bounds.max.x
+                    },
+                    if i & 2 == 0 {
+                        bounds.min.y
+                    } else {
+                        bounds.max.y
+                    },
+                    if i & 4 == 0 {
+                        bounds.min.z
+                    } else {
+                        bounds.max.z
+                    },
+                );
+                let clip = clip_from_world * corner.extend(1.0);
+                let ndc = clip.truncate() / clip.w;
+                assert!(
+                    clip.w > 0.0 && ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0,
+                    "corner {corner} outside the view at aspect {aspect}: {ndc}"
+                );
+                assert!(
+                    (0.0..=1.0).contains(&ndc.z),
+                    "corner {corner} clipped in depth"
+                );
+            }
+        }
+    }
+}
