@@ -8,3 +8,4 @@ pub mod method;
 pub mod raster;
 pub mod scene;
 pub mod shaders;
+pub mod shading;

@@ -6,21 +6,12 @@ use glam::{Mat4, Vec3};
 
 use super::types::{GpuLight, ShadowView, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT};
 use crate::scene::{Aabb, LightKind, Scene};
+use crate::shading::WorldLight;
 
 /// Lights in world space and the shadow views they need.
 pub struct LightSetup {
     pub lights: Vec<GpuLight>,
     pub views: Vec<ShadowView>,
-}
-
-/// A light's world position and the unit direction it points along (node −z).
-pub fn light_frame(world_from_node: Mat4) -> (Vec3, Vec3) {
-    let position = world_from_node.transform_point3(Vec3::ZERO);
-    let direction = world_from_node
-        .transform_vector3(Vec3::NEG_Z)
-        .try_normalize()
-        .unwrap_or(Vec3::NEG_Z);
-    (position, direction)
 }
 
 /// Builds the light records and shadow views. `pcf_radius` widens point-light cube faces a
@@ -40,8 +31,12 @@ pub fn setup_lights(
     let res = resolution as f32;
     let mut lights = Vec::new();
     let mut views = Vec::new();
-    for light in &scene.lights {
-        let (position, direction) = light_frame(world_from_node[light.node]);
+    for (light, placed) in scene
+        .lights
+        .iter()
+        .zip(WorldLight::from_scene(scene, world_from_node))
+    {
+        let (position, direction) = (placed.position, placed.direction);
         let shadow_layer = views.len() as u32;
         // Far enough to see everything, near as far out as possible for depth precision.
         let far = ((position - center).length() + radius) * 1.01;
@@ -95,7 +90,7 @@ pub fn setup_lights(
                 (LIGHT_DIRECTIONAL, 0.0, 1.0)
             }
         };
-        let intensity = light.radiometric();
+        let intensity = placed.intensity;
         lights.push(GpuLight {
             position: position.extend(1.0).to_array(),
             direction: direction.extend(light.range.unwrap_or(0.0)).to_array(),
