@@ -10,7 +10,7 @@ use glam::Mat4;
 
 use crate::gpu::{GpuBytes, GpuContext, GpuError, PassTimings, Passes};
 use crate::image_io::Image;
-use crate::scene::{CameraView, Scene};
+use crate::scene::{Aabb, CameraView, Scene};
 use scene_gpu::{SceneGpu, SceneTooLarge};
 use types::{FrameUniforms, ResolveParams, ShadowView, Vertex};
 
@@ -201,6 +201,8 @@ pub struct Rasterizer {
     resolve_group: wgpu::BindGroup,
     light_count: u32,
     shadow_bytes: GpuBytes,
+    /// Model-space bounds of every mesh, for per-frame shadow-frustum fitting.
+    mesh_bounds: Vec<Aabb>,
 }
 
 impl Rasterizer {
@@ -609,6 +611,7 @@ impl Rasterizer {
             resolve_group,
             light_count: scene.lights.len() as u32,
             shadow_bytes,
+            mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
         })
     }
 
@@ -628,7 +631,12 @@ impl Rasterizer {
         let queue = &ctx.queue;
         self.scene_gpu
             .update_transforms(ctx, scene, world_from_node);
-        let bounds = scene.world_bounds(world_from_node);
+        // Per frame only the eight corners of each mesh's box move, not every vertex.
+        let bounds = scene
+            .instances
+            .iter()
+            .map(|inst| self.mesh_bounds[inst.mesh].transformed(world_from_node[inst.node]))
+            .fold(Aabb::EMPTY, |a, b| a.union(&b));
         let setup = shadows::setup_lights(
             scene,
             world_from_node,
@@ -757,15 +765,25 @@ impl Rasterizer {
         })
     }
 
-    /// Reads the resolved direct and indirect images back.
-    pub fn read_outputs(&self, ctx: &GpuContext) -> Result<(Image, Image), GpuError> {
+    /// Reads the resolved direct and indirect images back (the indirect one only when a
+    /// method wrote it; otherwise it is black).
+    pub fn read_outputs(
+        &self,
+        ctx: &GpuContext,
+        has_indirect: bool,
+    ) -> Result<(Image, Image), GpuError> {
         let (w, h) = (self.settings.width, self.settings.height);
         let direct = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_direct)?;
-        let indirect = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_indirect)?;
-        Ok((
-            Image::from_rgba(w, h, direct),
-            Image::from_rgba(w, h, indirect),
-        ))
+        let indirect = if has_indirect {
+            Image::from_rgba(
+                w,
+                h,
+                crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_indirect)?,
+            )
+        } else {
+            Image::new(w, h)
+        };
+        Ok((Image::from_rgba(w, h, direct), indirect))
     }
 
     /// Shadows, G-buffer, direct light and resolve: the whole direct-only frame.
@@ -783,7 +801,7 @@ impl Rasterizer {
         self.record_direct(&mut passes)?;
         self.record_resolve(ctx, &mut passes, false)?;
         let timings = passes.finish()?;
-        let (direct, indirect) = self.read_outputs(ctx)?;
+        let (direct, indirect) = self.read_outputs(ctx, false)?;
         Ok(FrameOutput {
             direct,
             indirect,

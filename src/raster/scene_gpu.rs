@@ -397,12 +397,12 @@ impl MipLevel {
     fn half(&self, srgb: bool) -> Self {
         let width = (self.width / 2).max(1);
         let height = (self.height / 2).max(1);
+        let lut = srgb_decode_table();
         let to_linear = |v: u8, channel: usize| -> f32 {
-            let x = v as f32 / 255.0;
             if srgb && channel < 3 {
-                srgb_to_linear(x)
+                lut[v as usize]
             } else {
-                x
+                v as f32 / 255.0
             }
         };
         let to_byte = |x: f32, channel: usize| -> u8 {
@@ -438,6 +438,12 @@ impl MipLevel {
             rgba8,
         }
     }
+}
+
+/// sRGB-encoded byte → linear value, computed once.
+fn srgb_decode_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)))
 }
 
 pub fn srgb_to_linear(x: f32) -> f32 {

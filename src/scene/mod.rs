@@ -89,6 +89,15 @@ impl Mesh {
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
+
+    /// Bounds of the vertices in model space.
+    pub fn model_bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for p in &self.positions {
+            b.grow(*p);
+        }
+        b
+    }
 }
 
 /// Which colour space a texture's texels are stored in.
@@ -306,6 +315,30 @@ impl Aabb {
 
     pub fn extent(&self) -> Vec3 {
         self.max - self.min
+    }
+
+    /// Bounds of this box after the affine transform `m` (of its eight corners).
+    pub fn transformed(&self, m: Mat4) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        if self.is_empty() {
+            return b;
+        }
+        for i in 0..8 {
+            let corner = Vec3::new(
+                if i & 1 == 0 { self.min.x } else { self.max.x },
+                if i & 2 == 0 { self.min.y } else { self.max.y },
+                if i & 4 == 0 { self.min.z } else { self.max.z },
+            );
+            b.grow(m.transform_point3(corner));
+        }
+        b
+    }
+
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        Aabb {
+            min: self.min.min(other.min),
+            max: self.max.max(other.max),
+        }
     }
 }
 
