@@ -108,7 +108,7 @@ impl Image {
     }
 
     pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
-        ensure_writable(path)?;
+        create_parent_folders(path)?;
         let w = self.width as usize;
         exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
             let p = self.pixels[y * w + x];
@@ -155,7 +155,7 @@ impl Image {
     }
 
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
-        ensure_writable(path)?;
+        create_parent_folders(path)?;
         self.tone_map(exposure)
             .save_with_format(path, image::ImageFormat::Png)
             .map_err(|e| ImageError::Write {
@@ -190,19 +190,26 @@ pub fn prepare_output(path: &Path) -> Result<(), ImageError> {
     }
 }
 
+fn create_parent_folders(path: &Path) -> Result<(), ImageError> {
+    match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => {
+            std::fs::create_dir_all(parent).map_err(|e| ImageError::Write {
+                path: path.to_path_buf(),
+                message: format!("cannot create folder {}: {e}", parent.display()),
+            })
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Creates the parent folders and checks the file can be opened for writing, so an
 /// unwritable output path is reported before minutes of rendering rather than after.
-pub fn ensure_writable(path: &Path) -> Result<(), ImageError> {
+fn ensure_writable(path: &Path) -> Result<(), ImageError> {
     let fail = |message: String| ImageError::Write {
         path: path.to_path_buf(),
         message,
     };
-    if let Some(parent) = path.parent() {
-        if !parent.as_os_str().is_empty() {
-            std::fs::create_dir_all(parent)
-                .map_err(|e| fail(format!("cannot create folder {}: {e}", parent.display())))?;
-        }
-    }
+    create_parent_folders(path)?;
     if path.is_dir() {
         return Err(fail("is a folder".into()));
     }

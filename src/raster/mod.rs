@@ -631,12 +631,7 @@ impl Rasterizer {
         let queue = &ctx.queue;
         self.scene_gpu
             .update_transforms(ctx, scene, world_from_node);
-        // Per frame only the eight corners of each mesh's box move, not every vertex.
-        let bounds = scene
-            .instances
-            .iter()
-            .map(|inst| self.mesh_bounds[inst.mesh].transformed(world_from_node[inst.node]))
-            .fold(Aabb::EMPTY, |a, b| a.union(&b));
+        let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
         let setup = shadows::setup_lights(
             scene,
             world_from_node,

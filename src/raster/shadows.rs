@@ -31,12 +31,8 @@ pub fn setup_lights(
     let res = resolution as f32;
     let mut lights = Vec::new();
     let mut views = Vec::new();
-    for (light, placed) in scene
-        .lights
-        .iter()
-        .zip(WorldLight::from_scene(scene, world_from_node))
-    {
-        let (position, direction) = (placed.position, placed.direction);
+    for light in WorldLight::from_scene(scene, world_from_node) {
+        let (position, direction) = (light.position, light.direction);
         let shadow_layer = views.len() as u32;
         // Far enough to see everything, near as far out as possible for depth precision.
         let far = ((position - center).length() + radius) * 1.01;
@@ -90,7 +86,7 @@ pub fn setup_lights(
                 (LIGHT_DIRECTIONAL, 0.0, 1.0)
             }
         };
-        let intensity = placed.intensity;
+        let intensity = light.intensity;
         lights.push(GpuLight {
             position: position.extend(1.0).to_array(),
             direction: direction.extend(light.range.unwrap_or(0.0)).to_array(),

@@ -380,6 +380,16 @@ impl Scene {
         b
     }
 
+    /// Bounds of the instances from precomputed model-space mesh bounds (`mesh_bounds[i]` for
+    /// `meshes[i]`): eight corners per instance instead of every vertex, for per-frame use. It
+    /// may be looser than [`Scene::world_bounds`] for rotated meshes, never tighter.
+    pub fn instance_bounds(&self, mesh_bounds: &[Aabb], world_from_node: &[Mat4]) -> Aabb {
+        self.instances
+            .iter()
+            .map(|inst| mesh_bounds[inst.mesh].transformed(world_from_node[inst.node]))
+            .fold(Aabb::EMPTY, |a, b| a.union(&b))
+    }
+
     pub fn triangle_count(&self) -> usize {
         self.instances
             .iter()
