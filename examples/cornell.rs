@@ -18,7 +18,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let world_from_node = scene.world_from_node();
     let camera = scene.camera_view(None, 1.0, &world_from_node)?;
-    let mut direct = method::create("direct", &ctx, &scene, settings)?;
+    let mut direct = method::create("direct", &ctx, &scene, settings, &Default::default())?;
     let frame = direct.render(&ctx, &scene, &world_from_node, &camera)?;
     let image = frame.radiance(false);
     image.write_exr("out/example-cornell.exr".as_ref())?;

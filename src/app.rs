@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use crate::gpu::{GpuContext, GpuError};
 use crate::image_io::{prepare_output, ImageError};
-use crate::method;
+use crate::method::{self, MethodOptions};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, builtin::BuiltinParams, SceneError};
 
@@ -28,6 +28,8 @@ pub struct RenderRequest {
     /// Built-in scene name or a `.gltf`/`.glb` path.
     pub scene: String,
     pub method: String,
+    /// The method's knobs (`--rsm 64` becomes `rsm=64`).
+    pub options: MethodOptions,
     pub settings: RenderSettings,
     /// Camera name or index; `None` = the scene's first camera (or a framing default).
     pub camera: Option<String>,
@@ -47,6 +49,7 @@ impl Default for RenderRequest {
         Self {
             scene: "cornell".into(),
             method: "direct".into(),
+            options: MethodOptions::default(),
             settings: RenderSettings::default(),
             camera: None,
             outputs: vec![],
@@ -82,7 +85,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         settings.width as f32 / settings.height as f32,
         &world_from_node,
     )?;
-    let mut method = method::create(&request.method, &ctx, &scene, settings)?;
+    let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
     let frame = method.render(&ctx, &scene, &world_from_node, &camera)?;
     if request.indirect_only && request.method == "direct" {
         log::warn!("--indirect-only with method 'direct': the image is black by definition");
@@ -98,6 +101,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let mut report = serde_json::json!({
         "scene": scene.name,
         "method": method.name(),
+        "options": request.options.to_string(),
         "width": settings.width,
         "height": settings.height,
         "ssaa": settings.ssaa,

@@ -68,6 +68,9 @@ struct RenderArgs {
     /// Animation time in seconds (glTF animations).
     #[arg(long, default_value_t = 0.0)]
     time: f32,
+    /// A method option as key=value (repeatable); the method-specific flags are shorthands.
+    #[arg(long = "opt", value_name = "KEY=VALUE")]
+    options: Vec<String>,
 }
 
 fn main() -> ExitCode {
@@ -84,9 +87,18 @@ fn main() -> ExitCode {
             } else {
                 args.out
             };
+            let mut options = valgi::method::MethodOptions::default();
+            for pair in &args.options {
+                let Some((key, value)) = pair.split_once('=') else {
+                    eprintln!("error: --opt {pair}: expected KEY=VALUE");
+                    return ExitCode::FAILURE;
+                };
+                options.set(key.trim(), value.trim());
+            }
             let request = RenderRequest {
                 scene: args.scene,
                 method: args.method,
+                options,
                 settings: RenderSettings {
                     width: args.width,
                     height: args.height,
