@@ -20,7 +20,9 @@ struct VertexIn {
 }
 
 struct VertexOut {
-    @builtin(position) clip: vec4<f32>,
+    // Invariant so that later passes drawing the same geometry (the sparse VAL apply pass)
+    // can depth-test with Equal against this depth.
+    @builtin(position) @invariant clip: vec4<f32>,
     @location(0) normal_world: vec3<f32>,
     @location(1) uv0: vec2<f32>,
     @location(2) tangent_world: vec4<f32>,

@@ -32,10 +32,20 @@ pub trait Method {
 }
 
 /// Methods `valgi render --method` accepts, with a one-line description.
-pub const METHODS: &[(&str, &str)] = &[(
-    "direct",
-    "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
-)];
+pub const METHODS: &[(&str, &str)] = &[
+    (
+        "direct",
+        "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
+    ),
+    (
+        "sparse",
+        "direct + one-bounce diffuse and glossy light from RSM virtual area lights gathered at sparse model-space points (options: rsm, sparse-points, tile, glossy, occlusion, weights, seed)",
+    ),
+    (
+        "brute",
+        "direct + every VAL summed at every pixel: the sparse method without interpolation or occlusion (options: rsm, tile, glossy)",
+    ),
+];
 
 /// Builds a method by name for one scene and output size.
 pub fn create(
@@ -49,6 +59,10 @@ pub fn create(
         "direct" => Box::new(DirectMethod {
             raster: Rasterizer::new(ctx, scene, settings)?,
         }),
+        "sparse" => crate::vals::create(ctx, scene, settings, options)?,
+        "brute" => Box::new(crate::peers::brute::BruteMethod::new(
+            ctx, scene, settings, options,
+        )?),
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

@@ -15,10 +15,43 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/direct_light.wgsl"),
     ),
     ("resolve.wgsl", include_str!("../shaders/resolve.wgsl")),
+    (
+        "vals_common.wgsl",
+        include_str!("../shaders/vals_common.wgsl"),
+    ),
+    ("vals_rsm.wgsl", include_str!("../shaders/vals_rsm.wgsl")),
+    (
+        "vals_from_rsm.wgsl",
+        include_str!("../shaders/vals_from_rsm.wgsl"),
+    ),
+    (
+        "vals_gather.wgsl",
+        include_str!("../shaders/vals_gather.wgsl"),
+    ),
+    (
+        "vals_renormalize.wgsl",
+        include_str!("../shaders/vals_renormalize.wgsl"),
+    ),
+    (
+        "vals_occlusion.wgsl",
+        include_str!("../shaders/vals_occlusion.wgsl"),
+    ),
+    (
+        "vals_interpolate.wgsl",
+        include_str!("../shaders/vals_interpolate.wgsl"),
+    ),
+    (
+        "vals_apply.wgsl",
+        include_str!("../shaders/vals_apply.wgsl"),
+    ),
+    (
+        "brute_vals.wgsl",
+        include_str!("../shaders/brute_vals.wgsl"),
+    ),
 ];
 
 /// Files that are only included by others (no entry points of their own).
-pub const INCLUDES: &[&str] = &["common.wgsl"];
+pub const INCLUDES: &[&str] = &["common.wgsl", "vals_common.wgsl"];
 
 fn raw(name: &str) -> &'static str {
     FILES

@@ -158,6 +158,15 @@ impl GpuContext {
                 adapter: adapter_info.name.clone(),
                 message: e.to_string(),
             })?;
+        // Mesa's CPU drivers answer timestamp queries, but long compute dispatches that use
+        // workgroup barriers come back as ~0 ms (seen with lavapipe 22.3), so on a CPU
+        // adapter passes are timed by the wall clock, one submission each, which there measures
+        // the work itself. VALGI_TIMING=gpu|wall overrides the choice.
+        let timestamps = match std::env::var("VALGI_TIMING").as_deref() {
+            Ok("wall") => false,
+            Ok("gpu") => timestamps,
+            _ => timestamps && adapter_info.device_type != wgpu::DeviceType::Cpu,
+        };
         Ok(Self {
             adapter,
             device,

@@ -135,12 +135,13 @@ impl FrameTargets {
                 attachment,
             )),
             radiance_direct: view(target("radiance direct", rw, rh, RADIANCE_FORMAT, storage)),
+            // Compute passes (brute force) store into it; raster passes (sparse apply) draw.
             radiance_indirect: view(target(
                 "radiance indirect",
                 rw,
                 rh,
                 RADIANCE_FORMAT,
-                storage,
+                storage | wgpu::TextureUsages::RENDER_ATTACHMENT,
             )),
             output_direct: target(
                 "output direct",
@@ -185,7 +186,8 @@ pub struct Rasterizer {
     pub settings: RenderSettings,
     pub scene_gpu: SceneGpu,
     pub targets: FrameTargets,
-    frame_buffer: wgpu::Buffer,
+    /// The `Frame` uniform of the current frame (camera, render size), for passes methods add.
+    pub frame_buffer: wgpu::Buffer,
     lights_buffer: wgpu::Buffer,
     shadow_views_buffer: wgpu::Buffer,
     shadow_layer_buffers: Vec<wgpu::Buffer>,
@@ -637,7 +639,7 @@ impl Rasterizer {
             world_from_node,
             &bounds,
             self.settings.shadow_resolution,
-            self.settings.pcf_radius,
+            self.settings.pcf_radius as f32 + 1.0,
         );
         if !setup.lights.is_empty() {
             queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
@@ -820,11 +822,27 @@ pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::Bind
 }
 
 pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    storage_buffer_entry(binding, visibility, true)
+}
+
+/// A storage buffer the shader writes (`var<storage, read_write>`).
+pub fn storage_entry_rw(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
+    storage_buffer_entry(binding, visibility, false)
+}
+
+fn storage_buffer_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    read_only: bool,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
         ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            ty: wgpu::BufferBindingType::Storage { read_only },
             has_dynamic_offset: false,
             min_binding_size: None,
         },

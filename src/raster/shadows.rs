@@ -14,14 +14,16 @@ pub struct LightSetup {
     pub views: Vec<ShadowView>,
 }
 
-/// Builds the light records and shadow views. `pcf_radius` widens point-light cube faces a
-/// little so filter kernels near a face's edge stay inside that face.
+/// Builds the light records and views. `margin_texels` widens perspective views by that many
+/// texels per side: shadow maps need it so filter kernels near a cube face's edge stay inside
+/// that face; reflective shadow maps use 0 so that cube faces tile the sphere exactly and every
+/// direction is counted once.
 pub fn setup_lights(
     scene: &Scene,
     world_from_node: &[Mat4],
     bounds: &Aabb,
     resolution: u32,
-    pcf_radius: u32,
+    margin_texels: f32,
 ) -> LightSetup {
     let (center, radius) = if bounds.is_empty() {
         (Vec3::ZERO, 1.0)
@@ -39,7 +41,7 @@ pub fn setup_lights(
         let near = (far * 1e-4).max(1e-5);
         let (kind, cone_scale, cone_offset) = match light.kind {
             LightKind::Point => {
-                let fov = 2.0 * (1.0 + 2.0 * (pcf_radius as f32 + 1.0) / res).atan();
+                let fov = 2.0 * (1.0 + 2.0 * margin_texels / res).atan();
                 for (forward, up) in CUBE_FACES {
                     views.push(perspective_view(position, forward, up, fov, near, far, res));
                 }
@@ -51,7 +53,7 @@ pub fn setup_lights(
             } => {
                 let outer = outer_cone_angle.clamp(1e-3, std::f32::consts::FRAC_PI_2);
                 let inner = inner_cone_angle.clamp(0.0, outer);
-                let margin = 2.0 * (pcf_radius as f32 + 1.0) / res;
+                let margin = 2.0 * margin_texels / res;
                 let fov = (2.0 * ((outer.tan() * (1.0 + margin)).atan())).min(170f32.to_radians());
                 views.push(perspective_view(
                     position,
@@ -110,7 +112,7 @@ const CUBE_FACES: [(Vec3, Vec3); 6] = [
     (Vec3::NEG_Z, Vec3::Y),
 ];
 
-fn perspective_view(
+pub(crate) fn perspective_view(
     position: Vec3,
     forward: Vec3,
     up: Vec3,

@@ -1,0 +1,73 @@
+// Brute force: every pixel sums every VAL through the full BRDF with the same disc irradiance
+// as the sparse method — no interpolation, no occlusion. The baseline that isolates the sparse
+// method's interpolation error. VALs stream through workgroup memory in tiles.
+#include "vals_common.wgsl"
+
+const GROUP: u32 = 64u;
+const TILE_MAX: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> frame: Frame;
+@group(0) @binding(1) var<uniform> params: SparseParams;
+@group(0) @binding(2) var<storage, read> vals: array<Val>;
+@group(0) @binding(3) var<storage, read> val_count: array<u32>;
+@group(0) @binding(4) var gbuffer_depth: texture_depth_2d;
+@group(0) @binding(5) var gbuffer_normal: texture_2d<f32>;
+@group(0) @binding(6) var gbuffer_diffuse: texture_2d<f32>;
+@group(0) @binding(7) var gbuffer_specular: texture_2d<f32>;
+@group(0) @binding(8) var radiance_indirect: texture_storage_2d<rgba32float, write>;
+
+var<workgroup> tile_vals: array<Val, TILE_MAX>;
+var<workgroup> shared_count: u32;
+
+@compute @workgroup_size(8, 8, 1)
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    if (lid == 0u) {
+        shared_count = min(val_count[0], arrayLength(&vals));
+    }
+    let count = workgroupUniformLoad(&shared_count);
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let inside = id.x < frame.render_size.x && id.y < frame.render_size.y;
+    let pixel = vec2<i32>(min(id.xy, frame.render_size - 1u));
+    let covered = textureLoad(gbuffer_specular, pixel, 0).a > 0.5;
+    let is_active = inside && covered;
+    let depth = textureLoad(gbuffer_depth, pixel, 0);
+    let uv = (vec2<f32>(pixel) + 0.5) / vec2<f32>(frame.render_size);
+    let world = frame.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+    let p = world.xyz / world.w;
+    let n = normalize(textureLoad(gbuffer_normal, pixel, 0).xyz);
+    let diffuse_tex = textureLoad(gbuffer_diffuse, pixel, 0);
+    let rho_d = diffuse_tex.rgb;
+    let k = diffuse_tex.a;
+    let rho_s = textureLoad(gbuffer_specular, pixel, 0).rgb;
+    let wo = normalize(frame.camera_position.xyz - p);
+    let r = reflect(-wo, n);
+    let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
+    let specular_scale = rho_s * ((k + 2.0) / (2.0 * PI));
+
+    var radiance = vec3<f32>(0.0);
+    for (var base = 0u; base < count; base += tile) {
+        let m = min(tile, count - base);
+        for (var i = lid; i < m; i += GROUP) {
+            tile_vals[i] = vals[base + i];
+        }
+        workgroupBarrier();
+        if (is_active) {
+            for (var j = 0u; j < m; j++) {
+                let val = tile_vals[j];
+                let gw = disc_geometry(p, n, val);
+                if (gw.x <= 0.0) {
+                    continue;
+                }
+                var f = rho_d / PI;
+                if (glossy_on) {
+                    f += specular_scale * lobe(r, gw.yzw, k);
+                }
+                radiance += f * val.flux.rgb * (gw.x / PI);
+            }
+        }
+        workgroupBarrier();
+    }
+    if (inside) {
+        textureStore(radiance_indirect, vec2<i32>(id.xy), vec4<f32>(radiance, 1.0));
+    }
+}

@@ -1,0 +1,157 @@
+// Shared by the sparse virtual-area-light passes (DESIGN §4): the VAL record, the packed
+// sparse-point buffers and the four evaluation functions. `src/vals/math.rs` is the CPU twin
+// of every function here.
+#include "common.wgsl"
+
+// A disc light made from one RSM texel.
+struct Val {
+    // xyz: world position; w: area A (m²), the footprint had the surface faced the light.
+    position_area: vec4<f32>,
+    // xyz: unit normal.
+    normal: vec4<f32>,
+    // rgb: reflected flux Φ (W).
+    flux: vec4<f32>,
+}
+
+// Per-frame parameters of the sparse passes.
+struct SparseParams {
+    // xyz: the eye whose direction the glossy lobes use.
+    eye: vec4<f32>,
+    point_count: u32,
+    instance_count: u32,
+    // Bit 0: glossy on; bit 1: flux weights (else geometric).
+    flags: u32,
+    // 0 off, 1 sum, 2 union.
+    occlusion_mode: u32,
+    tile: u32,
+    vertex_count: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+// Where an instance's vertices, points and links start in the flat buffers.
+struct InstanceRange {
+    vertex_offset: u32,
+    vertex_count: u32,
+    point_offset: u32,
+    link_offset: u32,
+}
+
+const FLAG_GLOSSY: u32 = 1u;
+const FLAG_FLUX_WEIGHTS: u32 = 2u;
+const POSITION_EPSILON: f32 = 1e-12;
+const COS_MIN: f32 = 1e-2;
+const WEIGHT_EPSILON: f32 = 1e-6;
+
+// Octahedral unit-vector encoding in two snorm16 (the points' normals).
+fn oct_decode(packed: u32) -> vec3<f32> {
+    let e = unpack2x16snorm(packed);
+    var n = vec3<f32>(e.x, e.y, 1.0 - abs(e.x) - abs(e.y));
+    if (n.z < 0.0) {
+        let sx = select(-1.0, 1.0, n.x >= 0.0);
+        let sy = select(-1.0, 1.0, n.y >= 0.0);
+        n = vec3<f32>((1.0 - abs(n.y)) * sx, (1.0 - abs(n.x)) * sy, n.z);
+    }
+    return normalize(n);
+}
+
+// A sparse point in world space, decoded from its static model-space record.
+struct WorldPoint {
+    position: vec3<f32>,
+    normal: vec3<f32>,
+    k: f32,
+    disc_radius: f32,
+}
+
+fn world_point(model: vec4<u32>, point_meta: vec2<u32>, instance: InstanceData) -> WorldPoint {
+    var out: WorldPoint;
+    let p = vec3<f32>(bitcast<f32>(model.x), bitcast<f32>(model.y), bitcast<f32>(model.z));
+    out.position = (instance.world_from_model * vec4<f32>(p, 1.0)).xyz;
+    let normal_from_model = mat3x3<f32>(instance.normal_from_model[0].xyz, instance.normal_from_model[1].xyz, instance.normal_from_model[2].xyz);
+    out.normal = normalize(normal_from_model * oct_decode(model.w));
+    let k_radius = unpack2x16float(point_meta.x);
+    out.k = k_radius.x;
+    out.disc_radius = k_radius.y;
+    return out;
+}
+
+// g = max(0, n·ω̂)·max(0, −n_j·ω̂)/(|d|² + r_j²); returns (g, ω̂).
+fn disc_geometry(x: vec3<f32>, n: vec3<f32>, val: Val) -> vec4<f32> {
+    let d = val.position_area.xyz - x;
+    let dist2 = dot(d, d);
+    if (dist2 <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let w = d * inverseSqrt(dist2);
+    let g = max(dot(n, w), 0.0) * max(-dot(val.normal.xyz, w), 0.0) / (dist2 + val.position_area.w / PI);
+    return vec4<f32>(g, w);
+}
+
+fn lobe(r: vec3<f32>, w: vec3<f32>, k: f32) -> f32 {
+    return pow(max(dot(r, w), 0.0), k);
+}
+
+// cos/d² toward a point light at l (times I gives irradiance).
+fn diffuse_point_factor(x: vec3<f32>, n: vec3<f32>, l: vec3<f32>) -> f32 {
+    let d = l - x;
+    let dist2 = dot(d, d);
+    if (dist2 <= 0.0) {
+        return 0.0;
+    }
+    return max(dot(n, d * inverseSqrt(dist2)), 0.0) / dist2;
+}
+
+// lobe·cos/d² toward a point light at l.
+fn glossy_point_factor(x: vec3<f32>, n: vec3<f32>, r: vec3<f32>, k: f32, l: vec3<f32>) -> f32 {
+    let d = l - x;
+    let dist2 = dot(d, d);
+    if (dist2 <= 0.0) {
+        return 0.0;
+    }
+    let w = d * inverseSqrt(dist2);
+    return lobe(r, w, k) * max(dot(n, w), 0.0) / dist2;
+}
+
+fn rgb_bits(c: vec3<f32>) -> vec3<u32> {
+    return bitcast<vec3<u32>>(c);
+}
+
+fn bits_rgb(v: vec4<u32>) -> vec3<f32> {
+    return bitcast<vec3<f32>>(v.xyz);
+}
+
+// A point's two lights, decoded: positions are stored as f16 offsets from the point.
+struct PointLights {
+    diffuse_position: vec3<f32>,
+    diffuse: vec3<f32>,
+    glossy_position: vec3<f32>,
+    glossy: vec3<f32>,
+    diffuse_sphere: f32,
+    glossy_sphere: f32,
+}
+
+fn decode_lights(x: vec3<f32>, d: vec4<u32>, s: vec4<u32>, extra: vec2<u32>) -> PointLights {
+    var out: PointLights;
+    let z = unpack2x16float(extra.x);
+    let spheres = unpack2x16float(extra.y);
+    out.diffuse_position = x + vec3<f32>(unpack2x16float(d.w), z.x);
+    out.glossy_position = x + vec3<f32>(unpack2x16float(s.w), z.y);
+    out.diffuse = bits_rgb(d);
+    out.glossy = bits_rgb(s);
+    out.diffuse_sphere = spheres.x;
+    out.glossy_sphere = spheres.y;
+    return out;
+}
+
+// Duff et al. 2017 orthonormal basis; src/vals/math.rs builds the same one.
+fn tangent_frame_t(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    return vec3<f32>(1.0 + sign * n.x * n.x * a, sign * n.x * n.y * a, -sign * n.x);
+}
+
+fn tangent_frame_b(n: vec3<f32>) -> vec3<f32> {
+    let sign = select(-1.0, 1.0, n.z >= 0.0);
+    let a = -1.0 / (sign + n.z);
+    return vec3<f32>(n.x * n.y * a, sign + n.y * n.y * a, -n.y);
+}

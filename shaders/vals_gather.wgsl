@@ -1,0 +1,120 @@
+// Step 1 — gather: every VAL at every sparse point. Each workgroup takes 64 points; the VAL
+// list streams through workgroup memory `tile` records at a time, so every VAL is fetched once
+// per workgroup instead of once per point. Writes the irradiance sums (in the slots the
+// renormalized intensities later take), the averaged positions as f16 offsets from the point,
+// and the occlusion spheres.
+#include "vals_common.wgsl"
+
+const GROUP: u32 = 64u;
+const TILE_MAX: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> params: SparseParams;
+@group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
+@group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
+@group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read> vals: array<Val>;
+@group(0) @binding(5) var<storage, read> val_count: array<u32>;
+@group(0) @binding(6) var<storage, read_write> point_diffuse: array<vec4<u32>>;
+@group(0) @binding(7) var<storage, read_write> point_glossy: array<vec4<u32>>;
+@group(0) @binding(8) var<storage, read_write> point_extra: array<vec2<u32>>;
+
+var<workgroup> tile_vals: array<Val, TILE_MAX>;
+var<workgroup> shared_count: u32;
+
+// Weighted moments Σw, Σw·l, Σw·l² of the VAL positions.
+struct Moments {
+    weight: f32,
+    sum: vec3<f32>,
+    sum_squares: vec3<f32>,
+}
+
+fn moments_add(m: ptr<function, Moments>, w: f32, l: vec3<f32>) {
+    (*m).weight += w;
+    (*m).sum += w * l;
+    (*m).sum_squares += w * l * l;
+}
+
+// Mean position (xyz) and sphere radius 2·max σ (w).
+fn moments_mean_sphere(m: Moments) -> vec4<f32> {
+    if (m.weight <= 0.0) {
+        return vec4<f32>(0.0);
+    }
+    let mean = m.sum / m.weight;
+    let variance = max(m.sum_squares / m.weight - mean * mean, vec3<f32>(0.0));
+    return vec4<f32>(mean, 2.0 * sqrt(max(variance.x, max(variance.y, variance.z))));
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    if (lid == 0u) {
+        shared_count = min(val_count[0], arrayLength(&vals));
+    }
+    let count = workgroupUniformLoad(&shared_count);
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let index = gid.x;
+    let is_active = index < params.point_count;
+    let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
+    let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
+
+    var point: WorldPoint;
+    var r = vec3<f32>(0.0);
+    if (is_active) {
+        let point_meta = points_meta[index];
+        point = world_point(points_model[index], point_meta, instances[point_meta.y]);
+        let wo = normalize(params.eye.xyz - point.position);
+        r = reflect(-wo, point.normal);
+    }
+    var diffuse = vec3<f32>(0.0);
+    var glossy = vec3<f32>(0.0);
+    var md: Moments;
+    var ms: Moments;
+
+    for (var base = 0u; base < count; base += tile) {
+        let m = min(tile, count - base);
+        for (var i = lid; i < m; i += GROUP) {
+            tile_vals[i] = vals[base + i];
+        }
+        workgroupBarrier();
+        if (is_active) {
+            for (var j = 0u; j < m; j++) {
+                let val = tile_vals[j];
+                let gw = disc_geometry(point.position, point.normal, val);
+                let g = gw.x;
+                let e = val.flux.rgb * (g / PI);
+                var strength = val.position_area.w * g;
+                if (flux_weights) {
+                    strength = (val.flux.r + val.flux.g + val.flux.b) / 3.0 * g;
+                }
+                diffuse += e;
+                moments_add(&md, POSITION_EPSILON + strength, val.position_area.xyz);
+                if (glossy_on) {
+                    var lobe_j = 0.0;
+                    if (g > 0.0) {
+                        lobe_j = lobe(r, gw.yzw, point.k);
+                    }
+                    glossy += e * lobe_j;
+                    moments_add(&ms, POSITION_EPSILON + strength * lobe_j, val.position_area.xyz);
+                }
+            }
+        }
+        workgroupBarrier();
+    }
+    if (!is_active) {
+        return;
+    }
+    let d = moments_mean_sphere(md);
+    var s = vec4<f32>(point.position, 0.0);
+    if (glossy_on) {
+        s = moments_mean_sphere(ms);
+    }
+    // With no VAL at all the means are undefined: keep the lights on the point, dark.
+    var off_d = d.xyz - point.position;
+    var off_s = s.xyz - point.position;
+    if (count == 0u) {
+        off_d = vec3<f32>(0.0);
+        off_s = vec3<f32>(0.0);
+    }
+    point_diffuse[index] = vec4<u32>(rgb_bits(diffuse), pack2x16float(off_d.xy));
+    point_glossy[index] = vec4<u32>(rgb_bits(glossy), pack2x16float(off_s.xy));
+    point_extra[index] = vec2<u32>(pack2x16float(vec2<f32>(off_d.z, off_s.z)), pack2x16float(vec2<f32>(d.w, s.w)));
+}

@@ -1,0 +1,118 @@
+// Occlusion (optional): every other sparse point is an occluder disc. Seen from x, the light
+// sphere and each disc are projected onto x's unit tangent disc and treated as axis-aligned
+// squares of their projected areas; a disc hides overlap/sphere-area of the light, ramped to 0
+// between the sphere's front and its centre. Shares add (`sum`, the paper's) or combine as
+// independent blockers (`union`: 1 − Π(1 − o_i)). Intensities are scaled by 1 − o in place.
+#include "vals_common.wgsl"
+
+const GROUP: u32 = 64u;
+const TILE_MAX: u32 = 256u;
+
+@group(0) @binding(0) var<uniform> params: SparseParams;
+@group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
+@group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
+@group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read_write> point_diffuse: array<vec4<u32>>;
+@group(0) @binding(5) var<storage, read_write> point_glossy: array<vec4<u32>>;
+@group(0) @binding(6) var<storage, read> point_extra: array<vec2<u32>>;
+
+struct Disc {
+    // xyz: centre; w: radius.
+    center_radius: vec4<f32>,
+    normal: vec4<f32>,
+}
+
+var<workgroup> tile_discs: array<Disc, TILE_MAX>;
+
+fn square_overlap(a: vec2<f32>, area_a: f32, b: vec2<f32>, area_b: f32) -> f32 {
+    let ha = 0.5 * sqrt(area_a);
+    let hb = 0.5 * sqrt(area_b);
+    let o = max(min(a + ha, b + hb) - max(a - ha, b - hb), vec2<f32>(0.0));
+    return o.x * o.y;
+}
+
+// One disc's share of the sphere (centre `light`, radius `sphere`) as seen from x.
+fn occluder_share(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, light: vec3<f32>, sphere: f32, disc: Disc) -> f32 {
+    let to_light = light - x;
+    let light_distance = length(to_light);
+    let to_disc = disc.center_radius.xyz - x;
+    let disc_distance = length(to_disc);
+    let radius = disc.center_radius.w;
+    if (sphere <= 0.0 || light_distance <= 0.0 || disc_distance <= 0.0 || radius <= 0.0) {
+        return 0.0;
+    }
+    let wl = to_light / light_distance;
+    let wd = to_disc / disc_distance;
+    if (dot(n, wd) <= 0.0 || disc_distance >= light_distance) {
+        return 0.0;
+    }
+    let ramp = min((light_distance - disc_distance) / sphere, 1.0);
+    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
+    let disc_area = PI * radius * radius / (radius * radius + disc_distance * disc_distance) * abs(dot(disc.normal.xyz, wd));
+    let overlap = square_overlap(vec2<f32>(dot(wl, t), dot(wl, b)), sphere_area, vec2<f32>(dot(wd, t), dot(wd, b)), disc_area);
+    return min(overlap / sphere_area, 1.0) * ramp;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let index = gid.x;
+    let is_active = index < params.point_count;
+    let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
+    var point: WorldPoint;
+    var lights: PointLights;
+    var t = vec3<f32>(0.0);
+    var b = vec3<f32>(0.0);
+    var d = vec4<u32>(0u);
+    var s = vec4<u32>(0u);
+    if (is_active) {
+        let point_meta = points_meta[index];
+        point = world_point(points_model[index], point_meta, instances[point_meta.y]);
+        d = point_diffuse[index];
+        s = point_glossy[index];
+        lights = decode_lights(point.position, d, s, point_extra[index]);
+        t = tangent_frame_t(point.normal);
+        b = tangent_frame_b(point.normal);
+    }
+    var sum_d = 0.0;
+    var visible_d = 1.0;
+    var sum_s = 0.0;
+    var visible_s = 1.0;
+    for (var base = 0u; base < params.point_count; base += tile) {
+        let m = min(tile, params.point_count - base);
+        for (var i = lid; i < m; i += GROUP) {
+            let point_meta = points_meta[base + i];
+            let p = world_point(points_model[base + i], point_meta, instances[point_meta.y]);
+            tile_discs[i] = Disc(vec4<f32>(p.position, p.disc_radius), vec4<f32>(p.normal, 0.0));
+        }
+        workgroupBarrier();
+        if (is_active) {
+            for (var j = 0u; j < m; j++) {
+                if (base + j == index) {
+                    continue;
+                }
+                let disc = tile_discs[j];
+                let od = occluder_share(point.position, point.normal, t, b, lights.diffuse_position, lights.diffuse_sphere, disc);
+                sum_d += od;
+                visible_d *= 1.0 - od;
+                if (glossy_on) {
+                    let os = occluder_share(point.position, point.normal, t, b, lights.glossy_position, lights.glossy_sphere, disc);
+                    sum_s += os;
+                    visible_s *= 1.0 - os;
+                }
+            }
+        }
+        workgroupBarrier();
+    }
+    if (!is_active) {
+        return;
+    }
+    var od = min(sum_d, 1.0);
+    var os = min(sum_s, 1.0);
+    if (params.occlusion_mode == 2u) {
+        od = 1.0 - visible_d;
+        os = 1.0 - visible_s;
+    }
+    point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse * (1.0 - od)), d.w);
+    point_glossy[index] = vec4<u32>(rgb_bits(lights.glossy * (1.0 - os)), s.w);
+}

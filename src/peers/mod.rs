@@ -1,0 +1,3 @@
+//! Peer methods measured in the same harness as the sparse VAL method (DESIGN §6).
+
+pub mod brute;

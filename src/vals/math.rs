@@ -1,0 +1,541 @@
+//! The sparse virtual-area-light method's equations on the CPU (DESIGN §4). These are the CPU
+//! twins of the WGSL kernels in `shaders/vals_*.wgsl`: the same inputs, the same formulas, in
+//! plain Rust, so that tests can check the GPU against them and a reader can follow the math
+//! without reading shaders.
+
+use glam::Vec3;
+use std::f32::consts::PI;
+
+/// ε of the averaged-position weights `w = ε + A·g`: keeps an average defined where no light
+/// arrives, small enough not to move it where light does (A·g is ~1e-4 and up in metre scenes).
+pub const POSITION_EPSILON: f32 = 1e-12;
+
+/// The renormalization clamp, as a minimum cosine: `c_min = COS_MIN / |l − x|²`. Clamping the
+/// cosine (rather than the whole `cos/d²`) keeps the guard independent of the scene's scale.
+pub const COS_MIN: f32 = 1e-2;
+
+/// Interpolation weight sum below which a vertex gets no light rather than a division by ~0.
+pub const WEIGHT_EPSILON: f32 = 1e-6;
+
+/// One virtual area light: a disc at `position` facing `normal` that reflects `flux` (W, RGB),
+/// with the area `area` (m²) of its footprint had the surface faced the light.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Val {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub flux: Vec3,
+    pub area: f32,
+}
+
+impl Val {
+    /// r² = A/π.
+    pub fn radius_squared(&self) -> f32 {
+        self.area / PI
+    }
+}
+
+/// A sparse receiver point in world space with its material's Phong exponent.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Receiver {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub k: f32,
+}
+
+/// `g = max(0, n·ω̂)·max(0, −n_j·ω̂) / (|d|² + r_j²)`, ω̂ from x toward the disc: the disc's
+/// irradiance per unit flux, times π. Finite at zero distance; the point-light law far away.
+pub fn disc_geometry(x: Vec3, n: Vec3, val: &Val) -> (f32, Vec3) {
+    let d = val.position - x;
+    let dist2 = d.length_squared();
+    if dist2 <= 0.0 {
+        return (0.0, Vec3::ZERO);
+    }
+    let w = d / dist2.sqrt();
+    let g = n.dot(w).max(0.0) * (-val.normal.dot(w)).max(0.0) / (dist2 + val.radius_squared());
+    (g, w)
+}
+
+/// `E_j(x) = Φ_j·g_j/π`: irradiance at x (normal n) from one disc VAL.
+pub fn disc_irradiance(x: Vec3, n: Vec3, val: &Val) -> Vec3 {
+    val.flux * (disc_geometry(x, n, val).0 / PI)
+}
+
+/// `max(0, r·ω)^k`, the Phong lobe around the mirror direction r.
+pub fn lobe(r: Vec3, w: Vec3, k: f32) -> f32 {
+    r.dot(w).max(0.0).powf(k)
+}
+
+/// `reflect(−ω_o, n)`: the mirror direction of the view direction ω_o (pointing to the eye).
+pub fn mirror(wo: Vec3, n: Vec3) -> Vec3 {
+    let i = -wo;
+    i - 2.0 * n.dot(i) * n
+}
+
+/// Irradiance at x from a point light of intensity `i` at `l`: `I·max(0, n·ω̂)/|l−x|²`.
+pub fn diffuse_point(x: Vec3, n: Vec3, l: Vec3, i: Vec3) -> Vec3 {
+    i * diffuse_point_factor(x, n, l)
+}
+
+pub fn diffuse_point_factor(x: Vec3, n: Vec3, l: Vec3) -> f32 {
+    let d = l - x;
+    let dist2 = d.length_squared();
+    if dist2 <= 0.0 {
+        return 0.0;
+    }
+    n.dot(d / dist2.sqrt()).max(0.0) / dist2
+}
+
+/// Lobe-weighted irradiance: `I·max(0, r·ω̂)^k·max(0, n·ω̂)/|l−x|²`.
+pub fn glossy_point(x: Vec3, n: Vec3, r: Vec3, k: f32, l: Vec3, i: Vec3) -> Vec3 {
+    i * glossy_point_factor(x, n, r, k, l)
+}
+
+pub fn glossy_point_factor(x: Vec3, n: Vec3, r: Vec3, k: f32, l: Vec3) -> f32 {
+    let d = l - x;
+    let dist2 = d.length_squared();
+    if dist2 <= 0.0 {
+        return 0.0;
+    }
+    let w = d / dist2.sqrt();
+    lobe(r, w, k) * n.dot(w).max(0.0) / dist2
+}
+
+/// How the averaged light positions weight each VAL.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Weights {
+    /// `w = ε + A_j·g_j` (the paper's): independent of the VALs' flux and of RSM density.
+    Geometric,
+    /// `w = ε + mean(Φ_j)·g_j`: the irradiance each VAL contributes.
+    Flux,
+}
+
+/// Step 1's sums at one sparse point.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Gathered {
+    /// Σ E_j (W/m²).
+    pub diffuse: Vec3,
+    /// Σ lobe_j·E_j.
+    pub glossy: Vec3,
+    /// Weighted mean VAL positions.
+    pub diffuse_position: Vec3,
+    pub glossy_position: Vec3,
+    /// Occlusion sphere radii: twice the largest per-axis weighted standard deviation of the
+    /// VAL positions around the mean (the σ-box's largest side).
+    pub diffuse_sphere: f32,
+    pub glossy_sphere: f32,
+}
+
+/// Running weighted moments of positions: Σw, Σw·l, Σw·l².
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Moments {
+    pub weight: f32,
+    pub sum: Vec3,
+    pub sum_squares: Vec3,
+}
+
+impl Moments {
+    pub fn add(&mut self, w: f32, l: Vec3) {
+        self.weight += w;
+        self.sum += w * l;
+        self.sum_squares += w * l * l;
+    }
+
+    /// Mean and sphere radius (2·max σ).
+    pub fn mean_and_sphere(&self) -> (Vec3, f32) {
+        if self.weight <= 0.0 {
+            return (Vec3::ZERO, 0.0);
+        }
+        let mean = self.sum / self.weight;
+        let variance = (self.sum_squares / self.weight - mean * mean).max(Vec3::ZERO);
+        (mean, 2.0 * variance.max_element().sqrt())
+    }
+}
+
+/// Step 1 — gather every VAL at one receiver. `eye` gives the view direction for the glossy
+/// lobe; with `glossy` off the glossy sums stay zero.
+pub fn gather(
+    receiver: &Receiver,
+    eye: Vec3,
+    vals: &[Val],
+    weights: Weights,
+    glossy: bool,
+) -> Gathered {
+    let x = receiver.position;
+    let n = receiver.normal;
+    let r = mirror((eye - x).normalize_or_zero(), n);
+    let mut diffuse = Vec3::ZERO;
+    let mut glossy_sum = Vec3::ZERO;
+    let mut diffuse_moments = Moments::default();
+    let mut glossy_moments = Moments::default();
+    for val in vals {
+        let (g, w) = disc_geometry(x, n, val);
+        let e = val.flux * (g / PI);
+        let strength = match weights {
+            Weights::Geometric => val.area * g,
+            Weights::Flux => (val.flux.x + val.flux.y + val.flux.z) / 3.0 * g,
+        };
+        diffuse += e;
+        diffuse_moments.add(POSITION_EPSILON + strength, val.position);
+        if glossy {
+            let lobe_j = if g > 0.0 { lobe(r, w, receiver.k) } else { 0.0 };
+            glossy_sum += e * lobe_j;
+            glossy_moments.add(POSITION_EPSILON + strength * lobe_j, val.position);
+        }
+    }
+    let (diffuse_position, diffuse_sphere) = diffuse_moments.mean_and_sphere();
+    let (glossy_position, glossy_sphere) = if glossy {
+        glossy_moments.mean_and_sphere()
+    } else {
+        (x, 0.0)
+    };
+    Gathered {
+        diffuse,
+        glossy: glossy_sum,
+        diffuse_position,
+        glossy_position,
+        diffuse_sphere,
+        glossy_sphere,
+    }
+}
+
+/// One point light per channel after renormalization.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointLights {
+    pub diffuse_position: Vec3,
+    pub diffuse: Vec3,
+    pub glossy_position: Vec3,
+    pub glossy: Vec3,
+}
+
+/// Step 2 — renormalize: intensities that reproduce the gathered sums at x exactly (unless the
+/// clamp fires; the flags say which channel clamped).
+pub fn renormalize(
+    receiver: &Receiver,
+    eye: Vec3,
+    gathered: &Gathered,
+) -> (PointLights, [bool; 2]) {
+    let x = receiver.position;
+    let n = receiver.normal;
+    let r = mirror((eye - x).normalize_or_zero(), n);
+    let clamp = |factor: f32, l: Vec3| {
+        let c_min = COS_MIN / (l - x).length_squared().max(1e-30);
+        (factor.max(c_min), factor < c_min)
+    };
+    let (fd, clamped_d) = clamp(
+        diffuse_point_factor(x, n, gathered.diffuse_position),
+        gathered.diffuse_position,
+    );
+    let (fs, clamped_s) = clamp(
+        glossy_point_factor(x, n, r, receiver.k, gathered.glossy_position),
+        gathered.glossy_position,
+    );
+    let has_d = gathered.diffuse.max_element() > 0.0;
+    let has_s = gathered.glossy.max_element() > 0.0;
+    (
+        PointLights {
+            diffuse_position: gathered.diffuse_position,
+            diffuse: gathered.diffuse / fd,
+            glossy_position: gathered.glossy_position,
+            glossy: gathered.glossy / fs,
+        },
+        [clamped_d && has_d, clamped_s && has_s],
+    )
+}
+
+/// How occluders' shares combine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OcclusionMode {
+    Off,
+    /// `o = min(1, Σ o_i)` (the paper's; occludes twice behind aligned occluders).
+    Sum,
+    /// `o = 1 − Π(1 − o_i)`: independent occluders; never more than `Sum`.
+    Union,
+}
+
+/// An occluder disc: a sparse point with its Voronoi radius.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct OccluderDisc {
+    pub center: Vec3,
+    pub normal: Vec3,
+    pub radius: f32,
+}
+
+/// A tangent frame (t, b) for a unit normal (Duff et al. 2017, branchless and continuous
+/// except at n.z = −1's sign flip). The shader builds the same frame so the squares agree.
+pub fn tangent_frame(n: Vec3) -> (Vec3, Vec3) {
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// Overlap area of two axis-aligned squares given centres and areas.
+fn square_overlap(a: (f32, f32), area_a: f32, b: (f32, f32), area_b: f32) -> f32 {
+    let (ha, hb) = (0.5 * area_a.sqrt(), 0.5 * area_b.sqrt());
+    let ox = ((a.0 + ha).min(b.0 + hb) - (a.0 - ha).max(b.0 - hb)).max(0.0);
+    let oy = ((a.1 + ha).min(b.1 + hb) - (a.1 - ha).max(b.1 - hb)).max(0.0);
+    ox * oy
+}
+
+/// The fraction of the light sphere (centre `light`, radius `sphere`) that one disc hides as
+/// seen from x, before combining: the projected-square overlap over the sphere's projected
+/// area, ramped linearly to 0 as the occluder goes from the sphere's front to its centre.
+pub fn occluder_share(x: Vec3, n: Vec3, light: Vec3, sphere: f32, disc: &OccluderDisc) -> f32 {
+    let to_light = light - x;
+    let light_distance = to_light.length();
+    let to_disc = disc.center - x;
+    let disc_distance = to_disc.length();
+    if sphere <= 0.0 || light_distance <= 0.0 || disc_distance <= 0.0 || disc.radius <= 0.0 {
+        return 0.0;
+    }
+    let wl = to_light / light_distance;
+    let wd = to_disc / disc_distance;
+    // Below the horizon an occluder cannot block anything the receiver sees.
+    if n.dot(wd) <= 0.0 || disc_distance >= light_distance {
+        return 0.0;
+    }
+    let ramp = ((light_distance - disc_distance) / sphere).min(1.0);
+    let (t, b) = tangent_frame(n);
+    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
+    let disc_area = PI * disc.radius * disc.radius
+        / (disc.radius * disc.radius + disc_distance * disc_distance)
+        * disc.normal.dot(wd).abs();
+    let overlap = square_overlap(
+        (wl.dot(t), wl.dot(b)),
+        sphere_area,
+        (wd.dot(t), wd.dot(b)),
+        disc_area,
+    );
+    (overlap / sphere_area).min(1.0) * ramp
+}
+
+/// Occlusion at receiver `index` from every other disc.
+pub fn occlusion(
+    index: usize,
+    receiver: &Receiver,
+    light: Vec3,
+    sphere: f32,
+    discs: &[OccluderDisc],
+    mode: OcclusionMode,
+) -> f32 {
+    let mut sum = 0.0f32;
+    let mut visible = 1.0f32;
+    if mode == OcclusionMode::Off {
+        return 0.0;
+    }
+    for (j, disc) in discs.iter().enumerate() {
+        if j == index {
+            continue;
+        }
+        let o = occluder_share(receiver.position, receiver.normal, light, sphere, disc);
+        sum += o;
+        visible *= 1.0 - o;
+    }
+    match mode {
+        OcclusionMode::Sum => sum.min(1.0),
+        OcclusionMode::Union => 1.0 - visible,
+        OcclusionMode::Off => 0.0,
+    }
+}
+
+/// Step 3 — a vertex's lights from its linked points with normalized weights.
+pub fn interpolate(links: &[(usize, f32)], points: &[PointLights]) -> PointLights {
+    let total: f32 = links.iter().map(|(_, w)| w).sum();
+    if total < WEIGHT_EPSILON {
+        return PointLights::default();
+    }
+    let mut out = PointLights::default();
+    for &(j, w) in links {
+        let p = &points[j];
+        out.diffuse_position += w * p.diffuse_position;
+        out.diffuse += w * p.diffuse;
+        out.glossy_position += w * p.glossy_position;
+        out.glossy += w * p.glossy;
+    }
+    out.diffuse_position /= total;
+    out.diffuse /= total;
+    out.glossy_position /= total;
+    out.glossy /= total;
+    out
+}
+
+/// Interpolation weights for one vertex (paper eq. 12): `(1 − d_j/d_max)·clamp(n_v·n_j, 0, 1)`.
+pub fn link_weights(vertex: Vec3, vertex_normal: Vec3, points: &[(Vec3, Vec3)]) -> Vec<f32> {
+    let distances: Vec<f32> = points.iter().map(|(p, _)| (*p - vertex).length()).collect();
+    let d_max = distances.iter().cloned().fold(0.0f32, f32::max);
+    points
+        .iter()
+        .zip(&distances)
+        .map(|((_, n), d)| {
+            let falloff = if d_max > 0.0 { 1.0 - d / d_max } else { 1.0 };
+            falloff * vertex_normal.dot(*n).clamp(0.0, 1.0)
+        })
+        .collect()
+}
+
+/// Step 4 — outgoing indirect radiance at a pixel from the two interpolated point lights.
+pub fn apply(
+    p: Vec3,
+    n: Vec3,
+    wo: Vec3,
+    rho_d: Vec3,
+    rho_s: Vec3,
+    k: f32,
+    lights: &PointLights,
+) -> Vec3 {
+    let r = mirror(wo, n);
+    rho_d / PI * diffuse_point(p, n, lights.diffuse_position, lights.diffuse)
+        + rho_s
+            * ((k + 2.0) / (2.0 * PI))
+            * glossy_point(p, n, r, k, lights.glossy_position, lights.glossy)
+}
+
+/// The brute-force baseline at one pixel: every VAL through the full BRDF, no interpolation,
+/// no occlusion.
+pub fn brute_force(
+    p: Vec3,
+    n: Vec3,
+    wo: Vec3,
+    rho_d: Vec3,
+    rho_s: Vec3,
+    k: f32,
+    vals: &[Val],
+    glossy: bool,
+) -> Vec3 {
+    let r = mirror(wo, n);
+    let mut out = Vec3::ZERO;
+    for val in vals {
+        let (g, w) = disc_geometry(p, n, val);
+        if g <= 0.0 {
+            continue;
+        }
+        let e = val.flux * (g / PI);
+        let mut f = rho_d / PI;
+        if glossy {
+            f += rho_s * ((k + 2.0) / (2.0 * PI)) * lobe(r, w, k);
+        }
+        out += f * e;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn disc_irradiance_on_axis_matches_the_exact_disc() {
+        // A Lambertian disc of radius r and flux Φ, facing a receiver on its axis at distance
+        // h: the exact irradiance is Φ/(π r²)·π·r²/(h² + r²) = Φ/(π(h²+r²)) — which is exactly
+        // the VAL law on the axis (both cosines 1).
+        for (h, r) in [(0.1f32, 0.05f32), (1.0, 0.3), (0.01, 0.2), (5.0, 0.01)] {
+            let val = Val {
+                position: Vec3::new(0.0, h, 0.0),
+                normal: Vec3::NEG_Y,
+                flux: Vec3::splat(2.0),
+                area: PI * r * r,
+            };
+            let e = disc_irradiance(Vec3::ZERO, Vec3::Y, &val);
+            let exact = 2.0 / (PI * (h * h + r * r));
+            assert!(
+                (e.x - exact).abs() <= 1e-5 * exact,
+                "h {h} r {r}: {} vs {exact}",
+                e.x
+            );
+        }
+    }
+
+    #[test]
+    fn renormalized_lights_reproduce_the_sums_at_the_point() {
+        let receiver = Receiver {
+            position: Vec3::new(0.1, 0.0, -0.2),
+            normal: Vec3::new(0.1, 1.0, 0.05).normalize(),
+            k: 40.0,
+        };
+        let eye = Vec3::new(0.5, 1.0, 1.5);
+        let vals: Vec<Val> = (0..50)
+            .map(|i| {
+                let t = i as f32 * 0.37;
+                Val {
+                    position: Vec3::new(t.sin() * 0.6, 0.8 + 0.1 * t.cos(), (t * 1.7).cos() * 0.5),
+                    normal: Vec3::new(0.05 * t.cos(), -1.0, 0.1).normalize(),
+                    flux: Vec3::new(0.01, 0.02, 0.005) * (1.0 + (i % 3) as f32),
+                    area: 1e-3,
+                }
+            })
+            .collect();
+        let g = gather(&receiver, eye, &vals, Weights::Geometric, true);
+        let (lights, clamped) = renormalize(&receiver, eye, &g);
+        assert_eq!(clamped, [false, false]);
+        let x = receiver.position;
+        let n = receiver.normal;
+        let r = mirror((eye - x).normalize(), n);
+        let d = diffuse_point(x, n, lights.diffuse_position, lights.diffuse);
+        let s = glossy_point(x, n, r, receiver.k, lights.glossy_position, lights.glossy);
+        assert!((d - g.diffuse).abs().max_element() <= 1e-4 * g.diffuse.max_element());
+        assert!((s - g.glossy).abs().max_element() <= 1e-4 * g.glossy.max_element());
+        assert!(g.glossy.max_element() > 0.0);
+    }
+
+    #[test]
+    fn union_never_occludes_more_than_sum() {
+        let receiver = Receiver {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            k: 1.0,
+        };
+        let light = Vec3::new(0.0, 2.0, 0.0);
+        let discs: Vec<OccluderDisc> = (0..6)
+            .map(|i| OccluderDisc {
+                center: Vec3::new(0.05 * i as f32, 0.5 + 0.2 * i as f32, 0.0),
+                normal: Vec3::Y,
+                radius: 0.2,
+            })
+            .collect();
+        let sum = occlusion(
+            usize::MAX,
+            &receiver,
+            light,
+            0.5,
+            &discs,
+            OcclusionMode::Sum,
+        );
+        let union = occlusion(
+            usize::MAX,
+            &receiver,
+            light,
+            0.5,
+            &discs,
+            OcclusionMode::Union,
+        );
+        assert!(sum > 0.0 && union > 0.0);
+        assert!(union <= sum + 1e-6, "union {union} sum {sum}");
+        // A disc behind the light's centre hides nothing.
+        let behind = OccluderDisc {
+            center: Vec3::new(0.0, 2.5, 0.0),
+            normal: Vec3::Y,
+            radius: 1.0,
+        };
+        assert_eq!(
+            occluder_share(Vec3::ZERO, Vec3::Y, light, 0.5, &behind),
+            0.0
+        );
+    }
+
+    #[test]
+    fn tangent_frame_is_orthonormal() {
+        for n in [
+            Vec3::Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+            Vec3::new(0.3, -0.4, 0.8).normalize(),
+        ] {
+            let (t, b) = tangent_frame(n);
+            assert!((t.length() - 1.0).abs() < 1e-5 && (b.length() - 1.0).abs() < 1e-5);
+            assert!(t.dot(b).abs() < 1e-5 && t.dot(n).abs() < 1e-5 && b.dot(n).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,380 @@
+//! Sparse receiver points: the method's preprocessing, once per mesh and in model space
+//! (DESIGN §4). Points are spread with density proportional to area by weighted sample
+//! elimination (Yuksel 2015: a blue-noise subset of area-uniform candidates), seeded and
+//! deterministic. Every vertex links to its 8 nearest points of the same mesh with the
+//! interpolation weights of paper eq. 12, which rigid motion leaves unchanged, so they are
+//! computed here once. Every point gets an occluder-disc radius from its Voronoi region.
+
+use std::collections::{BinaryHeap, HashMap};
+use std::hash::{Hash, Hasher};
+use std::num::NonZero;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use glam::Vec3;
+use kiddo::immutable::float::kdtree::ImmutableKdTree;
+use kiddo::SquaredEuclidean;
+
+use super::math::link_weights;
+use crate::scene::{Mesh, Scene};
+
+/// Links per vertex.
+pub const LINKS: usize = 8;
+
+/// Fewest points any mesh with surface area gets, so every vertex has a full set of links.
+pub const MIN_POINTS_PER_MESH: usize = LINKS;
+
+/// Candidates per kept point for sample elimination (Yuksel suggests 3–5).
+const CANDIDATES_PER_POINT: usize = 5;
+
+/// One vertex's link: a mesh-local point index and its normalized weight.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Link {
+    pub point: u32,
+    pub weight: f32,
+}
+
+/// A mesh's sparse points and its vertices' links, all in model space.
+#[derive(Clone, Debug, Default)]
+pub struct MeshPoints {
+    pub positions: Vec<Vec3>,
+    pub normals: Vec<Vec3>,
+    /// Occluder-disc radius: the farthest mesh vertex in the point's Voronoi region, and at
+    /// least the radius of the point's share of the area (coarse meshes have regions with no
+    /// vertex at all; their discs must not vanish).
+    pub disc_radius: Vec<f32>,
+    /// `LINKS` links per vertex; weights sum to 1, or are all 0 when no linked point faces
+    /// the vertex's way.
+    pub links: Vec<[Link; LINKS]>,
+}
+
+/// Points per mesh: `total` split by area (model-space area × instances), at least
+/// `MIN_POINTS_PER_MESH` for any mesh with area, none for meshes without.
+pub fn points_per_mesh(scene: &Scene, total: usize) -> Vec<usize> {
+    let mut instances = vec![0usize; scene.meshes.len()];
+    for inst in &scene.instances {
+        instances[inst.mesh] += 1;
+    }
+    let areas: Vec<f64> = scene
+        .meshes
+        .iter()
+        .zip(&instances)
+        .map(|(m, &n)| mesh_area(m) * n as f64)
+        .collect();
+    let sum: f64 = areas.iter().sum();
+    scene
+        .meshes
+        .iter()
+        .zip(&areas)
+        .zip(&instances)
+        .map(|((_, &area), &n)| {
+            if area <= 0.0 || sum <= 0.0 || n == 0 {
+                0
+            } else {
+                // Per instance of the mesh, so instances × count ≈ the area share.
+                ((total as f64 * area / sum / n as f64).round() as usize).max(MIN_POINTS_PER_MESH)
+            }
+        })
+        .collect()
+}
+
+pub fn mesh_area(mesh: &Mesh) -> f64 {
+    mesh.indices
+        .chunks_exact(3)
+        .map(|t| triangle_area(mesh, t) as f64)
+        .sum()
+}
+
+fn triangle_area(mesh: &Mesh, t: &[u32]) -> f32 {
+    let [a, b, c] = [0, 1, 2].map(|i| mesh.positions[t[i] as usize]);
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// Deterministic SplitMix64 stream: the placement must not change between runs or machines.
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in [0, 1).
+    fn next_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+/// Places `count` points on `mesh` and links its vertices. Meshes without area get none.
+pub fn place(mesh: &Mesh, count: usize, seed: u64) -> MeshPoints {
+    let triangles: Vec<&[u32]> = mesh.indices.chunks_exact(3).collect();
+    let mut cdf = Vec::with_capacity(triangles.len());
+    let mut area = 0.0f64;
+    for t in &triangles {
+        area += triangle_area(mesh, t) as f64;
+        cdf.push(area);
+    }
+    if count == 0 || area <= 0.0 {
+        return MeshPoints {
+            links: vec![[Link::default(); LINKS]; mesh.positions.len()],
+            ..Default::default()
+        };
+    }
+
+    // Area-uniform candidates.
+    let mut rng = SplitMix(seed ^ 0x5EED_5EED_5EED_5EED);
+    let candidate_count = count * CANDIDATES_PER_POINT;
+    let mut candidates = Vec::with_capacity(candidate_count);
+    let mut candidate_normals = Vec::with_capacity(candidate_count);
+    for _ in 0..candidate_count {
+        let target = rng.next_f32() as f64 * area;
+        let ti = cdf
+            .partition_point(|&c| c < target)
+            .min(triangles.len() - 1);
+        let t = triangles[ti];
+        let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+        if u + v > 1.0 {
+            (u, v) = (1.0 - u, 1.0 - v);
+        }
+        let [a, b, c] = [0, 1, 2].map(|i| mesh.positions[t[i] as usize]);
+        candidates.push(a + u * (b - a) + v * (c - a));
+        let face = (b - a).cross(c - a).normalize_or_zero();
+        let normal = if mesh.normals.len() == mesh.positions.len() {
+            let [na, nb, nc] = [0, 1, 2].map(|i| mesh.normals[t[i] as usize]);
+            let n = (1.0 - u - v) * na + u * nb + v * nc;
+            if n.length_squared() > 1e-12 {
+                n.normalize()
+            } else {
+                face
+            }
+        } else {
+            face
+        };
+        candidate_normals.push(normal);
+    }
+
+    let kept = eliminate(&candidates, count, area as f32);
+    let positions: Vec<Vec3> = kept.iter().map(|&i| candidates[i]).collect();
+    let normals: Vec<Vec3> = kept.iter().map(|&i| candidate_normals[i]).collect();
+
+    // Links: the 8 nearest points of each vertex, weighted by eq. 12.
+    let coords: Vec<[f32; 3]> = positions.iter().map(|p| p.to_array()).collect();
+    let tree: ImmutableKdTree<f32, u64, 3, 32> = ImmutableKdTree::new_from_slice(&coords);
+    let wanted = NonZero::new(LINKS.min(positions.len())).expect("at least one point");
+    let mut disc_radius = vec![0.0f32; positions.len()];
+    let mut links = Vec::with_capacity(mesh.positions.len());
+    for (vi, v) in mesh.positions.iter().enumerate() {
+        let nearest = tree.nearest_n::<SquaredEuclidean>(&v.to_array(), wanted);
+        if let Some(first) = nearest.first() {
+            let owner = first.item as usize;
+            disc_radius[owner] = disc_radius[owner].max(first.distance.sqrt());
+        }
+        let vertex_normal = mesh.normals.get(vi).copied().unwrap_or(Vec3::ZERO);
+        let linked: Vec<(Vec3, Vec3)> = nearest
+            .iter()
+            .map(|nn| (positions[nn.item as usize], normals[nn.item as usize]))
+            .collect();
+        let weights = link_weights(*v, vertex_normal, &linked);
+        let total: f32 = weights.iter().sum();
+        let mut row = [Link::default(); LINKS];
+        if total > 0.0 {
+            for (slot, (nn, w)) in row.iter_mut().zip(nearest.iter().zip(&weights)) {
+                *slot = Link {
+                    point: nn.item as u32,
+                    weight: w / total,
+                };
+            }
+        }
+        links.push(row);
+    }
+    let share_radius = (area as f32 / (std::f32::consts::PI * positions.len() as f32)).sqrt();
+    for r in &mut disc_radius {
+        *r = r.max(share_radius);
+    }
+    MeshPoints {
+        positions,
+        normals,
+        disc_radius,
+        links,
+    }
+}
+
+/// Weighted sample elimination: repeatedly drop the candidate whose neighbours crowd it most
+/// until `count` remain. Returns the kept candidates' indices in ascending order.
+fn eliminate(candidates: &[Vec3], count: usize, area: f32) -> Vec<usize> {
+    if candidates.len() <= count {
+        return (0..candidates.len()).collect();
+    }
+    // Yuksel's r_max for a 2D domain: the spacing of `count` points in hexagonal packing.
+    let r_max = (area / (2.0 * 3f32.sqrt() * count as f32)).sqrt();
+    let reach = 2.0 * r_max;
+    let coords: Vec<[f32; 3]> = candidates.iter().map(|p| p.to_array()).collect();
+    let tree: ImmutableKdTree<f32, u64, 3, 32> = ImmutableKdTree::new_from_slice(&coords);
+    let contribution = |d: f32| (1.0 - (d / reach).min(1.0)).powi(8);
+    let neighbours: Vec<Vec<(u32, f32)>> = coords
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let mut found: Vec<(u32, f32)> = tree
+                .within_unsorted::<SquaredEuclidean>(c, reach * reach)
+                .into_iter()
+                .filter(|nn| nn.item as usize != i)
+                .map(|nn| (nn.item as u32, contribution(nn.distance.sqrt())))
+                .collect();
+            found.sort_by_key(|(j, _)| *j);
+            found
+        })
+        .collect();
+    let mut weight: Vec<f32> = neighbours
+        .iter()
+        .map(|n| n.iter().map(|(_, w)| w).sum())
+        .collect();
+    let mut alive = vec![true; candidates.len()];
+    // Max-heap keyed by weight, then index for determinism; stale entries are skipped.
+    let mut heap: BinaryHeap<(u32, std::cmp::Reverse<usize>)> = weight
+        .iter()
+        .enumerate()
+        .map(|(i, w)| (w.to_bits(), std::cmp::Reverse(i)))
+        .collect();
+    let mut remaining = candidates.len();
+    while remaining > count {
+        let Some((bits, std::cmp::Reverse(i))) = heap.pop() else {
+            break;
+        };
+        if !alive[i] || bits != weight[i].to_bits() {
+            continue;
+        }
+        alive[i] = false;
+        remaining -= 1;
+        for &(j, w) in &neighbours[i] {
+            let j = j as usize;
+            if alive[j] {
+                weight[j] = (weight[j] - w).max(0.0);
+                heap.push((weight[j].to_bits(), std::cmp::Reverse(j)));
+            }
+        }
+    }
+    (0..candidates.len()).filter(|&i| alive[i]).collect()
+}
+
+/// Identity of a mesh's geometry for the cache.
+fn mesh_key(mesh: &Mesh, count: usize, seed: u64) -> u64 {
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    for p in &mesh.positions {
+        p.to_array().map(f32::to_bits).hash(&mut h);
+    }
+    for n in &mesh.normals {
+        n.to_array().map(f32::to_bits).hash(&mut h);
+    }
+    mesh.indices.hash(&mut h);
+    count.hash(&mut h);
+    seed.hash(&mut h);
+    h.finish()
+}
+
+type Cache = Mutex<HashMap<u64, Arc<MeshPoints>>>;
+
+fn cache() -> &'static Cache {
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    CACHE.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+/// Points for every mesh of the scene, from the process-wide cache where this mesh was
+/// already processed with the same count and seed. Returns the points and how many meshes
+/// were computed (not cached).
+pub fn scene_points(scene: &Scene, total: usize, seed: u64) -> (Vec<Arc<MeshPoints>>, usize) {
+    let counts = points_per_mesh(scene, total);
+    let mut computed = 0;
+    let points = scene
+        .meshes
+        .iter()
+        .zip(&counts)
+        .enumerate()
+        .map(|(mi, (mesh, &count))| {
+            let key = mesh_key(mesh, count, seed);
+            if let Some(hit) = cache().lock().map(|c| c.get(&key).cloned()).ok().flatten() {
+                return hit;
+            }
+            computed += 1;
+            let placed = Arc::new(place(mesh, count, seed.wrapping_add(mi as u64)));
+            if let Ok(mut c) = cache().lock() {
+                c.insert(key, placed.clone());
+            }
+            placed
+        })
+        .collect();
+    (points, computed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::mesh::MeshBuilder;
+
+    fn plane(max_edge: f32) -> Mesh {
+        let mut b = MeshBuilder::new("plane", 0);
+        b.add_quad(
+            [
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 0.0),
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(0.0, 0.0, 1.0),
+            ],
+            Vec3::Y,
+            max_edge,
+        );
+        b.build()
+    }
+
+    #[test]
+    fn placement_is_deterministic_blue_noise_on_the_surface() {
+        let mesh = plane(0.1);
+        let a = place(&mesh, 200, 7);
+        let b = place(&mesh, 200, 7);
+        assert_eq!(a.positions, b.positions);
+        assert_eq!(a.positions.len(), 200);
+        for p in &a.positions {
+            assert!(p.y.abs() < 1e-6 && (0.0..=1.0).contains(&p.x) && (0.0..=1.0).contains(&p.z));
+        }
+        // Blue noise: no two points much closer than the packing spacing. Uniform random
+        // points would have a minimum distance far below it.
+        let spacing = (1.0 / (2.0 * 3f32.sqrt() * 200.0)).sqrt() * 2.0;
+        let mut min_d = f32::MAX;
+        for (i, p) in a.positions.iter().enumerate() {
+            for q in &a.positions[i + 1..] {
+                min_d = min_d.min((*p - *q).length());
+            }
+        }
+        assert!(
+            min_d > 0.4 * spacing,
+            "min distance {min_d} vs spacing {spacing}"
+        );
+    }
+
+    #[test]
+    fn links_are_nearest_and_normalized() {
+        let mesh = plane(0.1);
+        let pts = place(&mesh, 64, 1);
+        assert_eq!(pts.links.len(), mesh.positions.len());
+        for (v, row) in mesh.positions.iter().zip(&pts.links) {
+            let total: f32 = row.iter().map(|l| l.weight).sum();
+            assert!((total - 1.0).abs() < 1e-5);
+            // The nearest point overall is among the links, with the largest weight.
+            let nearest = (0..pts.positions.len())
+                .min_by(|&a, &b| {
+                    (pts.positions[a] - *v)
+                        .length()
+                        .total_cmp(&(pts.positions[b] - *v).length())
+                })
+                .unwrap();
+            let best = row
+                .iter()
+                .max_by(|a, b| a.weight.total_cmp(&b.weight))
+                .unwrap();
+            assert_eq!(best.point as usize, nearest);
+        }
+        assert!(pts.disc_radius.iter().all(|&r| r > 0.0));
+    }
+}

@@ -1,0 +1,484 @@
+//! Reflective shadow maps → virtual area lights (DESIGN §4). Every light renders an R×R RSM
+//! (a spot light one perspective layer, a point light six cube faces that tile the sphere
+//! exactly, a directional light an orthographic layer fitted to the scene); a compute pass then
+//! compacts every lit texel of every layer into one storage buffer of [`GpuVal`] records.
+//! Later passes (the sparse gather, brute force, LPV injection) read `vals_buffer` and the
+//! count in `val_count_buffer`.
+
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::raster::scene_gpu::SceneGpu;
+use crate::raster::shadows::setup_lights;
+use crate::raster::types::{GpuLight, Vertex};
+use crate::raster::{
+    buffer_binding, compute_pipeline, storage_entry, uniform_entry, view_binding, RenderError,
+    DEPTH_FORMAT,
+};
+use crate::scene::{Aabb, LightKind, Scene};
+
+use super::math::Val;
+
+/// One VAL as the shaders store it (`Val` in `shaders/vals_common.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct GpuVal {
+    /// xyz: world position; w: area A (m²).
+    pub position_area: [f32; 4],
+    pub normal: [f32; 4],
+    /// rgb: reflected flux Φ (W).
+    pub flux: [f32; 4],
+}
+
+impl GpuVal {
+    pub fn to_val(&self) -> Val {
+        Val {
+            position: glam::Vec4::from(self.position_area).truncate(),
+            normal: glam::Vec4::from(self.normal).truncate(),
+            flux: glam::Vec4::from(self.flux).truncate(),
+            area: self.position_area[3],
+        }
+    }
+}
+
+/// `RsmView` in `shaders/vals_rsm.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RsmView {
+    pub clip_from_world: [[f32; 4]; 4],
+    pub light_index: u32,
+    pub resolution: u32,
+    /// tan(fov/2) of a perspective view; 0 for orthographic.
+    pub tan_half_fov: f32,
+    /// World area of one texel of an orthographic view.
+    pub texel_area: f32,
+}
+
+/// `RsmSize` in `shaders/vals_from_rsm.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct RsmSize {
+    pub resolution: u32,
+    pub layers: u32,
+    pub capacity: u32,
+    pub pad: u32,
+}
+
+const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
+const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// The RSMs of every light and the VAL buffer made from them.
+pub struct Rsm {
+    pub resolution: u32,
+    pub layer_count: u32,
+    /// Capacity in VALs (every texel of every layer).
+    pub capacity: u32,
+    pub vals_buffer: wgpu::Buffer,
+    /// One u32: how many VALs this frame produced.
+    pub val_count_buffer: wgpu::Buffer,
+    pub bytes: GpuBytes,
+    lights_buffer: wgpu::Buffer,
+    layer_buffers: Vec<wgpu::Buffer>,
+    layer_groups: Vec<wgpu::BindGroup>,
+    /// Per layer: position, normal and flux attachment views.
+    layer_views: Vec<[wgpu::TextureView; 3]>,
+    depth_view: wgpu::TextureView,
+    pipeline: wgpu::RenderPipeline,
+    compact_pipeline: wgpu::ComputePipeline,
+    compact_group: wgpu::BindGroup,
+    mesh_bounds: Vec<Aabb>,
+}
+
+impl Rsm {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        scene_gpu: &SceneGpu,
+        resolution: u32,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        let limits = device.limits();
+        if resolution == 0 || resolution > limits.max_texture_dimension_2d {
+            return Err(RenderError::Settings(format!(
+                "--rsm {resolution}: the RSM resolution must be 1..={}",
+                limits.max_texture_dimension_2d
+            )));
+        }
+        let layer_count: u32 = scene
+            .lights
+            .iter()
+            .map(|l| if l.kind == LightKind::Point { 6 } else { 1 })
+            .sum();
+        if layer_count > limits.max_texture_array_layers {
+            return Err(RenderError::Settings(format!(
+                "scene '{}' needs {layer_count} RSM layers; the device allows {}",
+                scene.name, limits.max_texture_array_layers
+            )));
+        }
+        let texels = layer_count as u64 * resolution as u64 * resolution as u64;
+        let val_bytes = texels.max(1) * std::mem::size_of::<GpuVal>() as u64;
+        let max_binding =
+            (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        if val_bytes > max_binding {
+            return Err(RenderError::Settings(format!(
+                "--rsm {resolution} with {layer_count} layers needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm"
+            )));
+        }
+        let mut bytes = GpuBytes::default();
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let vals_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("vals"),
+                size: val_bytes,
+                usage: storage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            },
+        );
+        let val_count_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("val count"),
+                size: 4,
+                usage: storage | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            },
+        );
+        let lights_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("rsm lights"),
+                size: (scene.lights.len().max(1) * std::mem::size_of::<GpuLight>()) as u64,
+                usage: storage,
+                mapped_at_creation: false,
+            },
+        );
+        let layers = layer_count.max(1);
+        let mut array = |label: &str, format| {
+            bytes.texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: resolution,
+                        height: resolution,
+                        depth_or_array_layers: layers,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                        | wgpu::TextureUsages::TEXTURE_BINDING,
+                    view_formats: &[],
+                },
+            )
+        };
+        let textures = [
+            array("rsm position", POSITION_FORMAT),
+            array("rsm normal", NORMAL_FORMAT),
+            array("rsm flux", FLUX_FORMAT),
+        ];
+        let depth = bytes.texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some("rsm depth"),
+                size: wgpu::Extent3d {
+                    width: resolution,
+                    height: resolution,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: DEPTH_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                view_formats: &[],
+            },
+        );
+        let depth_view = depth.create_view(&Default::default());
+        let layer_views: Vec<[wgpu::TextureView; 3]> = (0..layer_count)
+            .map(|layer| {
+                textures.each_ref().map(|t| {
+                    t.create_view(&wgpu::TextureViewDescriptor {
+                        label: Some("rsm layer"),
+                        dimension: Some(wgpu::TextureViewDimension::D2),
+                        base_array_layer: layer,
+                        array_layer_count: Some(1),
+                        ..Default::default()
+                    })
+                })
+            })
+            .collect();
+        let array_views = textures.each_ref().map(|t| {
+            t.create_view(&wgpu::TextureViewDescriptor {
+                label: Some("rsm array"),
+                dimension: Some(wgpu::TextureViewDimension::D2Array),
+                ..Default::default()
+            })
+        });
+
+        let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let view_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("rsm view"),
+            entries: &[
+                uniform_entry(0, vs_fs),
+                storage_entry(1, vs_fs),
+                storage_entry(2, vs_fs),
+            ],
+        });
+        let layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
+            .map(|_| {
+                bytes.buffer(
+                    device,
+                    &wgpu::BufferDescriptor {
+                        label: Some("rsm view"),
+                        size: std::mem::size_of::<RsmView>() as u64,
+                        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                        mapped_at_creation: false,
+                    },
+                )
+            })
+            .collect();
+        let layer_groups = layer_buffers
+            .iter()
+            .map(|buffer| {
+                device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("rsm view"),
+                    layout: &view_bgl,
+                    entries: &[
+                        buffer_binding(0, buffer),
+                        buffer_binding(1, &scene_gpu.instance_buffer),
+                        buffer_binding(2, &lights_buffer),
+                    ],
+                })
+            })
+            .collect();
+        let module = ctx.shader("vals_rsm.wgsl");
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("rsm"),
+            bind_group_layouts: &[Some(&view_bgl), Some(&scene_gpu.material_layout)],
+            immediate_size: 0,
+        });
+        let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
+        let target = |format| {
+            Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })
+        };
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("rsm"),
+            layout: Some(&layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &attributes,
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[
+                    target(POSITION_FORMAT),
+                    target(NORMAL_FORMAT),
+                    target(FLUX_FORMAT),
+                ],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let array_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: cs,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                view_dimension: wgpu::TextureViewDimension::D2Array,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let compact_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vals from rsm"),
+            entries: &[
+                uniform_entry(0, cs),
+                array_entry(1),
+                array_entry(2),
+                array_entry(3),
+                crate::raster::storage_entry_rw(4, cs),
+                crate::raster::storage_entry_rw(5, cs),
+            ],
+        });
+        let capacity = texels.min(u32::MAX as u64) as u32;
+        let size_buffer = bytes.buffer_init(
+            device,
+            "rsm size",
+            bytemuck::bytes_of(&RsmSize {
+                resolution,
+                layers: layer_count,
+                capacity,
+                pad: 0,
+            }),
+            wgpu::BufferUsages::UNIFORM,
+        );
+        let compact_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vals from rsm"),
+            layout: &compact_bgl,
+            entries: &[
+                buffer_binding(0, &size_buffer),
+                view_binding(1, &array_views[0]),
+                view_binding(2, &array_views[1]),
+                view_binding(3, &array_views[2]),
+                buffer_binding(4, &vals_buffer),
+                buffer_binding(5, &val_count_buffer),
+            ],
+        });
+        let compact_pipeline = compute_pipeline(
+            device,
+            "vals from rsm",
+            &ctx.shader("vals_from_rsm.wgsl"),
+            &compact_bgl,
+        );
+        Ok(Self {
+            resolution,
+            layer_count,
+            capacity,
+            vals_buffer,
+            val_count_buffer,
+            bytes,
+            lights_buffer,
+            layer_buffers,
+            layer_groups,
+            layer_views,
+            depth_view,
+            pipeline,
+            compact_pipeline,
+            compact_group,
+            mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
+        })
+    }
+
+    /// Uploads this frame's light records and RSM views.
+    pub fn prepare(&self, ctx: &GpuContext, scene: &Scene, world_from_node: &[Mat4]) {
+        let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
+        // No margin: cube faces must meet exactly so that no direction is counted twice.
+        let setup = setup_lights(scene, world_from_node, &bounds, self.resolution, 0.0);
+        if !setup.lights.is_empty() {
+            ctx.queue
+                .write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
+        }
+        let mut layer = 0usize;
+        for (light_index, light) in setup.lights.iter().enumerate() {
+            let layers = if light.kind == crate::raster::types::LIGHT_POINT {
+                6
+            } else {
+                1
+            };
+            for _ in 0..layers {
+                let view = &setup.views[layer];
+                let perspective = view.origin[3] > 0.5;
+                let rsm_view = RsmView {
+                    clip_from_world: view.clip_from_world,
+                    light_index: light_index as u32,
+                    resolution: self.resolution,
+                    tan_half_fov: if perspective {
+                        0.5 * view.texel[0] * self.resolution as f32
+                    } else {
+                        0.0
+                    },
+                    texel_area: if perspective {
+                        0.0
+                    } else {
+                        view.texel[0] * view.texel[0]
+                    },
+                };
+                ctx.queue.write_buffer(
+                    &self.layer_buffers[layer],
+                    0,
+                    bytemuck::bytes_of(&rsm_view),
+                );
+                layer += 1;
+            }
+        }
+    }
+
+    /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm").
+    pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
+        passes
+            .encoder()
+            .clear_buffer(&self.val_count_buffer, 0, None);
+        let clear = |view| {
+            Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })
+        };
+        for (views, group) in self.layer_views.iter().zip(&self.layer_groups) {
+            passes.render(
+                "rsm",
+                &[clear(&views[0]), clear(&views[1]), clear(&views[2])],
+                Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &self.depth_view,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(1.0),
+                        store: wgpu::StoreOp::Discard,
+                    }),
+                    stencil_ops: None,
+                }),
+                |pass| {
+                    pass.set_pipeline(&self.pipeline);
+                    pass.set_bind_group(0, group, &[]);
+                    scene_gpu.draw(pass, Some(1));
+                },
+            )?;
+        }
+        if self.layer_count > 0 {
+            let r = self.resolution;
+            passes.compute("rsm", |pass| {
+                pass.set_pipeline(&self.compact_pipeline);
+                pass.set_bind_group(0, &self.compact_group, &[]);
+                pass.dispatch_workgroups(r.div_ceil(8), r.div_ceil(8), self.layer_count);
+            })?;
+        }
+        Ok(())
+    }
+
+    /// The VALs of the last recorded frame.
+    pub fn read_vals(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {
+        let count = self.read_count(ctx)?.min(self.capacity) as usize;
+        let all: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.vals_buffer)?;
+        Ok(all[..count.min(all.len())]
+            .iter()
+            .map(GpuVal::to_val)
+            .collect())
+    }
+
+    pub fn read_count(&self, ctx: &GpuContext) -> Result<u32, GpuError> {
+        let count: Vec<u32> = crate::gpu::read_buffer(ctx, &self.val_count_buffer)?;
+        Ok(count.first().copied().unwrap_or(0))
+    }
+}

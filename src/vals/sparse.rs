@@ -1,0 +1,669 @@
+//! The sparse points on the GPU: static model-space buffers built once from the preprocessing,
+//! and the per-frame passes gather → renormalize → occlusion → interpolation → apply.
+//!
+//! Memory per sparse point, 64 bytes: model position + octahedral normal (16), Phong k and
+//! disc radius as f16 + instance index (8), and the solution: diffuse and glossy intensities
+//! as f32 RGB with the averaged positions as f16 offsets from the point (16 + 16), the offsets'
+//! z and the two occlusion spheres as f16 (8). Per vertex: the interpolated lights, 48 bytes
+//! (f32, they are varyings of the apply pass), plus 32 bytes of static links (8 × u16 point
+//! index + unorm16 weight) per mesh vertex.
+
+use std::sync::Arc;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat3, Mat4, Vec3};
+use half::f16;
+
+use super::math::{OcclusionMode, PointLights, Weights};
+use super::points::{MeshPoints, LINKS};
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::raster::scene_gpu::SceneGpu;
+use crate::raster::types::Vertex;
+use crate::raster::{
+    buffer_binding, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
+    uniform_entry, view_binding, FrameTargets, RenderError, DEPTH_FORMAT, RADIANCE_FORMAT,
+};
+use crate::scene::{Material, Scene};
+
+/// `SparseParams` in `shaders/vals_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct SparseParams {
+    pub eye: [f32; 4],
+    pub point_count: u32,
+    pub instance_count: u32,
+    pub flags: u32,
+    pub occlusion_mode: u32,
+    pub tile: u32,
+    pub vertex_count: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
+pub const FLAG_GLOSSY: u32 = 1;
+pub const FLAG_FLUX_WEIGHTS: u32 = 2;
+
+/// `InstanceRange` in `shaders/vals_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct InstanceRange {
+    pub vertex_offset: u32,
+    pub vertex_count: u32,
+    pub point_offset: u32,
+    pub link_offset: u32,
+}
+
+/// The knobs of the sparse passes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SparseOptions {
+    pub tile: u32,
+    pub glossy: bool,
+    pub occlusion: OcclusionMode,
+    pub weights: Weights,
+}
+
+/// Octahedral encoding of a unit vector in two snorm16 (`oct_decode` in the shader).
+pub fn oct_encode(n: Vec3) -> u32 {
+    let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-30);
+    let (mut x, mut y) = (n.x, n.y);
+    if n.z < 0.0 {
+        let (ox, oy) = (x, y);
+        x = (1.0 - oy.abs()) * if ox >= 0.0 { 1.0 } else { -1.0 };
+        y = (1.0 - ox.abs()) * if oy >= 0.0 { 1.0 } else { -1.0 };
+    }
+    let snorm = |v: f32| ((v.clamp(-1.0, 1.0) * 32767.0).round() as i16) as u16 as u32;
+    snorm(x) | (snorm(y) << 16)
+}
+
+pub fn oct_decode(packed: u32) -> Vec3 {
+    let unorm = |bits: u32| ((bits as u16 as i16) as f32 / 32767.0).max(-1.0);
+    let (x, y) = (unorm(packed & 0xffff), unorm(packed >> 16));
+    let mut n = Vec3::new(x, y, 1.0 - x.abs() - y.abs());
+    if n.z < 0.0 {
+        let sx = if n.x >= 0.0 { 1.0 } else { -1.0 };
+        let sy = if n.y >= 0.0 { 1.0 } else { -1.0 };
+        n = Vec3::new((1.0 - n.y.abs()) * sx, (1.0 - n.x.abs()) * sy, n.z);
+    }
+    n.normalize()
+}
+
+/// WGSL `pack2x16float` / `unpack2x16float`.
+pub fn pack_half2(a: f32, b: f32) -> u32 {
+    f16::from_f32(a).to_bits() as u32 | ((f16::from_f32(b).to_bits() as u32) << 16)
+}
+
+pub fn unpack_half2(v: u32) -> (f32, f32) {
+    (
+        f16::from_bits(v as u16).to_f32(),
+        f16::from_bits((v >> 16) as u16).to_f32(),
+    )
+}
+
+/// A sparse point decoded on the CPU exactly as the shaders decode it.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct DecodedPoint {
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub k: f32,
+    pub disc_radius: f32,
+}
+
+/// The per-point solution buffers read back and decoded.
+#[derive(Clone, Debug, Default)]
+pub struct PointsReadback {
+    pub points: Vec<DecodedPoint>,
+    /// Diffuse/glossy channel values (sums after gather, intensities after renormalize) and
+    /// positions, plus the occlusion spheres.
+    pub lights: Vec<PointLights>,
+    pub spheres: Vec<(f32, f32)>,
+}
+
+pub struct SparseGpu {
+    pub point_count: u32,
+    pub vertex_count: u32,
+    pub instance_count: u32,
+    /// Bytes of the per-point buffers (static + solution).
+    pub point_bytes: u64,
+    /// Bytes of the per-instance-vertex lights.
+    pub vertex_light_bytes: u64,
+    /// Bytes of the per-mesh-vertex links.
+    pub link_bytes: u64,
+    pub bytes: GpuBytes,
+    params_buffer: wgpu::Buffer,
+    points_model: Vec<[u32; 4]>,
+    points_meta: Vec<[u32; 2]>,
+    point_instances: Vec<usize>,
+    point_diffuse: wgpu::Buffer,
+    point_glossy: wgpu::Buffer,
+    point_extra: wgpu::Buffer,
+    pub clamp_buffer: wgpu::Buffer,
+    vertex_lights: wgpu::Buffer,
+    gather: (wgpu::ComputePipeline, wgpu::BindGroup),
+    renormalize: (wgpu::ComputePipeline, wgpu::BindGroup),
+    occlusion: (wgpu::ComputePipeline, wgpu::BindGroup),
+    interpolate: (wgpu::ComputePipeline, wgpu::BindGroup),
+    apply_pipeline: wgpu::RenderPipeline,
+    apply_group: wgpu::BindGroup,
+}
+
+/// Which passes a frame runs; tests stop early to read intermediate buffers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Stage {
+    Gather,
+    Renormalize,
+    Occlusion,
+    Interpolate,
+    Apply,
+}
+
+impl SparseGpu {
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        scene_gpu: &SceneGpu,
+        targets: &FrameTargets,
+        frame_buffer: &wgpu::Buffer,
+        points: &[Arc<MeshPoints>],
+        vals_buffer: &wgpu::Buffer,
+        val_count_buffer: &wgpu::Buffer,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        let limits = device.limits();
+        // Static model-space data, flattened over instances.
+        let mut points_model = Vec::new();
+        let mut points_meta = Vec::new();
+        let mut point_instances = Vec::new();
+        let mut ranges = Vec::with_capacity(scene.instances.len());
+        let mut link_offsets = Vec::with_capacity(scene.meshes.len());
+        let mut links = Vec::<[u32; 4]>::new();
+        for (mesh, mesh_points) in scene.meshes.iter().zip(points) {
+            if mesh_points.positions.len() > u16::MAX as usize + 1 {
+                return Err(RenderError::Settings(format!(
+                    "mesh '{}' got {} sparse points; links address at most 65536 per mesh: lower --sparse-points",
+                    mesh.name,
+                    mesh_points.positions.len()
+                )));
+            }
+            link_offsets.push((links.len() / 2) as u32);
+            for row in &mesh_points.links {
+                let packed: Vec<u32> = row
+                    .iter()
+                    .map(|l| {
+                        let w = (l.weight.clamp(0.0, 1.0) * 65535.0).round() as u32;
+                        (l.point & 0xffff) | (w << 16)
+                    })
+                    .collect();
+                debug_assert_eq!(packed.len(), LINKS);
+                links.push([packed[0], packed[1], packed[2], packed[3]]);
+                links.push([packed[4], packed[5], packed[6], packed[7]]);
+            }
+        }
+        let mut vertex_offset = 0u32;
+        for (instance_index, instance) in scene.instances.iter().enumerate() {
+            let mesh = &scene.meshes[instance.mesh];
+            let mesh_points = &points[instance.mesh];
+            let material = scene
+                .materials
+                .get(mesh.material)
+                .cloned()
+                .unwrap_or_default();
+            let k = Material::phong_exponent(material.roughness);
+            ranges.push(InstanceRange {
+                vertex_offset,
+                vertex_count: mesh.positions.len() as u32,
+                point_offset: points_model.len() as u32,
+                link_offset: link_offsets[instance.mesh],
+            });
+            vertex_offset += mesh.positions.len() as u32;
+            for ((p, n), r) in mesh_points
+                .positions
+                .iter()
+                .zip(&mesh_points.normals)
+                .zip(&mesh_points.disc_radius)
+            {
+                points_model.push([p.x.to_bits(), p.y.to_bits(), p.z.to_bits(), oct_encode(*n)]);
+                points_meta.push([pack_half2(k, *r), instance_index as u32]);
+                point_instances.push(instance_index);
+            }
+        }
+        let point_count = points_model.len() as u32;
+        let vertex_count = vertex_offset;
+        let max_binding =
+            (limits.max_storage_buffer_binding_size as u64).min(limits.max_buffer_size);
+        let vertex_light_size = vertex_count.max(1) as u64 * 48;
+        if vertex_light_size > max_binding {
+            return Err(RenderError::Settings(format!(
+                "scene '{}' has {vertex_count} instance vertices needing {vertex_light_size} bytes of vertex lights; the device binds at most {max_binding}",
+                scene.name
+            )));
+        }
+
+        let mut bytes = GpuBytes::default();
+        let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        let readable = storage | wgpu::BufferUsages::COPY_SRC;
+        let init = |bytes: &mut GpuBytes, label: &str, data: &[u8]| {
+            let dummy = [0u8; 16];
+            bytes.buffer_init(
+                device,
+                label,
+                if data.is_empty() { &dummy } else { data },
+                readable,
+            )
+        };
+        let points_model_buffer = init(
+            &mut bytes,
+            "points model",
+            bytemuck::cast_slice(&points_model),
+        );
+        let points_meta_buffer = init(
+            &mut bytes,
+            "points meta",
+            bytemuck::cast_slice(&points_meta),
+        );
+        let empty = |bytes: &mut GpuBytes, label: &str, size: u64| {
+            bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: size.max(16),
+                    usage: readable,
+                    mapped_at_creation: false,
+                },
+            )
+        };
+        let n = point_count as u64;
+        let point_diffuse = empty(&mut bytes, "point diffuse", n * 16);
+        let point_glossy = empty(&mut bytes, "point glossy", n * 16);
+        let point_extra = empty(&mut bytes, "point extra", n * 8);
+        let point_bytes = bytes.0;
+        let ranges_buffer = init(&mut bytes, "instance ranges", bytemuck::cast_slice(&ranges));
+        let links_buffer = init(&mut bytes, "vertex links", bytemuck::cast_slice(&links));
+        let link_bytes = (links.len() * 16) as u64;
+        let vertex_lights = empty(&mut bytes, "vertex lights", vertex_light_size);
+        let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
+        let params_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("sparse params"),
+                size: std::mem::size_of::<SparseParams>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            },
+        );
+
+        let cs = wgpu::ShaderStages::COMPUTE;
+        // (binding, buffer, writable) lists per pass, in the shaders' binding order.
+        let make = |name: &str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
+            let entries: Vec<wgpu::BindGroupLayoutEntry> = list
+                .iter()
+                .enumerate()
+                .map(|(i, (_, rw))| {
+                    if i == 0 {
+                        uniform_entry(0, cs)
+                    } else if *rw {
+                        storage_entry_rw(i as u32, cs)
+                    } else {
+                        storage_entry(i as u32, cs)
+                    }
+                })
+                .collect();
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some(name),
+                entries: &entries,
+            });
+            let group_entries: Vec<wgpu::BindGroupEntry> = list
+                .iter()
+                .enumerate()
+                .map(|(i, (b, _))| buffer_binding(i as u32, b))
+                .collect();
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(name),
+                layout: &layout,
+                entries: &group_entries,
+            });
+            (
+                compute_pipeline(device, name, &ctx.shader(shader), &layout),
+                group,
+            )
+        };
+        let instances = &scene_gpu.instance_buffer;
+        let gather = make(
+            "gather",
+            "vals_gather.wgsl",
+            &[
+                (&params_buffer, false),
+                (instances, false),
+                (&points_model_buffer, false),
+                (&points_meta_buffer, false),
+                (vals_buffer, false),
+                (val_count_buffer, false),
+                (&point_diffuse, true),
+                (&point_glossy, true),
+                (&point_extra, true),
+            ],
+        );
+        let renormalize = make(
+            "renormalize",
+            "vals_renormalize.wgsl",
+            &[
+                (&params_buffer, false),
+                (instances, false),
+                (&points_model_buffer, false),
+                (&points_meta_buffer, false),
+                (&point_diffuse, true),
+                (&point_glossy, true),
+                (&point_extra, false),
+                (&clamp_buffer, true),
+            ],
+        );
+        let occlusion = make(
+            "occlusion",
+            "vals_occlusion.wgsl",
+            &[
+                (&params_buffer, false),
+                (instances, false),
+                (&points_model_buffer, false),
+                (&points_meta_buffer, false),
+                (&point_diffuse, true),
+                (&point_glossy, true),
+                (&point_extra, false),
+            ],
+        );
+        let interpolate = make(
+            "interpolation",
+            "vals_interpolate.wgsl",
+            &[
+                (&params_buffer, false),
+                (instances, false),
+                (&points_model_buffer, false),
+                (&points_meta_buffer, false),
+                (&point_diffuse, false),
+                (&point_glossy, false),
+                (&point_extra, false),
+                (&ranges_buffer, false),
+                (&links_buffer, false),
+                (&vertex_lights, true),
+            ],
+        );
+
+        // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
+        let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let apply_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("apply"),
+            entries: &[
+                uniform_entry(0, vs_fs),
+                storage_entry(1, vs_fs),
+                storage_entry(2, vs_fs),
+                storage_entry(3, vs_fs),
+                texture_entry(4, wgpu::ShaderStages::FRAGMENT),
+                texture_entry(5, wgpu::ShaderStages::FRAGMENT),
+                texture_entry(6, wgpu::ShaderStages::FRAGMENT),
+                uniform_entry(7, vs_fs),
+            ],
+        });
+        let apply_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("apply"),
+            layout: &apply_bgl,
+            entries: &[
+                buffer_binding(0, frame_buffer),
+                buffer_binding(1, instances),
+                buffer_binding(2, &ranges_buffer),
+                buffer_binding(3, &vertex_lights),
+                view_binding(4, &targets.normal),
+                view_binding(5, &targets.diffuse),
+                view_binding(6, &targets.specular),
+                buffer_binding(7, &params_buffer),
+            ],
+        });
+        let apply_module = ctx.shader("vals_apply.wgsl");
+        let apply_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("apply"),
+            bind_group_layouts: &[Some(&apply_bgl)],
+            immediate_size: 0,
+        });
+        let apply_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("apply"),
+            layout: Some(&apply_layout),
+            vertex: wgpu::VertexState {
+                module: &apply_module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<Vertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &[wgpu::VertexAttribute {
+                        format: wgpu::VertexFormat::Float32x3,
+                        offset: 0,
+                        shader_location: 0,
+                    }],
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(false),
+                depth_compare: Some(wgpu::CompareFunction::Equal),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &apply_module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: RADIANCE_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        Ok(Self {
+            point_count,
+            vertex_count,
+            instance_count: ranges.len() as u32,
+            point_bytes,
+            vertex_light_bytes: vertex_light_size,
+            link_bytes,
+            bytes,
+            params_buffer,
+            points_model,
+            points_meta,
+            point_instances,
+            point_diffuse,
+            point_glossy,
+            point_extra,
+            clamp_buffer,
+            vertex_lights,
+            gather,
+            renormalize,
+            occlusion,
+            interpolate,
+            apply_pipeline,
+            apply_group,
+        })
+    }
+
+    /// Uploads this frame's parameters: the eye for the glossy lobes and the options.
+    pub fn prepare(&self, ctx: &GpuContext, eye: Vec3, options: &SparseOptions) {
+        let mut flags = 0;
+        if options.glossy {
+            flags |= FLAG_GLOSSY;
+        }
+        if options.weights == Weights::Flux {
+            flags |= FLAG_FLUX_WEIGHTS;
+        }
+        let params = SparseParams {
+            eye: eye.extend(1.0).to_array(),
+            point_count: self.point_count,
+            instance_count: self.instance_count,
+            flags,
+            occlusion_mode: match options.occlusion {
+                OcclusionMode::Off => 0,
+                OcclusionMode::Sum => 1,
+                OcclusionMode::Union => 2,
+            },
+            tile: options.tile,
+            vertex_count: self.vertex_count,
+            pad0: 0,
+            pad1: 0,
+        };
+        ctx.queue
+            .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+    }
+
+    /// Records the sparse passes up to and including `last`.
+    pub fn record(
+        &self,
+        passes: &mut Passes,
+        scene_gpu: &SceneGpu,
+        targets: &FrameTargets,
+        options: &SparseOptions,
+        last: Stage,
+    ) -> Result<(), GpuError> {
+        passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
+        let groups = self.point_count.div_ceil(64);
+        let mut compute =
+            |label: &str, (pipeline, group): &(wgpu::ComputePipeline, wgpu::BindGroup), n: u32| {
+                passes.compute(label, |pass| {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(0, group, &[]);
+                    pass.dispatch_workgroups(n.max(1), 1, 1);
+                })
+            };
+        compute("gather", &self.gather, groups)?;
+        if last >= Stage::Renormalize {
+            compute("renormalize", &self.renormalize, groups)?;
+        }
+        if last >= Stage::Occlusion && options.occlusion != OcclusionMode::Off {
+            compute("occlusion", &self.occlusion, groups)?;
+        }
+        if last >= Stage::Interpolate {
+            compute(
+                "interpolation",
+                &self.interpolate,
+                self.vertex_count.div_ceil(64),
+            )?;
+        }
+        if last >= Stage::Apply {
+            passes.render(
+                "apply",
+                &[Some(wgpu::RenderPassColorAttachment {
+                    view: &targets.radiance_indirect,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &targets.depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: wgpu::LoadOp::Load,
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                |pass| {
+                    pass.set_pipeline(&self.apply_pipeline);
+                    pass.set_bind_group(0, &self.apply_group, &[]);
+                    scene_gpu.draw(pass, None);
+                },
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The sparse points in world space for the given transforms, decoded like the shaders.
+    pub fn decoded_points(&self, scene: &Scene, world_from_node: &[Mat4]) -> Vec<DecodedPoint> {
+        self.points_model
+            .iter()
+            .zip(&self.points_meta)
+            .zip(&self.point_instances)
+            .map(|((model, meta), &instance)| {
+                let world = world_from_node[scene.instances[instance].node];
+                let p = Vec3::new(
+                    f32::from_bits(model[0]),
+                    f32::from_bits(model[1]),
+                    f32::from_bits(model[2]),
+                );
+                let normal_from_model = Mat3::from_mat4(world).inverse().transpose();
+                let (k, disc_radius) = unpack_half2(meta[0]);
+                DecodedPoint {
+                    position: world.transform_point3(p),
+                    normal: (normal_from_model * oct_decode(model[3])).normalize(),
+                    k,
+                    disc_radius,
+                }
+            })
+            .collect()
+    }
+
+    /// Reads the per-point buffers after the last recorded frame.
+    pub fn read_points(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+    ) -> Result<PointsReadback, GpuError> {
+        let points = self.decoded_points(scene, world_from_node);
+        let d: Vec<[u32; 4]> = crate::gpu::read_buffer(ctx, &self.point_diffuse)?;
+        let s: Vec<[u32; 4]> = crate::gpu::read_buffer(ctx, &self.point_glossy)?;
+        let e: Vec<[u32; 2]> = crate::gpu::read_buffer(ctx, &self.point_extra)?;
+        let mut lights = Vec::with_capacity(points.len());
+        let mut spheres = Vec::with_capacity(points.len());
+        for (i, point) in points.iter().enumerate() {
+            let rgb = |v: &[u32; 4]| {
+                Vec3::new(
+                    f32::from_bits(v[0]),
+                    f32::from_bits(v[1]),
+                    f32::from_bits(v[2]),
+                )
+            };
+            let (dx, dy) = unpack_half2(d[i][3]);
+            let (sx, sy) = unpack_half2(s[i][3]);
+            let (dz, sz) = unpack_half2(e[i][0]);
+            lights.push(PointLights {
+                diffuse_position: point.position + Vec3::new(dx, dy, dz),
+                diffuse: rgb(&d[i]),
+                glossy_position: point.position + Vec3::new(sx, sy, sz),
+                glossy: rgb(&s[i]),
+            });
+            spheres.push(unpack_half2(e[i][1]));
+        }
+        Ok(PointsReadback {
+            points,
+            lights,
+            spheres,
+        })
+    }
+
+    /// The interpolated lights of every instance vertex.
+    pub fn read_vertex_lights(&self, ctx: &GpuContext) -> Result<Vec<PointLights>, GpuError> {
+        let raw: Vec<[f32; 12]> = crate::gpu::read_buffer(ctx, &self.vertex_lights)?;
+        Ok(raw
+            .iter()
+            .take(self.vertex_count as usize)
+            .map(|v| PointLights {
+                diffuse_position: Vec3::new(v[0], v[1], v[2]),
+                diffuse: Vec3::new(v[3], v[4], v[5]),
+                glossy_position: Vec3::new(v[6], v[7], v[8]),
+                glossy: Vec3::new(v[9], v[10], v[11]),
+            })
+            .collect())
+    }
+
+    /// How many points clamped their (diffuse, glossy) renormalization last frame.
+    pub fn read_clamps(&self, ctx: &GpuContext) -> Result<(u32, u32), GpuError> {
+        let c: Vec<u32> = crate::gpu::read_buffer(ctx, &self.clamp_buffer)?;
+        Ok((
+            c.first().copied().unwrap_or(0),
+            c.get(1).copied().unwrap_or(0),
+        ))
+    }
+}
