@@ -1,0 +1,591 @@
+//! The sparse VAL method on the software Vulkan device: RSM flux conservation, GPU kernels
+//! against their CPU twins (`valgi::vals::math`), exact renormalization, dark points staying
+//! exactly dark, brute force against a CPU sum, glossy lobes that follow the eye, occlusion
+//! behind a blocker, and the sparse image against brute force.
+
+mod common;
+
+use glam::{Quat, Vec3, Vec4};
+use valgi::gpu::GpuContext;
+use valgi::method::{Method, MethodOptions};
+use valgi::peers::brute::BruteMethod;
+use valgi::raster::{FrameOutput, RenderSettings};
+use valgi::scene::builtin::{self, BuiltinParams};
+use valgi::scene::mesh::MeshBuilder;
+use valgi::scene::{
+    Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs,
+};
+use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
+use valgi::vals::sparse::{PointsReadback, SparseOptions};
+use valgi::vals::{SparseMethod, SparseSettings, Stage};
+
+fn settings(size: u32) -> RenderSettings {
+    RenderSettings {
+        width: size,
+        height: size,
+        shadow_resolution: 256,
+        ..RenderSettings::default()
+    }
+}
+
+fn sparse_settings(rsm: u32, points: usize, occlusion: OcclusionMode, glossy: bool) -> SparseSettings {
+    SparseSettings {
+        rsm,
+        sparse_points: points,
+        seed: 3,
+        options: SparseOptions {
+            tile: 64,
+            glossy,
+            occlusion,
+            weights: Weights::Geometric,
+        },
+    }
+}
+
+fn camera(scene: &Scene, size: u32) -> CameraView {
+    let _ = size;
+    scene
+        .camera_view(None, 1.0, &scene.world_from_node())
+        .expect("camera")
+}
+
+/// Renders with the sparse method up to `last` and reads the per-point buffers.
+fn run_sparse(
+    ctx: &GpuContext,
+    scene: &Scene,
+    size: u32,
+    s: SparseSettings,
+    last: Stage,
+) -> (SparseMethod, FrameOutput, PointsReadback) {
+    let mut method = SparseMethod::new(ctx, scene, settings(size), s).expect("sparse method");
+    method.last_stage = last;
+    let world = scene.world_from_node();
+    let frame = method
+        .render(ctx, scene, &world, &camera(scene, size))
+        .expect("render");
+    let points = method.sparse.read_points(ctx, scene, &world).expect("readback");
+    (method, frame, points)
+}
+
+fn close(a: Vec3, b: Vec3, rel: f32, abs: f32) -> bool {
+    (a - b).abs().max_element() <= rel * a.abs().max_element().max(b.abs().max_element()) + abs
+}
+
+fn cornell_coarse() -> Scene {
+    builtin::load("cornell", &BuiltinParams { max_edge: 0.1 }).expect("cornell")
+}
+
+#[test]
+fn rsm_of_a_point_light_in_a_closed_box_reflects_rho_times_its_power() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let (method, frame, _) = run_sparse(&ctx, &scene, 32, sparse_settings(64, 64, OcclusionMode::Off, false), Stage::Gather);
+    let vals = method.rsm.read_vals(&ctx).unwrap();
+    assert_eq!(vals.len(), 6 * 64 * 64, "every cube-map texel sees a wall");
+    let total: Vec3 = vals.iter().map(|v| v.flux).sum();
+    // Every direction of a 1 W/sr light hits a wall of albedo 0.5: Φ = 0.5·4π·1 W. The RSM's
+    // texel solid angles are a midpoint rule over the cube, good to ~1e-4 at 64².
+    let expected = 0.5 * 4.0 * std::f32::consts::PI;
+    assert!(
+        (total.x - expected).abs() < 1e-3 * expected,
+        "reflected flux {total} vs {expected}"
+    );
+    // A_j = Ω_j·d_j² is the footprint had the wall faced the light, so ΣA = ∫d² dΩ =
+    // ∫cos θ dA = 6·∫∫_[-1,1]² (1+x²+y²)^(-1/2) dx dy over the six unit-distance faces.
+    let n = 2000;
+    let face: f64 = (0..n * n)
+        .map(|i| {
+            let x = -1.0 + (2.0 * (i % n) as f64 + 1.0) / n as f64;
+            let y = -1.0 + (2.0 * (i / n) as f64 + 1.0) / n as f64;
+            (1.0 + x * x + y * y).powf(-0.5) * (2.0 / n as f64).powi(2)
+        })
+        .sum();
+    let area: f32 = vals.iter().map(|v| v.area).sum();
+    let expected_area = 6.0 * face as f32;
+    assert!(
+        (area - expected_area).abs() < 1e-3 * expected_area,
+        "VAL area {area} vs {expected_area} m²"
+    );
+    assert_eq!(frame.direct.non_finite_count(), 0);
+}
+
+#[test]
+fn gpu_kernels_agree_with_their_cpu_twins() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let eye = camera(&scene, 32).position();
+    for weights in [Weights::Geometric, Weights::Flux] {
+        let mut s = sparse_settings(32, 400, OcclusionMode::Sum, true);
+        s.options.weights = weights;
+        // Gather.
+        let (method, _, gathered) = run_sparse(&ctx, &scene, 32, s, Stage::Gather);
+        let vals = method.rsm.read_vals(&ctx).unwrap();
+        assert!(vals.len() > 500, "{} VALs", vals.len());
+        let receivers: Vec<Receiver> = gathered
+            .points
+            .iter()
+            .map(|p| Receiver {
+                position: p.position,
+                normal: p.normal,
+                k: p.k,
+            })
+            .collect();
+        let mut lit = 0;
+        for (i, r) in receivers.iter().enumerate() {
+            let cpu = math::gather(r, eye, &vals, weights, true);
+            let gpu = &gathered.lights[i];
+            assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "point {i}: E_d {} vs {}", gpu.diffuse, cpu.diffuse);
+            assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "point {i}: E_s {} vs {}", gpu.glossy, cpu.glossy);
+            // Positions are stored as f16 offsets from the point: 2⁻¹¹ relative.
+            let reach = (cpu.diffuse_position - r.position).length();
+            assert!((gpu.diffuse_position - cpu.diffuse_position).length() <= 1e-3 * reach + 1e-5, "point {i}: l_d");
+            let reach_s = (cpu.glossy_position - r.position).length();
+            assert!((gpu.glossy_position - cpu.glossy_position).length() <= 1e-3 * reach_s + 1e-5, "point {i}: l_s");
+            let (sd, _) = gathered.spheres[i];
+            assert!((sd - cpu.diffuse_sphere).abs() <= 2e-3 * cpu.diffuse_sphere + 1e-5, "point {i}: sphere {sd} vs {}", cpu.diffuse_sphere);
+            if cpu.diffuse.max_element() > 0.0 {
+                lit += 1;
+            }
+        }
+        assert!(lit > receivers.len() / 2, "only {lit} points lit");
+
+        // Renormalize, fed the GPU's gathered sums.
+        let (_, _, renormalized) = run_sparse(&ctx, &scene, 32, s, Stage::Renormalize);
+        for (i, r) in receivers.iter().enumerate() {
+            let g = &gathered.lights[i];
+            let input = math::Gathered {
+                diffuse: g.diffuse,
+                glossy: g.glossy,
+                diffuse_position: g.diffuse_position,
+                glossy_position: g.glossy_position,
+                ..Default::default()
+            };
+            let (cpu, _) = math::renormalize(r, eye, &input);
+            let gpu = &renormalized.lights[i];
+            assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "point {i}: I_d {} vs {}", gpu.diffuse, cpu.diffuse);
+            assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "point {i}: I_s {} vs {}", gpu.glossy, cpu.glossy);
+        }
+
+        // Occlusion, both combinations, fed the GPU's renormalized lights.
+        let discs: Vec<math::OccluderDisc> = renormalized
+            .points
+            .iter()
+            .map(|p| math::OccluderDisc {
+                center: p.position,
+                normal: p.normal,
+                radius: p.disc_radius,
+            })
+            .collect();
+        for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
+            let mut so = s;
+            so.options.occlusion = mode;
+            let (_, _, occluded) = run_sparse(&ctx, &scene, 32, so, Stage::Occlusion);
+            let mut darkened = 0;
+            for (i, r) in receivers.iter().enumerate() {
+                let before = &renormalized.lights[i];
+                let (sd, _) = renormalized.spheres[i];
+                let o = math::occlusion(i, r, before.diffuse_position, sd, &discs, mode);
+                let cpu = before.diffuse * (1.0 - o);
+                let gpu = occluded.lights[i].diffuse;
+                assert!(close(gpu, cpu, 1e-3, 1e-7 * before.diffuse.max_element()), "{mode:?} point {i}: {gpu} vs {cpu} (o = {o})");
+                if o > 0.01 {
+                    darkened += 1;
+                }
+            }
+            assert!(darkened > 10, "{mode:?}: occlusion touched only {darkened} points");
+        }
+
+        // Interpolation, fed the GPU's final point lights and the quantized link weights.
+        let (method, _, final_points) = run_sparse(&ctx, &scene, 32, s, Stage::Interpolate);
+        let vertex_lights = method.sparse.read_vertex_lights(&ctx).unwrap();
+        let mut v = 0usize;
+        let mut point_offset = 0usize;
+        for instance in &scene.instances {
+            let mesh_points = &method.points[instance.mesh];
+            for row in &mesh_points.links {
+                let links: Vec<(usize, f32)> = row
+                    .iter()
+                    .map(|l| {
+                        let w = (l.weight.clamp(0.0, 1.0) * 65535.0).round() / 65535.0;
+                        (point_offset + l.point as usize, w)
+                    })
+                    .filter(|(_, w)| *w > 0.0)
+                    .collect();
+                let cpu = math::interpolate(&links, &final_points.lights);
+                let gpu = &vertex_lights[v];
+                assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "vertex {v}: {} vs {}", gpu.diffuse, cpu.diffuse);
+                assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "vertex {v}");
+                assert!((gpu.diffuse_position - cpu.diffuse_position).length() < 1e-4, "vertex {v}");
+                v += 1;
+            }
+            point_offset += mesh_points.positions.len();
+        }
+        assert_eq!(v, vertex_lights.len());
+    }
+}
+
+#[test]
+fn renormalized_lights_reproduce_the_gathered_sums_at_each_point() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let eye = camera(&scene, 32).position();
+    let s = sparse_settings(32, 300, OcclusionMode::Off, true);
+    let (_, _, gathered) = run_sparse(&ctx, &scene, 32, s, Stage::Gather);
+    let (method, _, renormalized) = run_sparse(&ctx, &scene, 32, s, Stage::Renormalize);
+    let (clamp_d, clamp_s) = method.sparse.read_clamps(&ctx).unwrap();
+    let mut checked = 0;
+    for (i, p) in renormalized.points.iter().enumerate() {
+        let (e, l) = (&gathered.lights[i], &renormalized.lights[i]);
+        let r = math::mirror((eye - p.position).normalize(), p.normal);
+        let d = math::diffuse_point(p.position, p.normal, l.diffuse_position, l.diffuse);
+        let g = math::glossy_point(p.position, p.normal, r, p.k, l.glossy_position, l.glossy);
+        // Skip the channels whose clamp fired (counted, and rare).
+        let unclamped_d = math::diffuse_point_factor(p.position, p.normal, l.diffuse_position)
+            >= math::COS_MIN / (l.diffuse_position - p.position).length_squared();
+        if unclamped_d && e.diffuse.max_element() > 0.0 {
+            assert!(close(d, e.diffuse, 1e-4, 0.0), "point {i}: {d} vs {}", e.diffuse);
+            checked += 1;
+        }
+        let unclamped_s = math::glossy_point_factor(p.position, p.normal, r, p.k, l.glossy_position)
+            >= math::COS_MIN / (l.glossy_position - p.position).length_squared();
+        if unclamped_s && e.glossy.max_element() > 0.0 {
+            assert!(close(g, e.glossy, 1e-4, 0.0), "point {i}: glossy {g} vs {}", e.glossy);
+        }
+    }
+    assert!(checked > renormalized.points.len() / 2, "{checked} points checked");
+    assert!((clamp_d as usize) < renormalized.points.len() / 10, "diffuse clamp fired {clamp_d}×");
+    eprintln!("renormalize clamps: diffuse {clamp_d}, glossy {clamp_s} of {} points", renormalized.points.len());
+}
+
+#[test]
+fn points_that_receive_no_light_are_exactly_dark_and_nothing_is_nan() {
+    let Some(ctx) = common::gpu() else { return };
+    // On a lone plane every VAL is coplanar with every receiver: n·ω̂ = 0 exactly.
+    let scene = builtin::load("plane-spot", &BuiltinParams { max_edge: 0.25 }).unwrap();
+    let (method, frame, points) = run_sparse(&ctx, &scene, 32, sparse_settings(32, 200, OcclusionMode::Sum, true), Stage::Apply);
+    assert!(method.rsm.read_count(&ctx).unwrap() > 100);
+    for l in &points.lights {
+        assert_eq!(l.diffuse, Vec3::ZERO);
+        assert_eq!(l.glossy, Vec3::ZERO);
+        assert!(l.diffuse_position.is_finite() && l.glossy_position.is_finite());
+    }
+    for v in method.sparse.read_vertex_lights(&ctx).unwrap() {
+        assert!(v.diffuse_position.is_finite() && v.glossy_position.is_finite());
+        assert_eq!(v.diffuse, Vec3::ZERO);
+    }
+    assert!(frame.indirect.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0));
+    assert_eq!(frame.direct.non_finite_count(), 0);
+
+    // Without any light there are no VALs at all.
+    let mut dark = scene.clone();
+    dark.lights.clear();
+    let (method, frame, points) = run_sparse(&ctx, &dark, 32, sparse_settings(32, 200, OcclusionMode::Union, true), Stage::Apply);
+    assert_eq!(method.rsm.read_count(&ctx).unwrap(), 0);
+    assert!(points.lights.iter().all(|l| l.diffuse == Vec3::ZERO && l.diffuse_position.is_finite()));
+    assert_eq!(frame.indirect.non_finite_count(), 0);
+    assert!(frame.indirect.pixels.iter().all(|p| p[..3] == [0.0; 3]));
+}
+
+/// Where the ray through pixel (x, y)'s centre meets the plane y = 0.
+fn pixel_on_floor(camera: &CameraView, size: u32, x: u32, y: u32) -> Vec3 {
+    let world_from_clip = camera.clip_from_world().inverse();
+    let ndc = |v: u32| (v as f32 + 0.5) / size as f32 * 2.0 - 1.0;
+    let unproject = |z: f32| {
+        let p = world_from_clip * Vec4::new(ndc(x), -ndc(y), z, 1.0);
+        p.truncate() / p.w
+    };
+    let (a, b) = (unproject(0.0), unproject(1.0));
+    a + (b - a) * (a.y / (a.y - b.y))
+}
+
+#[test]
+fn brute_force_matches_the_cpu_sum_over_every_val() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let size = 64;
+    let mut options = MethodOptions::default();
+    options.set("rsm", 32);
+    let mut brute = BruteMethod::new(&ctx, &scene, settings(size), &options).unwrap();
+    let world = scene.world_from_node();
+    let cam = camera(&scene, size);
+    let frame = brute.render(&ctx, &scene, &world, &cam).unwrap();
+    let vals = brute.rsm.read_vals(&ctx).unwrap();
+    let floor = scene.materials[scene.meshes.iter().find(|m| m.name == "floor").unwrap().material].clone();
+    let rho_d = floor.base_color.truncate();
+    // Pixels at the front of the floor, in front of both blocks (the short one starts at
+    // z = 65 mm), spread across the image.
+    let pixels: Vec<(u32, u32, Vec3)> = (0..size)
+        .step_by(5)
+        .flat_map(|x| (50..size).map(move |y| (x, y)))
+        .map(|(x, y)| (x, y, pixel_on_floor(&cam, size, x, y)))
+        .filter(|(_, _, p)| p.x > 0.01 && p.x < 0.54 && p.z > 0.005 && p.z < 0.06)
+        .collect();
+    assert!(pixels.len() >= 8, "{} floor pixels", pixels.len());
+    for (x, y, p) in pixels {
+        let wo = (cam.position() - p).normalize();
+        let cpu = math::brute_force(p, Vec3::Y, wo, rho_d, Vec3::ZERO, 1.0, &vals, true);
+        let gpu = frame.indirect.get(x, y);
+        let gpu = Vec3::new(gpu[0], gpu[1], gpu[2]);
+        assert!(cpu.max_element() > 0.0);
+        // The G-buffer position comes from a 32-bit depth: 1e-3 covers it.
+        assert!(close(gpu, cpu, 2e-3, 0.0), "pixel ({x},{y}): {gpu} vs {cpu}");
+    }
+}
+
+// ---- small hand-built scenes -------------------------------------------------------------
+
+struct Builder(Scene);
+
+impl Builder {
+    fn new(name: &str) -> Self {
+        Self(Scene {
+            name: name.into(),
+            ..Scene::default()
+        })
+    }
+    fn node(&mut self, name: &str, local: Trs) -> usize {
+        self.0.nodes.push(Node {
+            name: name.into(),
+            parent: None,
+            local,
+        });
+        self.0.nodes.len() - 1
+    }
+    fn quad(&mut self, name: &str, corners: [Vec3; 4], facing: Vec3, material: Material) {
+        self.0.materials.push(material);
+        let mut mesh = MeshBuilder::new(name, self.0.materials.len() - 1);
+        let [p0, p1, p2, p3] = corners;
+        mesh.add_quad(p0, p1, p2, p3, facing, 0.1);
+        self.0.meshes.push(mesh.build());
+        let node = self.node(name, Trs::default());
+        self.0.instances.push(Instance {
+            mesh: self.0.meshes.len() - 1,
+            node,
+        });
+    }
+    fn spot(&mut self, position: Vec3, direction: Vec3, outer: f32) {
+        let node = self.node(
+            "spot",
+            Trs {
+                translation: position,
+                rotation: Quat::from_rotation_arc(Vec3::NEG_Z, direction.normalize()),
+                ..Trs::default()
+            },
+        );
+        self.0.lights.push(Light {
+            name: "spot".into(),
+            node,
+            kind: LightKind::Spot {
+                inner_cone_angle: 0.0,
+                outer_cone_angle: outer,
+            },
+            color: Vec3::ONE,
+            intensity: 2.0,
+            range: None,
+        });
+    }
+    fn camera(&mut self, eye: Vec3, target: Vec3) {
+        let node = self.node(
+            "camera",
+            Trs {
+                translation: eye,
+                rotation: Quat::from_rotation_arc(Vec3::NEG_Z, (target - eye).normalize()),
+                ..Trs::default()
+            },
+        );
+        self.0.cameras.push(Camera {
+            name: "camera".into(),
+            node,
+            yfov: 1.0,
+            aspect: None,
+            znear: 0.01,
+            zfar: None,
+        });
+    }
+}
+
+/// A horizontal square of half-size `half` at height y.
+fn square(y: f32, half: f32) -> [Vec3; 4] {
+    [
+        Vec3::new(-half, y, -half),
+        Vec3::new(half, y, -half),
+        Vec3::new(half, y, half),
+        Vec3::new(-half, y, half),
+    ]
+}
+
+/// A glossy floor in front of a wall lit by a spot; the camera at `eye_x`.
+fn glossy_scene(eye_x: f32, specular_factor: f32) -> Scene {
+    let mut b = Builder::new("glossy-floor");
+    b.quad(
+        "floor",
+        square(0.0, 1.0),
+        Vec3::Y,
+        Material {
+            base_color: Vec4::new(0.8, 0.8, 0.8, 1.0),
+            metallic: 0.5,
+            roughness: 0.35,
+            specular_factor,
+            ..Material::lambert("floor", Vec3::splat(0.8))
+        },
+    );
+    b.quad(
+        "wall",
+        [
+            Vec3::new(-1.0, 0.0, -1.0),
+            Vec3::new(1.0, 0.0, -1.0),
+            Vec3::new(1.0, 1.0, -1.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+        ],
+        Vec3::Z,
+        Material::lambert("wall", Vec3::splat(0.8)),
+    );
+    b.spot(Vec3::new(0.0, 0.5, 0.2), Vec3::NEG_Z, 0.3);
+    b.camera(Vec3::new(eye_x, 0.6, 1.2), Vec3::new(0.0, 0.0, -0.3));
+    b.0
+}
+
+fn render_indirect(ctx: &GpuContext, scene: &Scene, size: u32, s: SparseSettings) -> (FrameOutput, CameraView) {
+    let (_, frame, _) = run_sparse(ctx, scene, size, s, Stage::Apply);
+    (frame, camera(scene, size))
+}
+
+#[test]
+fn glossy_highlight_follows_the_eye_and_vanishes_when_glossy_is_off() {
+    let Some(ctx) = common::gpu() else { return };
+    let size = 48;
+    let mut centroids = Vec::new();
+    for eye_x in [-0.5f32, 0.5] {
+        let scene = glossy_scene(eye_x, 1.0);
+        let on = render_indirect(&ctx, &scene, size, sparse_settings(32, 600, OcclusionMode::Off, true));
+        let (off, cam) = render_indirect(&ctx, &scene, size, sparse_settings(32, 600, OcclusionMode::Off, false));
+        // Glossy off is exactly the floor without its specular lobe.
+        let matte = glossy_scene(eye_x, 0.0);
+        let (matte_frame, _) = render_indirect(&ctx, &matte, size, sparse_settings(32, 600, OcclusionMode::Off, true));
+        let mut weight = 0.0f32;
+        let mut weighted_x = 0.0f32;
+        let mut diffuse = 0.0f32;
+        for y in 0..size {
+            for x in 0..size {
+                let a = on.0.indirect.get(x, y)[1];
+                let b = off.indirect.get(x, y)[1];
+                let m = matte_frame.indirect.get(x, y)[1];
+                assert!((b - m).abs() <= 1e-4 * m.abs() + 1e-9, "pixel ({x},{y}): glossy off {b} vs matte {m}");
+                let p = pixel_on_floor(&cam, size, x, y);
+                if p.z > -0.95 && p.z < 1.0 && p.x.abs() < 1.0 && (a - b) > 0.0 {
+                    weight += a - b;
+                    weighted_x += (a - b) * p.x;
+                }
+                diffuse += b;
+            }
+        }
+        assert!(weight > 0.05 * diffuse, "eye {eye_x}: glossy {weight} vs diffuse {diffuse}");
+        centroids.push(weighted_x / weight);
+    }
+    // The mirror image of the lit wall patch (x = 0) seen from x = ∓0.5 lies at ∓0.23 on the
+    // floor; the highlight's centroid must move to the eye's side.
+    assert!(centroids[0] < -0.05 && centroids[1] > 0.05, "highlight centroids {centroids:?}");
+}
+
+/// Light from a lit ceiling patch reaches the floor through where a blocker hangs.
+fn blocker_scene() -> Scene {
+    let mut b = Builder::new("blocker");
+    b.quad("floor", square(0.0, 1.0), Vec3::Y, Material::lambert("floor", Vec3::splat(0.8)));
+    b.quad("ceiling", square(1.0, 1.0), Vec3::NEG_Y, Material::lambert("ceiling", Vec3::splat(0.8)));
+    b.quad("blocker", square(0.5, 0.3), Vec3::NEG_Y, Material::lambert("blocker", Vec3::splat(0.8)));
+    b.spot(Vec3::new(0.0, 0.9, 0.0), Vec3::Y, 1.2);
+    b.camera(Vec3::new(0.0, 0.3, 2.0), Vec3::ZERO);
+    b.0
+}
+
+#[test]
+fn occlusion_darkens_receivers_behind_a_blocker_and_union_never_exceeds_sum() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = blocker_scene();
+    let floor_mesh = scene.meshes.iter().position(|m| m.name == "floor").unwrap();
+    let mut results = Vec::new();
+    for mode in [OcclusionMode::Off, OcclusionMode::Sum, OcclusionMode::Union] {
+        let (method, _, points) = run_sparse(&ctx, &scene, 32, sparse_settings(32, 800, mode, false), Stage::Occlusion);
+        // The floor's points come first among the instances (the floor is instance 0).
+        let floor_count = method.points[floor_mesh].positions.len();
+        let under: Vec<f32> = points.points[..floor_count]
+            .iter()
+            .zip(&points.lights)
+            .filter(|(p, _)| p.position.x.abs() < 0.15 && p.position.z.abs() < 0.15)
+            .map(|(_, l)| l.diffuse.x)
+            .collect();
+        let open: Vec<f32> = points.points[..floor_count]
+            .iter()
+            .zip(&points.lights)
+            .filter(|(p, _)| p.position.x.abs() > 0.7 || p.position.z.abs() > 0.7)
+            .map(|(_, l)| l.diffuse.x)
+            .collect();
+        assert!(!under.is_empty() && !open.is_empty());
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        results.push((mode, mean(&under), mean(&open), points.lights.clone()));
+    }
+    let (_, off_under, _, _) = results[0];
+    let (_, sum_under, _, ref sum_lights) = results[1];
+    let (_, union_under, _, ref union_lights) = results[2];
+    assert!(sum_under < 0.7 * off_under, "sum {sum_under} vs off {off_under}");
+    assert!(union_under < 0.9 * off_under, "union {union_under} vs off {off_under}");
+    assert!(union_under >= sum_under, "union {union_under} < sum {sum_under}");
+    for (s, u) in sum_lights.iter().zip(union_lights) {
+        assert!(u.diffuse.x >= s.diffuse.x * (1.0 - 1e-5) - 1e-12, "union occluded more than sum at a point");
+    }
+    eprintln!("under the blocker: off {off_under:.4e}, sum {sum_under:.4e}, union {union_under:.4e}");
+}
+
+/// Mean FLIP between two images tone-mapped at `exposure` stops.
+fn mean_flip(a: &valgi::image_io::Image, b: &valgi::image_io::Image, exposure: f32) -> f32 {
+    let (ta, tb) = (a.tone_map(exposure), b.tone_map(exposure));
+    let (w, h) = ta.dimensions();
+    let map = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, ta.as_raw()),
+        nv_flip::FlipImageRgb8::with_data(w, h, tb.as_raw()),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    nv_flip::FlipPool::from_image(&map).mean()
+}
+
+#[test]
+fn sparse_indirect_on_cornell_is_close_to_brute_force() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell", &BuiltinParams::default()).unwrap();
+    let size = 256;
+    let world = scene.world_from_node();
+    let cam = camera(&scene, size);
+    let mut brute_options = MethodOptions::default();
+    brute_options.set("rsm", 64);
+    let mut brute = BruteMethod::new(&ctx, &scene, settings(size), &brute_options).unwrap();
+    let reference = brute.render(&ctx, &scene, &world, &cam).unwrap().indirect;
+    // Exposure that puts the brute-force image's mean at 18% grey, so FLIP sees the indirect
+    // light at the brightness a viewer of the indirect-only image would.
+    let mean = (reference.mean_rgb().iter().sum::<f64>() / 3.0) as f32;
+    let exposure = (0.18 / mean).log2();
+    let mut flips = Vec::new();
+    for (points, occlusion) in [(4096, OcclusionMode::Off), (1024, OcclusionMode::Off), (4096, OcclusionMode::Sum)] {
+        let s = SparseSettings {
+            rsm: 64,
+            sparse_points: points,
+            ..SparseSettings::default()
+        };
+        let s = SparseSettings {
+            options: SparseOptions { occlusion, ..s.options },
+            ..s
+        };
+        let (_, frame, _) = run_sparse(&ctx, &scene, size, s, Stage::Apply);
+        flips.push(mean_flip(&reference, &frame.indirect, exposure));
+    }
+    eprintln!("mean FLIP against brute force (exposure {exposure:.2}): 4096 points {:.4}, 1024 points {:.4}, 4096 points + occlusion {:.4}", flips[0], flips[1], flips[2]);
+    assert_eq!(mean_flip(&reference, &reference, exposure), 0.0);
+    // Measured on lavapipe: 0.040 (4096 points), 0.069 (1024), 0.174 (4096 with the paper's
+    // occlusion, which brute force does not model). Without occlusion the only difference is
+    // interpolation from the points, so the error must fall as points are added, and 4096
+    // points must stay under 0.05: a quarter above the measured value leaves room for the
+    // order in which atomics compact the VALs, not for a change in the method.
+    assert!(flips[0] < flips[1], "more points must be closer to brute force: {flips:?}");
+    assert!(flips[0] < 0.05, "sparse (4096 points) vs brute force: mean FLIP {}", flips[0]);
+    // Occlusion only ever darkens: it must move the image away from the unoccluded baseline.
+    assert!(flips[2] > flips[0]);
+}
