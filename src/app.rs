@@ -40,8 +40,12 @@ pub struct RenderRequest {
     pub indirect_only: bool,
     /// Built-in scenes' tessellation (maximum edge length, metres).
     pub max_edge: f32,
-    /// Animation time, seconds.
+    /// Animation time, seconds (of the first frame with `frames`).
     pub time: f32,
+    /// Render this many frames as `frame_NNNN.exr` into the single output folder.
+    pub frames: Option<u32>,
+    /// Frames per second for `frames`.
+    pub fps: f32,
 }
 
 impl Default for RenderRequest {
@@ -57,6 +61,8 @@ impl Default for RenderRequest {
             indirect_only: false,
             max_edge: BuiltinParams::default().max_edge,
             time: 0.0,
+            frames: None,
+            fps: 30.0,
         }
     }
 }
@@ -64,6 +70,9 @@ impl Default for RenderRequest {
 /// Renders and writes the request's outputs; returns the JSON report line.
 pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let started = Instant::now();
+    if let Some(frames) = request.frames {
+        return render_frames(request, frames, started);
+    }
     // Fail on an unwritable output before spending time on the scene and the GPU.
     for path in &request.outputs {
         prepare_output(path)?;
@@ -116,6 +125,92 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "non_finite_pixels": non_finite,
         "warnings": scene.warnings.len(),
         "outputs": request.outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+    });
+    if let Some(obj) = report.as_object_mut() {
+        obj.extend(method.report());
+        obj.insert(
+            "wall_ms".into(),
+            serde_json::json!(crate::gpu::timing::round3(
+                started.elapsed().as_secs_f64() * 1000.0
+            )),
+        );
+    }
+    Ok(report)
+}
+
+/// `frame_NNNN.exr` for frame `index` in `dir`.
+pub fn frame_path(dir: &std::path::Path, index: u32) -> PathBuf {
+    dir.join(format!("frame_{index:04}.exr"))
+}
+
+/// Renders `frames` frames of the animation with one method instance (so preprocessing happens
+/// once) and writes numbered EXRs into the request's single output folder.
+fn render_frames(
+    request: &RenderRequest,
+    frames: u32,
+    started: Instant,
+) -> Result<serde_json::Value, AppError> {
+    let dir = request
+        .outputs
+        .first()
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("out/frames"));
+    if frames == 0 || !(request.fps.is_finite() && request.fps > 0.0) {
+        return Err(
+            RenderError::Settings("--frames must be at least 1 and --fps positive".into()).into(),
+        );
+    }
+    prepare_output(&frame_path(&dir, 0))?;
+    let scene = scene::load(
+        &request.scene,
+        &BuiltinParams {
+            max_edge: request.max_edge,
+        },
+    )?;
+    for warning in &scene.warnings {
+        log::warn!("{warning}");
+    }
+    if scene.animations.is_empty() {
+        log::warn!(
+            "scene '{}' has no animation: every frame is the same",
+            scene.name
+        );
+    }
+    let ctx = GpuContext::new()?;
+    let settings = request.settings;
+    let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
+    let mut frame_ms = Vec::with_capacity(frames as usize);
+    let mut non_finite = 0;
+    let mut last_timings = None;
+    for index in 0..frames {
+        let time = request.time + index as f32 / request.fps;
+        let world_from_node = scene.world_from_node_at(time);
+        let camera = scene.camera_view(
+            request.camera.as_deref(),
+            settings.width as f32 / settings.height as f32,
+            &world_from_node,
+        )?;
+        let frame = method.render(&ctx, &scene, &world_from_node, &camera)?;
+        let mut image = frame.radiance(request.indirect_only);
+        non_finite += image.sanitize();
+        image.write(&frame_path(&dir, index), request.exposure)?;
+        frame_ms.push(crate::gpu::timing::round3(frame.timings.total_ms()));
+        last_timings = Some(frame.timings);
+    }
+    let mut report = serde_json::json!({
+        "scene": scene.name,
+        "method": method.name(),
+        "options": request.options.to_string(),
+        "width": settings.width,
+        "height": settings.height,
+        "frames": frames,
+        "fps": request.fps,
+        "frame_total_ms": frame_ms,
+        "last_frame_passes": last_timings.map(|t| t.to_json()),
+        "adapter": ctx.adapter_label(),
+        "indirect_only": request.indirect_only,
+        "non_finite_pixels": non_finite,
+        "out_dir": dir.display().to_string(),
     });
     if let Some(obj) = report.as_object_mut() {
         obj.extend(method.report());

@@ -23,6 +23,9 @@ struct Cli {
 enum Command {
     /// Render a scene to linear EXR and/or tone-mapped PNG; prints one JSON line of timings.
     Render(RenderArgs),
+    /// Benchmark the sparse method (the paper's Table 1 grid), brute force and the device's
+    /// FMA peak; prints a table and writes DIR/bench.csv.
+    Bench(BenchArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -68,9 +71,58 @@ struct RenderArgs {
     /// Animation time in seconds (glTF animations).
     #[arg(long, default_value_t = 0.0)]
     time: f32,
+    /// RSM resolution per light layer (sparse, brute): R×R texels, six layers for a point light.
+    #[arg(long)]
+    rsm: Option<u32>,
+    /// Sparse receiver points for the whole scene (sparse).
+    #[arg(long)]
+    sparse_points: Option<usize>,
+    /// VALs per workgroup-memory tile in the gather (sparse, brute), 1..=256.
+    #[arg(long)]
+    tile: Option<u32>,
+    /// Glossy indirect light (sparse, brute).
+    #[arg(long, value_parser = ["on", "off"])]
+    glossy: Option<String>,
+    /// Indirect occlusion from the sparse points' discs (sparse).
+    #[arg(long, value_parser = ["off", "sum", "union"])]
+    occlusion: Option<String>,
+    /// Weights of the averaged light positions (sparse).
+    #[arg(long, value_parser = ["geometric", "flux"])]
+    weights: Option<String>,
+    /// Render F frames of the scene's animation (from --time, at --fps) as numbered EXRs into
+    /// the folder given by --out.
+    #[arg(long)]
+    frames: Option<u32>,
+    /// Frames per second of --frames.
+    #[arg(long, default_value_t = 30.0)]
+    fps: f32,
     /// A method option as key=value (repeatable); the method-specific flags are shorthands.
     #[arg(long = "opt", value_name = "KEY=VALUE")]
     options: Vec<String>,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    #[arg(long, default_value = "cornell")]
+    scene: String,
+    #[arg(long, default_value_t = 1920)]
+    width: u32,
+    #[arg(long, default_value_t = 1080)]
+    height: u32,
+    /// Target VAL counts (the RSM resolution is fitted to each).
+    #[arg(long, value_delimiter = ',', default_value = "16384,65536,524288")]
+    vals: Vec<u32>,
+    /// Sparse point counts.
+    #[arg(long, value_delimiter = ',', default_value = "4096,16384")]
+    points: Vec<usize>,
+    /// Square size at which the sparse stages are timed again (resolution independence).
+    #[arg(long, default_value_t = 512)]
+    small: u32,
+    /// Skip the brute-force run (slow on software drivers).
+    #[arg(long)]
+    no_brute: bool,
+    #[arg(long, default_value = "out/bench")]
+    out: PathBuf,
 }
 
 fn main() -> ExitCode {
@@ -78,6 +130,10 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Render(args) => {
+            if args.frames.is_some() && args.out.len() != 1 {
+                eprintln!("error: --frames needs exactly one --out DIR for the numbered EXRs");
+                return ExitCode::FAILURE;
+            }
             let outputs = if args.out.is_empty() {
                 let stem = scene_stem(&args.scene);
                 vec![
@@ -88,6 +144,19 @@ fn main() -> ExitCode {
                 args.out
             };
             let mut options = valgi::method::MethodOptions::default();
+            let shorthands = [
+                ("rsm", args.rsm.map(|v| v.to_string())),
+                ("sparse-points", args.sparse_points.map(|v| v.to_string())),
+                ("tile", args.tile.map(|v| v.to_string())),
+                ("glossy", args.glossy.clone()),
+                ("occlusion", args.occlusion.clone()),
+                ("weights", args.weights.clone()),
+            ];
+            for (key, value) in shorthands {
+                if let Some(value) = value {
+                    options.set(key, value);
+                }
+            }
             for pair in &args.options {
                 let Some((key, value)) = pair.split_once('=') else {
                     eprintln!("error: --opt {pair}: expected KEY=VALUE");
@@ -112,10 +181,34 @@ fn main() -> ExitCode {
                 indirect_only: args.indirect_only,
                 max_edge: args.max_edge,
                 time: args.time,
+                frames: args.frames,
+                fps: args.fps,
             };
             match app::render(&request) {
                 Ok(report) => {
                     println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Bench(args) => {
+            let request = valgi::bench::BenchRequest {
+                scene: args.scene,
+                width: args.width,
+                height: args.height,
+                vals: args.vals,
+                points: args.points,
+                small: args.small,
+                brute: !args.no_brute,
+                out: args.out,
+            };
+            match valgi::bench::run(&request) {
+                Ok(path) => {
+                    println!("wrote {}", path.display());
                     ExitCode::SUCCESS
                 }
                 Err(e) => {

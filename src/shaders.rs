@@ -48,6 +48,7 @@ pub const FILES: &[(&str, &str)] = &[
         "brute_vals.wgsl",
         include_str!("../shaders/brute_vals.wgsl"),
     ),
+    ("bench_fma.wgsl", include_str!("../shaders/bench_fma.wgsl")),
 ];
 
 /// Files that are only included by others (no entry points of their own).

@@ -12,9 +12,7 @@ use valgi::peers::brute::BruteMethod;
 use valgi::raster::{FrameOutput, RenderSettings};
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::mesh::MeshBuilder;
-use valgi::scene::{
-    Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs,
-};
+use valgi::scene::{Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs};
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
 use valgi::vals::sparse::{PointsReadback, SparseOptions};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
@@ -28,7 +26,12 @@ fn settings(size: u32) -> RenderSettings {
     }
 }
 
-fn sparse_settings(rsm: u32, points: usize, occlusion: OcclusionMode, glossy: bool) -> SparseSettings {
+fn sparse_settings(
+    rsm: u32,
+    points: usize,
+    occlusion: OcclusionMode,
+    glossy: bool,
+) -> SparseSettings {
     SparseSettings {
         rsm,
         sparse_points: points,
@@ -63,7 +66,10 @@ fn run_sparse(
     let frame = method
         .render(ctx, scene, &world, &camera(scene, size))
         .expect("render");
-    let points = method.sparse.read_points(ctx, scene, &world).expect("readback");
+    let points = method
+        .sparse
+        .read_points(ctx, scene, &world)
+        .expect("readback");
     (method, frame, points)
 }
 
@@ -79,7 +85,13 @@ fn cornell_coarse() -> Scene {
 fn rsm_of_a_point_light_in_a_closed_box_reflects_rho_times_its_power() {
     let Some(ctx) = common::gpu() else { return };
     let scene = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
-    let (method, frame, _) = run_sparse(&ctx, &scene, 32, sparse_settings(64, 64, OcclusionMode::Off, false), Stage::Gather);
+    let (method, frame, _) = run_sparse(
+        &ctx,
+        &scene,
+        32,
+        sparse_settings(64, 64, OcclusionMode::Off, false),
+        Stage::Gather,
+    );
     let vals = method.rsm.read_vals(&ctx).unwrap();
     assert_eq!(vals.len(), 6 * 64 * 64, "every cube-map texel sees a wall");
     let total: Vec3 = vals.iter().map(|v| v.flux).sum();
@@ -134,15 +146,35 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
         for (i, r) in receivers.iter().enumerate() {
             let cpu = math::gather(r, eye, &vals, weights, true);
             let gpu = &gathered.lights[i];
-            assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "point {i}: E_d {} vs {}", gpu.diffuse, cpu.diffuse);
-            assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "point {i}: E_s {} vs {}", gpu.glossy, cpu.glossy);
+            assert!(
+                close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
+                "point {i}: E_d {} vs {}",
+                gpu.diffuse,
+                cpu.diffuse
+            );
+            assert!(
+                close(gpu.glossy, cpu.glossy, 1e-3, 1e-9),
+                "point {i}: E_s {} vs {}",
+                gpu.glossy,
+                cpu.glossy
+            );
             // Positions are stored as f16 offsets from the point: 2⁻¹¹ relative.
             let reach = (cpu.diffuse_position - r.position).length();
-            assert!((gpu.diffuse_position - cpu.diffuse_position).length() <= 1e-3 * reach + 1e-5, "point {i}: l_d");
+            assert!(
+                (gpu.diffuse_position - cpu.diffuse_position).length() <= 1e-3 * reach + 1e-5,
+                "point {i}: l_d"
+            );
             let reach_s = (cpu.glossy_position - r.position).length();
-            assert!((gpu.glossy_position - cpu.glossy_position).length() <= 1e-3 * reach_s + 1e-5, "point {i}: l_s");
+            assert!(
+                (gpu.glossy_position - cpu.glossy_position).length() <= 1e-3 * reach_s + 1e-5,
+                "point {i}: l_s"
+            );
             let (sd, _) = gathered.spheres[i];
-            assert!((sd - cpu.diffuse_sphere).abs() <= 2e-3 * cpu.diffuse_sphere + 1e-5, "point {i}: sphere {sd} vs {}", cpu.diffuse_sphere);
+            assert!(
+                (sd - cpu.diffuse_sphere).abs() <= 2e-3 * cpu.diffuse_sphere + 1e-5,
+                "point {i}: sphere {sd} vs {}",
+                cpu.diffuse_sphere
+            );
             if cpu.diffuse.max_element() > 0.0 {
                 lit += 1;
             }
@@ -162,8 +194,18 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
             };
             let (cpu, _) = math::renormalize(r, eye, &input);
             let gpu = &renormalized.lights[i];
-            assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "point {i}: I_d {} vs {}", gpu.diffuse, cpu.diffuse);
-            assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "point {i}: I_s {} vs {}", gpu.glossy, cpu.glossy);
+            assert!(
+                close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
+                "point {i}: I_d {} vs {}",
+                gpu.diffuse,
+                cpu.diffuse
+            );
+            assert!(
+                close(gpu.glossy, cpu.glossy, 1e-3, 1e-9),
+                "point {i}: I_s {} vs {}",
+                gpu.glossy,
+                cpu.glossy
+            );
         }
 
         // Occlusion, both combinations, fed the GPU's renormalized lights.
@@ -187,12 +229,18 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
                 let o = math::occlusion(i, r, before.diffuse_position, sd, &discs, mode);
                 let cpu = before.diffuse * (1.0 - o);
                 let gpu = occluded.lights[i].diffuse;
-                assert!(close(gpu, cpu, 1e-3, 1e-7 * before.diffuse.max_element()), "{mode:?} point {i}: {gpu} vs {cpu} (o = {o})");
+                assert!(
+                    close(gpu, cpu, 1e-3, 1e-7 * before.diffuse.max_element()),
+                    "{mode:?} point {i}: {gpu} vs {cpu} (o = {o})"
+                );
                 if o > 0.01 {
                     darkened += 1;
                 }
             }
-            assert!(darkened > 10, "{mode:?}: occlusion touched only {darkened} points");
+            assert!(
+                darkened > 10,
+                "{mode:?}: occlusion touched only {darkened} points"
+            );
         }
 
         // Interpolation, fed the GPU's final point lights and the quantized link weights.
@@ -213,9 +261,17 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
                     .collect();
                 let cpu = math::interpolate(&links, &final_points.lights);
                 let gpu = &vertex_lights[v];
-                assert!(close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9), "vertex {v}: {} vs {}", gpu.diffuse, cpu.diffuse);
+                assert!(
+                    close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
+                    "vertex {v}: {} vs {}",
+                    gpu.diffuse,
+                    cpu.diffuse
+                );
                 assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "vertex {v}");
-                assert!((gpu.diffuse_position - cpu.diffuse_position).length() < 1e-4, "vertex {v}");
+                assert!(
+                    (gpu.diffuse_position - cpu.diffuse_position).length() < 1e-4,
+                    "vertex {v}"
+                );
                 v += 1;
             }
             point_offset += mesh_points.positions.len();
@@ -243,18 +299,36 @@ fn renormalized_lights_reproduce_the_gathered_sums_at_each_point() {
         let unclamped_d = math::diffuse_point_factor(p.position, p.normal, l.diffuse_position)
             >= math::COS_MIN / (l.diffuse_position - p.position).length_squared();
         if unclamped_d && e.diffuse.max_element() > 0.0 {
-            assert!(close(d, e.diffuse, 1e-4, 0.0), "point {i}: {d} vs {}", e.diffuse);
+            assert!(
+                close(d, e.diffuse, 1e-4, 0.0),
+                "point {i}: {d} vs {}",
+                e.diffuse
+            );
             checked += 1;
         }
-        let unclamped_s = math::glossy_point_factor(p.position, p.normal, r, p.k, l.glossy_position)
-            >= math::COS_MIN / (l.glossy_position - p.position).length_squared();
+        let unclamped_s =
+            math::glossy_point_factor(p.position, p.normal, r, p.k, l.glossy_position)
+                >= math::COS_MIN / (l.glossy_position - p.position).length_squared();
         if unclamped_s && e.glossy.max_element() > 0.0 {
-            assert!(close(g, e.glossy, 1e-4, 0.0), "point {i}: glossy {g} vs {}", e.glossy);
+            assert!(
+                close(g, e.glossy, 1e-4, 0.0),
+                "point {i}: glossy {g} vs {}",
+                e.glossy
+            );
         }
     }
-    assert!(checked > renormalized.points.len() / 2, "{checked} points checked");
-    assert!((clamp_d as usize) < renormalized.points.len() / 10, "diffuse clamp fired {clamp_d}×");
-    eprintln!("renormalize clamps: diffuse {clamp_d}, glossy {clamp_s} of {} points", renormalized.points.len());
+    assert!(
+        checked > renormalized.points.len() / 2,
+        "{checked} points checked"
+    );
+    assert!(
+        (clamp_d as usize) < renormalized.points.len() / 10,
+        "diffuse clamp fired {clamp_d}×"
+    );
+    eprintln!(
+        "renormalize clamps: diffuse {clamp_d}, glossy {clamp_s} of {} points",
+        renormalized.points.len()
+    );
 }
 
 #[test]
@@ -262,7 +336,13 @@ fn points_that_receive_no_light_are_exactly_dark_and_nothing_is_nan() {
     let Some(ctx) = common::gpu() else { return };
     // On a lone plane every VAL is coplanar with every receiver: n·ω̂ = 0 exactly.
     let scene = builtin::load("plane-spot", &BuiltinParams { max_edge: 0.25 }).unwrap();
-    let (method, frame, points) = run_sparse(&ctx, &scene, 32, sparse_settings(32, 200, OcclusionMode::Sum, true), Stage::Apply);
+    let (method, frame, points) = run_sparse(
+        &ctx,
+        &scene,
+        32,
+        sparse_settings(32, 200, OcclusionMode::Sum, true),
+        Stage::Apply,
+    );
     assert!(method.rsm.read_count(&ctx).unwrap() > 100);
     for l in &points.lights {
         assert_eq!(l.diffuse, Vec3::ZERO);
@@ -273,15 +353,28 @@ fn points_that_receive_no_light_are_exactly_dark_and_nothing_is_nan() {
         assert!(v.diffuse_position.is_finite() && v.glossy_position.is_finite());
         assert_eq!(v.diffuse, Vec3::ZERO);
     }
-    assert!(frame.indirect.pixels.iter().all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0));
+    assert!(frame
+        .indirect
+        .pixels
+        .iter()
+        .all(|p| p[0] == 0.0 && p[1] == 0.0 && p[2] == 0.0));
     assert_eq!(frame.direct.non_finite_count(), 0);
 
     // Without any light there are no VALs at all.
     let mut dark = scene.clone();
     dark.lights.clear();
-    let (method, frame, points) = run_sparse(&ctx, &dark, 32, sparse_settings(32, 200, OcclusionMode::Union, true), Stage::Apply);
+    let (method, frame, points) = run_sparse(
+        &ctx,
+        &dark,
+        32,
+        sparse_settings(32, 200, OcclusionMode::Union, true),
+        Stage::Apply,
+    );
     assert_eq!(method.rsm.read_count(&ctx).unwrap(), 0);
-    assert!(points.lights.iter().all(|l| l.diffuse == Vec3::ZERO && l.diffuse_position.is_finite()));
+    assert!(points
+        .lights
+        .iter()
+        .all(|l| l.diffuse == Vec3::ZERO && l.diffuse_position.is_finite()));
     assert_eq!(frame.indirect.non_finite_count(), 0);
     assert!(frame.indirect.pixels.iter().all(|p| p[..3] == [0.0; 3]));
 }
@@ -310,7 +403,13 @@ fn brute_force_matches_the_cpu_sum_over_every_val() {
     let cam = camera(&scene, size);
     let frame = brute.render(&ctx, &scene, &world, &cam).unwrap();
     let vals = brute.rsm.read_vals(&ctx).unwrap();
-    let floor = scene.materials[scene.meshes.iter().find(|m| m.name == "floor").unwrap().material].clone();
+    let floor = scene.materials[scene
+        .meshes
+        .iter()
+        .find(|m| m.name == "floor")
+        .unwrap()
+        .material]
+        .clone();
     let rho_d = floor.base_color.truncate();
     // Pixels at the front of the floor, in front of both blocks (the short one starts at
     // z = 65 mm), spread across the image.
@@ -328,7 +427,10 @@ fn brute_force_matches_the_cpu_sum_over_every_val() {
         let gpu = Vec3::new(gpu[0], gpu[1], gpu[2]);
         assert!(cpu.max_element() > 0.0);
         // The G-buffer position comes from a 32-bit depth: 1e-3 covers it.
-        assert!(close(gpu, cpu, 2e-3, 0.0), "pixel ({x},{y}): {gpu} vs {cpu}");
+        assert!(
+            close(gpu, cpu, 2e-3, 0.0),
+            "pixel ({x},{y}): {gpu} vs {cpu}"
+        );
     }
 }
 
@@ -445,7 +547,12 @@ fn glossy_scene(eye_x: f32, specular_factor: f32) -> Scene {
     b.0
 }
 
-fn render_indirect(ctx: &GpuContext, scene: &Scene, size: u32, s: SparseSettings) -> (FrameOutput, CameraView) {
+fn render_indirect(
+    ctx: &GpuContext,
+    scene: &Scene,
+    size: u32,
+    s: SparseSettings,
+) -> (FrameOutput, CameraView) {
     let (_, frame, _) = run_sparse(ctx, scene, size, s, Stage::Apply);
     (frame, camera(scene, size))
 }
@@ -457,11 +564,26 @@ fn glossy_highlight_follows_the_eye_and_vanishes_when_glossy_is_off() {
     let mut centroids = Vec::new();
     for eye_x in [-0.5f32, 0.5] {
         let scene = glossy_scene(eye_x, 1.0);
-        let on = render_indirect(&ctx, &scene, size, sparse_settings(32, 600, OcclusionMode::Off, true));
-        let (off, cam) = render_indirect(&ctx, &scene, size, sparse_settings(32, 600, OcclusionMode::Off, false));
+        let on = render_indirect(
+            &ctx,
+            &scene,
+            size,
+            sparse_settings(32, 600, OcclusionMode::Off, true),
+        );
+        let (off, cam) = render_indirect(
+            &ctx,
+            &scene,
+            size,
+            sparse_settings(32, 600, OcclusionMode::Off, false),
+        );
         // Glossy off is exactly the floor without its specular lobe.
         let matte = glossy_scene(eye_x, 0.0);
-        let (matte_frame, _) = render_indirect(&ctx, &matte, size, sparse_settings(32, 600, OcclusionMode::Off, true));
+        let (matte_frame, _) = render_indirect(
+            &ctx,
+            &matte,
+            size,
+            sparse_settings(32, 600, OcclusionMode::Off, true),
+        );
         let mut weight = 0.0f32;
         let mut weighted_x = 0.0f32;
         let mut diffuse = 0.0f32;
@@ -470,7 +592,10 @@ fn glossy_highlight_follows_the_eye_and_vanishes_when_glossy_is_off() {
                 let a = on.0.indirect.get(x, y)[1];
                 let b = off.indirect.get(x, y)[1];
                 let m = matte_frame.indirect.get(x, y)[1];
-                assert!((b - m).abs() <= 1e-4 * m.abs() + 1e-9, "pixel ({x},{y}): glossy off {b} vs matte {m}");
+                assert!(
+                    (b - m).abs() <= 1e-4 * m.abs() + 1e-9,
+                    "pixel ({x},{y}): glossy off {b} vs matte {m}"
+                );
                 let p = pixel_on_floor(&cam, size, x, y);
                 if p.z > -0.95 && p.z < 1.0 && p.x.abs() < 1.0 && (a - b) > 0.0 {
                     weight += a - b;
@@ -479,20 +604,41 @@ fn glossy_highlight_follows_the_eye_and_vanishes_when_glossy_is_off() {
                 diffuse += b;
             }
         }
-        assert!(weight > 0.05 * diffuse, "eye {eye_x}: glossy {weight} vs diffuse {diffuse}");
+        assert!(
+            weight > 0.05 * diffuse,
+            "eye {eye_x}: glossy {weight} vs diffuse {diffuse}"
+        );
         centroids.push(weighted_x / weight);
     }
     // The mirror image of the lit wall patch (x = 0) seen from x = ∓0.5 lies at ∓0.23 on the
     // floor; the highlight's centroid must move to the eye's side.
-    assert!(centroids[0] < -0.05 && centroids[1] > 0.05, "highlight centroids {centroids:?}");
+    assert!(
+        centroids[0] < -0.05 && centroids[1] > 0.05,
+        "highlight centroids {centroids:?}"
+    );
 }
 
 /// Light from a lit ceiling patch reaches the floor through where a blocker hangs.
 fn blocker_scene() -> Scene {
     let mut b = Builder::new("blocker");
-    b.quad("floor", square(0.0, 1.0), Vec3::Y, Material::lambert("floor", Vec3::splat(0.8)));
-    b.quad("ceiling", square(1.0, 1.0), Vec3::NEG_Y, Material::lambert("ceiling", Vec3::splat(0.8)));
-    b.quad("blocker", square(0.5, 0.3), Vec3::NEG_Y, Material::lambert("blocker", Vec3::splat(0.8)));
+    b.quad(
+        "floor",
+        square(0.0, 1.0),
+        Vec3::Y,
+        Material::lambert("floor", Vec3::splat(0.8)),
+    );
+    b.quad(
+        "ceiling",
+        square(1.0, 1.0),
+        Vec3::NEG_Y,
+        Material::lambert("ceiling", Vec3::splat(0.8)),
+    );
+    b.quad(
+        "blocker",
+        square(0.5, 0.3),
+        Vec3::NEG_Y,
+        Material::lambert("blocker", Vec3::splat(0.8)),
+    );
     b.spot(Vec3::new(0.0, 0.9, 0.0), Vec3::Y, 1.2);
     b.camera(Vec3::new(0.0, 0.3, 2.0), Vec3::ZERO);
     b.0
@@ -505,7 +651,13 @@ fn occlusion_darkens_receivers_behind_a_blocker_and_union_never_exceeds_sum() {
     let floor_mesh = scene.meshes.iter().position(|m| m.name == "floor").unwrap();
     let mut results = Vec::new();
     for mode in [OcclusionMode::Off, OcclusionMode::Sum, OcclusionMode::Union] {
-        let (method, _, points) = run_sparse(&ctx, &scene, 32, sparse_settings(32, 800, mode, false), Stage::Occlusion);
+        let (method, _, points) = run_sparse(
+            &ctx,
+            &scene,
+            32,
+            sparse_settings(32, 800, mode, false),
+            Stage::Occlusion,
+        );
         // The floor's points come first among the instances (the floor is instance 0).
         let floor_count = method.points[floor_mesh].positions.len();
         let under: Vec<f32> = points.points[..floor_count]
@@ -527,13 +679,27 @@ fn occlusion_darkens_receivers_behind_a_blocker_and_union_never_exceeds_sum() {
     let (_, off_under, _, _) = results[0];
     let (_, sum_under, _, ref sum_lights) = results[1];
     let (_, union_under, _, ref union_lights) = results[2];
-    assert!(sum_under < 0.7 * off_under, "sum {sum_under} vs off {off_under}");
-    assert!(union_under < 0.9 * off_under, "union {union_under} vs off {off_under}");
-    assert!(union_under >= sum_under, "union {union_under} < sum {sum_under}");
+    assert!(
+        sum_under < 0.7 * off_under,
+        "sum {sum_under} vs off {off_under}"
+    );
+    assert!(
+        union_under < 0.9 * off_under,
+        "union {union_under} vs off {off_under}"
+    );
+    assert!(
+        union_under >= sum_under,
+        "union {union_under} < sum {sum_under}"
+    );
     for (s, u) in sum_lights.iter().zip(union_lights) {
-        assert!(u.diffuse.x >= s.diffuse.x * (1.0 - 1e-5) - 1e-12, "union occluded more than sum at a point");
+        assert!(
+            u.diffuse.x >= s.diffuse.x * (1.0 - 1e-5) - 1e-12,
+            "union occluded more than sum at a point"
+        );
     }
-    eprintln!("under the blocker: off {off_under:.4e}, sum {sum_under:.4e}, union {union_under:.4e}");
+    eprintln!(
+        "under the blocker: off {off_under:.4e}, sum {sum_under:.4e}, union {union_under:.4e}"
+    );
 }
 
 /// Mean FLIP between two images tone-mapped at `exposure` stops.
@@ -564,14 +730,21 @@ fn sparse_indirect_on_cornell_is_close_to_brute_force() {
     let mean = (reference.mean_rgb().iter().sum::<f64>() / 3.0) as f32;
     let exposure = (0.18 / mean).log2();
     let mut flips = Vec::new();
-    for (points, occlusion) in [(4096, OcclusionMode::Off), (1024, OcclusionMode::Off), (4096, OcclusionMode::Sum)] {
+    for (points, occlusion) in [
+        (4096, OcclusionMode::Off),
+        (1024, OcclusionMode::Off),
+        (4096, OcclusionMode::Sum),
+    ] {
         let s = SparseSettings {
             rsm: 64,
             sparse_points: points,
             ..SparseSettings::default()
         };
         let s = SparseSettings {
-            options: SparseOptions { occlusion, ..s.options },
+            options: SparseOptions {
+                occlusion,
+                ..s.options
+            },
             ..s
         };
         let (_, frame, _) = run_sparse(&ctx, &scene, size, s, Stage::Apply);
@@ -584,8 +757,15 @@ fn sparse_indirect_on_cornell_is_close_to_brute_force() {
     // interpolation from the points, so the error must fall as points are added, and 4096
     // points must stay under 0.05: a quarter above the measured value leaves room for the
     // order in which atomics compact the VALs, not for a change in the method.
-    assert!(flips[0] < flips[1], "more points must be closer to brute force: {flips:?}");
-    assert!(flips[0] < 0.05, "sparse (4096 points) vs brute force: mean FLIP {}", flips[0]);
+    assert!(
+        flips[0] < flips[1],
+        "more points must be closer to brute force: {flips:?}"
+    );
+    assert!(
+        flips[0] < 0.05,
+        "sparse (4096 points) vs brute force: mean FLIP {}",
+        flips[0]
+    );
     // Occlusion only ever darkens: it must move the image away from the unoccluded baseline.
     assert!(flips[2] > flips[0]);
 }

@@ -377,6 +377,7 @@ pub fn link_weights(vertex: Vec3, vertex_normal: Vec3, points: &[(Vec3, Vec3)]) 
 }
 
 /// Step 4 — outgoing indirect radiance at a pixel from the two interpolated point lights.
+#[allow(clippy::too_many_arguments)]
 pub fn apply(
     p: Vec3,
     n: Vec3,
@@ -395,6 +396,7 @@ pub fn apply(
 
 /// The brute-force baseline at one pixel: every VAL through the full BRDF, no interpolation,
 /// no occlusion.
+#[allow(clippy::too_many_arguments)]
 pub fn brute_force(
     p: Vec3,
     n: Vec3,

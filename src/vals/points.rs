@@ -316,12 +316,10 @@ mod tests {
     fn plane(max_edge: f32) -> Mesh {
         let mut b = MeshBuilder::new("plane", 0);
         b.add_quad(
-            [
-                Vec3::new(0.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 0.0),
-                Vec3::new(1.0, 0.0, 1.0),
-                Vec3::new(0.0, 0.0, 1.0),
-            ],
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 1.0),
+            Vec3::new(0.0, 0.0, 1.0),
             Vec3::Y,
             max_edge,
         );

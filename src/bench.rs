@@ -1,0 +1,384 @@
+//! `valgi bench`: the paper's Table 1 grid for the sparse method on whatever device runs it —
+//! VAL counts × sparse point counts × {diffuse, +glossy, +occlusion} — plus brute force at
+//! the same size, the sparse stages' time at a second resolution, and the gather's throughput
+//! next to the device's FMA peak measured by a trivial kernel in the same run. Prints a table
+//! and writes CSV. Timings are measurements, never test assertions.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use bytemuck::{Pod, Zeroable};
+
+use crate::gpu::{GpuContext, Passes};
+use crate::method::Method;
+use crate::raster::{
+    compute_pipeline, storage_entry_rw, uniform_entry, RenderError, RenderSettings,
+};
+use crate::scene::{self, builtin::BuiltinParams, Scene};
+use crate::vals::math::OcclusionMode;
+use crate::vals::{SparseMethod, SparseSettings};
+
+/// Arithmetic per point-VAL pair in the diffuse + glossy gather, in FMA-equivalents (an FMA, a
+/// multiply or an add counts one; inverseSqrt, division, pow count one each, which flatters
+/// nothing): d = l − x (3), |d|² (3), inverseSqrt (1), ω̂ (3), n·ω̂ and n_j·ω̂ (6), the two
+/// clamps and product (3), r² = A/π and the denominator (2), division (1), E = Φ·g/π (4),
+/// weight A·g (1), Σ E (3), diffuse moments Σw, Σw·l, Σw·l² (7), r·ω̂ (3), pow (1),
+/// Σ lobe·E (3), glossy weight (1), glossy moments (7).
+pub const GATHER_OPS_PER_PAIR: f64 = 55.0;
+
+#[derive(Clone, Debug)]
+pub struct BenchRequest {
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    /// Target VAL counts; the RSM resolution is chosen to come close.
+    pub vals: Vec<u32>,
+    pub points: Vec<usize>,
+    /// Second resolution at which the sparse stages are timed again.
+    pub small: u32,
+    pub brute: bool,
+    pub out: PathBuf,
+}
+
+/// `FmaParams` in `shaders/bench_fma.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct FmaParams {
+    iterations: u32,
+    pad: [u32; 3],
+}
+
+/// Fused multiply-adds per second of the trivial kernel (best of three runs).
+pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
+    let device = &ctx.device;
+    let threads: u32 = 256 * 256;
+    let sink = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("fma sink"),
+        size: threads as u64 * 16,
+        usage: wgpu::BufferUsages::STORAGE,
+        mapped_at_creation: false,
+    });
+    let params = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("fma params"),
+        size: 16,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let cs = wgpu::ShaderStages::COMPUTE;
+    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        label: Some("fma"),
+        entries: &[uniform_entry(0, cs), storage_entry_rw(1, cs)],
+    });
+    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("fma"),
+        layout: &layout,
+        entries: &[
+            crate::raster::buffer_binding(0, &params),
+            crate::raster::buffer_binding(1, &sink),
+        ],
+    });
+    let pipeline = compute_pipeline(device, "fma peak", &ctx.shader("bench_fma.wgsl"), &layout);
+    let run = |iterations: u32| -> Result<f64, RenderError> {
+        ctx.queue.write_buffer(
+            &params,
+            0,
+            bytemuck::bytes_of(&FmaParams {
+                iterations,
+                pad: [0; 3],
+            }),
+        );
+        let mut passes = Passes::new(ctx, 2);
+        passes.compute("fma", |pass| {
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(threads / 256, 1, 1);
+        })?;
+        let ms = passes.finish()?.get("fma").unwrap_or(0.0).max(1e-6);
+        Ok(threads as f64 * iterations as f64 * 16.0 / (ms * 1e-3))
+    };
+    // Grow the work until one run takes long enough to time well.
+    let mut iterations = 64u32;
+    let mut rate = run(iterations)?;
+    while threads as f64 * iterations as f64 * 16.0 / rate < 0.2 && iterations < 1 << 20 {
+        iterations *= 4;
+        rate = run(iterations)?;
+    }
+    let best = (0..3)
+        .map(|_| run(iterations))
+        .collect::<Result<Vec<f64>, _>>()?;
+    Ok(best.into_iter().fold(rate, f64::max))
+}
+
+/// The RSM resolution that gives about `target` VALs on this scene, from one probe render.
+fn rsm_for(ctx: &GpuContext, scene: &Scene, target: u32) -> Result<u32, RenderError> {
+    let probe = 64u32;
+    let mut method = SparseMethod::new(
+        ctx,
+        scene,
+        RenderSettings {
+            width: 64,
+            height: 64,
+            ..Default::default()
+        },
+        SparseSettings {
+            rsm: probe,
+            sparse_points: 64,
+            ..Default::default()
+        },
+    )?;
+    method.last_stage = crate::vals::Stage::Gather;
+    let world = scene.world_from_node();
+    let camera = scene
+        .camera_view(None, 1.0, &world)
+        .map_err(|e| RenderError::Settings(e.to_string()))?;
+    method.render(ctx, scene, &world, &camera)?;
+    let count = method.rsm.read_count(ctx)?.max(1) as f64;
+    let per_texel = count / (probe as f64 * probe as f64);
+    Ok(((target as f64 / per_texel).sqrt().round() as u32).max(1))
+}
+
+struct Row {
+    config: &'static str,
+    vals: u32,
+    points: u32,
+    width: u32,
+    height: u32,
+    table2: serde_json::Value,
+    sparse_ms: f64,
+    pairs_per_s: f64,
+    bytes_per_point: f64,
+}
+
+/// Runs the grid; returns the CSV path.
+pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
+    std::fs::create_dir_all(&request.out).map_err(|e| {
+        RenderError::Settings(format!("cannot create {}: {e}", request.out.display()))
+    })?;
+    let scene = scene::load(&request.scene, &BuiltinParams::default())?;
+    let ctx = GpuContext::new()?;
+    let peak = fma_peak(&ctx)?;
+    println!(
+        "device: {}  FMA peak (trivial kernel): {:.2} GFMA/s",
+        ctx.adapter_label(),
+        peak / 1e9
+    );
+    let world = scene.world_from_node();
+    let mut rows = Vec::new();
+    let render = |settings: SparseSettings,
+                  width: u32,
+                  height: u32|
+     -> Result<
+        (
+            serde_json::Map<String, serde_json::Value>,
+            crate::gpu::PassTimings,
+        ),
+        RenderError,
+    > {
+        let render_settings = RenderSettings {
+            width,
+            height,
+            ..Default::default()
+        };
+        let mut method = SparseMethod::new(&ctx, &scene, render_settings, settings)?;
+        let camera = scene
+            .camera_view(None, width as f32 / height as f32, &world)
+            .map_err(|e| RenderError::Settings(e.to_string()))?;
+        // One warm-up frame (pipelines, caches), then the measured one.
+        method.render(&ctx, &scene, &world, &camera)?;
+        let frame = method.render(&ctx, &scene, &world, &camera)?;
+        Ok((method.report(), frame.timings))
+    };
+    let sparse_stages = |t: &crate::gpu::PassTimings| {
+        ["gather", "renormalize", "occlusion", "interpolation"]
+            .iter()
+            .map(|l| t.get(l).unwrap_or(0.0))
+            .sum::<f64>()
+    };
+    for &target in &request.vals {
+        let rsm = rsm_for(&ctx, &scene, target)?;
+        for &points in &request.points {
+            for (config, glossy, occlusion) in [
+                ("diffuse", false, OcclusionMode::Off),
+                ("+glossy", true, OcclusionMode::Off),
+                ("+occlusion", true, OcclusionMode::Sum),
+            ] {
+                let mut settings = SparseSettings {
+                    rsm,
+                    sparse_points: points,
+                    ..Default::default()
+                };
+                settings.options.glossy = glossy;
+                settings.options.occlusion = occlusion;
+                let (report, timings) = render(settings, request.width, request.height)?;
+                let vals = report.get("vals").and_then(|v| v.as_u64()).unwrap_or(0) as u32;
+                let n_points = report
+                    .get("sparse_points")
+                    .and_then(|v| v.as_u64())
+                    .unwrap_or(0) as u32;
+                let gather = timings.get("gather").unwrap_or(0.0).max(1e-6);
+                let row = Row {
+                    config,
+                    vals,
+                    points: n_points,
+                    width: request.width,
+                    height: request.height,
+                    table2: crate::vals::table2(&timings),
+                    sparse_ms: sparse_stages(&timings),
+                    pairs_per_s: vals as f64 * n_points as f64 / (gather * 1e-3),
+                    bytes_per_point: report
+                        .get("bytes_per_point")
+                        .and_then(|v| v.as_f64())
+                        .unwrap_or(0.0),
+                };
+                print_row(&row, peak);
+                rows.push(row);
+            }
+        }
+    }
+    // Resolution independence: the full configuration at a small square size.
+    let rsm = rsm_for(&ctx, &scene, request.vals[0])?;
+    let settings = SparseSettings {
+        rsm,
+        sparse_points: request.points[0],
+        ..Default::default()
+    };
+    let (report, timings) = render(settings, request.small, request.small)?;
+    let vals = report.get("vals").and_then(|v| v.as_u64()).unwrap_or(0) as u32;
+    let n_points = report
+        .get("sparse_points")
+        .and_then(|v| v.as_u64())
+        .unwrap_or(0) as u32;
+    let small_row = Row {
+        config: "+occlusion",
+        vals,
+        points: n_points,
+        width: request.small,
+        height: request.small,
+        table2: crate::vals::table2(&timings),
+        sparse_ms: sparse_stages(&timings),
+        pairs_per_s: vals as f64 * n_points as f64
+            / (timings.get("gather").unwrap_or(0.0).max(1e-6) * 1e-3),
+        bytes_per_point: report
+            .get("bytes_per_point")
+            .and_then(|v| v.as_f64())
+            .unwrap_or(0.0),
+    };
+    print_row(&small_row, peak);
+    if let Some(big) = rows.iter().find(|r| {
+        r.config == "+occlusion" && r.vals == small_row.vals && r.points == small_row.points
+    }) {
+        println!(
+            "sparse stages {}×{}: {:.3} ms, {}×{}: {:.3} ms (ratio {:.3})",
+            small_row.width,
+            small_row.height,
+            small_row.sparse_ms,
+            big.width,
+            big.height,
+            big.sparse_ms,
+            big.sparse_ms / small_row.sparse_ms.max(1e-9)
+        );
+    }
+    rows.push(small_row);
+
+    let mut brute_ms = None;
+    if request.brute {
+        let mut options = crate::method::MethodOptions::default();
+        options.set("rsm", rsm);
+        let render_settings = RenderSettings {
+            width: request.width,
+            height: request.height,
+            ..Default::default()
+        };
+        let mut brute =
+            crate::peers::brute::BruteMethod::new(&ctx, &scene, render_settings, &options)?;
+        let camera = scene
+            .camera_view(None, request.width as f32 / request.height as f32, &world)
+            .map_err(|e| RenderError::Settings(e.to_string()))?;
+        let frame = brute.render(&ctx, &scene, &world, &camera)?;
+        let total = frame.timings.total_ms();
+        println!(
+            "brute force {}×{} with {} VALs: {:.1} ms total ({:.1} ms in the per-pixel sum)",
+            request.width,
+            request.height,
+            brute
+                .report()
+                .get("vals")
+                .and_then(|v| v.as_u64())
+                .unwrap_or(0),
+            total,
+            frame.timings.get("brute").unwrap_or(0.0)
+        );
+        if let Some(sparse) = rows.iter().find(|r| {
+            r.config == "+occlusion"
+                && r.width == request.width
+                && r.vals == rows[0].vals
+                && r.points == rows[0].points
+        }) {
+            let sparse_total = sparse.table2["total"].as_f64().unwrap_or(0.0);
+            println!(
+                "sparse (diffuse+glossy+occlusion) {:.1} ms vs brute force {:.1} ms: {:.1}× faster",
+                sparse_total,
+                total,
+                total / sparse_total.max(1e-9)
+            );
+        }
+        brute_ms = Some(total);
+    }
+
+    let path = request.out.join("bench.csv");
+    let mut file = std::fs::File::create(&path)
+        .map_err(|e| RenderError::Settings(format!("cannot write {}: {e}", path.display())))?;
+    let mut lines = vec![format!(
+        "device,config,vals,points,width,height,rsm_ms,direct_ms,gather_ms,renormalize_ms,occlusion_ms,interpolation_ms,apply_ms,total_ms,sparse_stages_ms,pairs_per_s,gather_fraction_of_fma_peak,bytes_per_point,brute_total_ms"
+    )];
+    for r in &rows {
+        let t = |k: &str| r.table2[k].as_f64().unwrap_or(0.0);
+        lines.push(format!(
+            "\"{}\",{},{},{},{},{},{},{},{},{},{},{},{},{},{:.3},{:.4e},{:.4},{},{}",
+            ctx.adapter_label(),
+            r.config,
+            r.vals,
+            r.points,
+            r.width,
+            r.height,
+            t("rsm"),
+            t("direct"),
+            t("gather"),
+            t("renormalize"),
+            t("occlusion"),
+            t("interpolation"),
+            t("apply"),
+            t("total"),
+            r.sparse_ms,
+            r.pairs_per_s,
+            r.pairs_per_s * GATHER_OPS_PER_PAIR / peak,
+            r.bytes_per_point,
+            brute_ms.map(|b| format!("{b:.3}")).unwrap_or_default()
+        ));
+    }
+    writeln!(file, "{}", lines.join("\n"))
+        .map_err(|e| RenderError::Settings(format!("cannot write {}: {e}", path.display())))?;
+    Ok(path)
+}
+
+fn print_row(r: &Row, peak: f64) {
+    let t = |k: &str| r.table2[k].as_f64().unwrap_or(0.0);
+    println!(
+        "{:<11} vals {:>7} points {:>6} {:>4}×{:<4} rsm {:>8.2} direct {:>8.2} gather {:>9.2} renorm {:>6.2} occl {:>8.2} interp {:>6.2} apply {:>7.2} total {:>9.2} ms | {:.3e} pairs/s = {:.1}% of FMA peak",
+        r.config,
+        r.vals,
+        r.points,
+        r.width,
+        r.height,
+        t("rsm"),
+        t("direct"),
+        t("gather"),
+        t("renormalize"),
+        t("occlusion"),
+        t("interpolation"),
+        t("apply"),
+        t("total"),
+        r.pairs_per_s,
+        100.0 * r.pairs_per_s * GATHER_OPS_PER_PAIR / peak
+    );
+}
