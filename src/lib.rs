@@ -2,10 +2,12 @@
 //! points, on top of a baked multi-bounce light atlas. See README.md and DESIGN notes.
 
 pub mod app;
+pub mod eval;
 pub mod gpu;
 pub mod image_io;
 pub mod method;
 pub mod raster;
+pub mod reference;
 pub mod scene;
 pub mod shaders;
 pub mod shading;

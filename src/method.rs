@@ -29,13 +29,25 @@ pub trait Method {
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         serde_json::Map::new()
     }
+
+    /// Estimated variance of each pixel of the last frame (full or indirect image), for
+    /// Monte Carlo methods; `None` for deterministic ones.
+    fn variance(&self, _indirect_only: bool) -> Option<crate::image_io::Image> {
+        None
+    }
 }
 
 /// Methods `valgi render --method` accepts, with a one-line description.
-pub const METHODS: &[(&str, &str)] = &[(
-    "direct",
-    "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
-)];
+pub const METHODS: &[(&str, &str)] = &[
+    (
+        "direct",
+        "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
+    ),
+    (
+        "reference",
+        "CPU path tracer, the ground truth (options: bounces=N|inf, spp=N, seed=N)",
+    ),
+];
 
 /// Builds a method by name for one scene and output size.
 pub fn create(
@@ -49,6 +61,7 @@ pub fn create(
         "direct" => Box::new(DirectMethod {
             raster: Rasterizer::new(ctx, scene, settings)?,
         }),
+        "reference" => Box::new(crate::reference::ReferenceMethod::new(settings, options)?),
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",
