@@ -67,13 +67,15 @@ pub fn pareto_chart(path: &Path, title: &str, points: &[ParetoPoint]) -> Result<
             .caption(title, (FONT, 24))
             .margin(16)
             .x_label_area_size(50)
-            .y_label_area_size(70)
+            .y_label_area_size(90)
             .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
             .map_err(|e| plot_error(path, e))?;
         chart
             .configure_mesh()
             .x_desc("time per frame (ms, log)")
             .y_desc("FLIP of the indirect image (log)")
+            .x_label_formatter(&|v| short_number(*v))
+            .y_label_formatter(&|v| short_number(*v))
             .label_style((FONT, 14))
             .axis_desc_style((FONT, 16))
             .draw()
@@ -195,5 +197,18 @@ pub fn image_sheet(path: &Path, columns: &[&str], rows: &[SheetRow]) -> Result<(
             root.present().map_err(|e| plot_error(path, e))?;
         }
         save_rgb(path, width, height, buffer)
+    }
+}
+
+/// Axis tick text: at most 3 significant digits, no float noise.
+fn short_number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let digits = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    if v.abs() >= 1e5 || v.abs() < 1e-3 {
+        format!("{v:.1e}")
+    } else {
+        format!("{v:.digits$}")
     }
 }
