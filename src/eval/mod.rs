@@ -357,6 +357,11 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             log::warn!("{warning}");
         }
         let scene_label = slug(&scene.name);
+        // Build every method first: a bad option fails before the reference renders.
+        let mut methods = Vec::with_capacity(specs.len());
+        for (name, options) in &specs {
+            methods.push(method::create(name, &ctx, scene, settings, options)?);
+        }
         let aspect = request.width as f32 / request.height as f32;
         let world0 = scene.world_from_node_at(0.0);
         let camera0 = scene.camera_view(request.camera.as_deref(), aspect, &world0)?;
@@ -413,8 +418,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             ],
         }];
         let mut points = vec![];
-        for (name, options) in &specs {
-            let mut method = method::create(name, &ctx, scene, settings, options)?;
+        for ((name, options), method) in specs.iter().zip(methods.iter_mut()) {
             let settings_text = options.to_string();
             let label = if settings_text.is_empty() {
                 name.clone()
