@@ -259,3 +259,113 @@ fn split_csv(line: &str) -> Vec<String> {
     fields.push(field);
     fields
 }
+
+#[test]
+fn failure_case_scenes_and_their_moving_variants() {
+    use valgi::scene::builtin::{self, procedural, BuiltinParams};
+    let params = BuiltinParams { max_edge: 0.2 };
+    for base in [
+        "cornell",
+        "corridor",
+        "coarse-wall",
+        "aligned-occluders",
+        "thin-wall",
+        "glossy-row",
+        "cornell-bunny",
+    ] {
+        let moving = format!("{base}-moving");
+        assert!(
+            builtin::names().iter().any(|(n, _)| *n == moving),
+            "{moving} listed"
+        );
+        let scene = builtin::load(&moving, &params).unwrap();
+        assert_eq!(scene.name, moving);
+        assert!(scene.animation_duration() > 0.0, "{moving} is animated");
+        let (a, b) = (scene.world_from_node_at(0.0), scene.world_from_node_at(1.0));
+        assert!(a != b, "{moving} moves");
+        let still = builtin::load(base, &params).unwrap();
+        assert!(still.animations.is_empty(), "{base} is still");
+    }
+    // The door angle is a parameter; closed shuts the doorway.
+    let closed = builtin::load("corridor-door0", &params).unwrap();
+    let open = builtin::load("corridor-door90", &params).unwrap();
+    let door = |s: &valgi::scene::Scene| {
+        let node = s.nodes.iter().position(|n| n.name == "door").unwrap();
+        s.world_from_node()[node].transform_vector3(glam::Vec3::Z)
+    };
+    assert!((door(&closed) - glam::Vec3::Z).length() < 1e-5);
+    assert!((door(&open) - glam::Vec3::X).length() < 1e-5);
+    assert!(builtin::load("corridor-door400", &params).is_err());
+    // The coarse wall is two triangles.
+    let coarse = builtin::load("coarse-wall", &params).unwrap();
+    let wall = coarse
+        .meshes
+        .iter()
+        .find(|m| m.name == procedural::COARSE_WALL_MESH)
+        .unwrap();
+    assert_eq!(wall.triangle_count(), 2);
+    // glossy-row's exponents come out of the material mapping.
+    let glossy = builtin::load("glossy-row", &params).unwrap();
+    for k in procedural::GLOSSY_ROW_EXPONENTS {
+        let m = glossy
+            .materials
+            .iter()
+            .find(|m| m.name == format!("phong k={k}"))
+            .unwrap();
+        let got = valgi::scene::Material::phong_exponent(m.roughness);
+        assert!((got - k).abs() < 1e-2 * k, "k {k}: {got}");
+    }
+}
+
+#[test]
+fn bunny_from_ply_or_a_named_stand_in() {
+    use valgi::scene::builtin::procedural::{bunny_mesh, load_ply};
+    let dir = common::temp_dir("bunny");
+    // Missing: the stand-in, named as such, with a warning naming where it looked.
+    let missing = dir.join("none.ply");
+    let (mesh, warning) = bunny_mesh(std::slice::from_ref(&missing)).unwrap();
+    assert!(mesh.name.contains("stand-in"), "{}", mesh.name);
+    assert!(mesh.triangle_count() > 100);
+    assert!(warning.unwrap().contains("none.ply"));
+    // A small valid ASCII PLY with an extra vertex property and a quad.
+    let good = dir.join("quad.ply");
+    std::fs::write(
+        &good,
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float confidence\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0 1\n1 0 0 1\n1 1 0 1\n0 1 0 1\n4 0 1 2 3\n",
+    )
+    .unwrap();
+    let mesh = load_ply(&good).unwrap();
+    assert_eq!(mesh.triangle_count(), 2);
+    let (mesh, warning) = bunny_mesh(&[missing.clone(), good.clone()]).unwrap();
+    assert_eq!(mesh.name, "bunny");
+    assert!(warning.is_none());
+    // Malformed files are errors that name the file and the problem.
+    for (name, text, needle) in [
+        ("magic.ply", "plx\n", "not a PLY"),
+        ("binary.ply", "ply\nformat binary_little_endian 1.0\nend_header\n", "ASCII"),
+        (
+            "short.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
+            "ends at vertex 2",
+        ),
+        (
+            "index.ply",
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+            "out of range",
+        ),
+    ] {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let err = load_ply(&path).unwrap_err().to_string();
+        assert!(err.contains(name) && err.contains(needle), "{err}");
+        let err = bunny_mesh(&[path]).unwrap_err().to_string();
+        assert!(err.contains(needle), "{err}");
+    }
+    // The shared data's bunny, when present, loads as the real thing.
+    let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/bunny/bun_zipper_res2.ply");
+    if shared.is_file() {
+        let mesh = load_ply(&shared).unwrap();
+        assert!(mesh.triangle_count() > 10_000, "{}", mesh.triangle_count());
+    }
+}

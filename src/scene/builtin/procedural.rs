@@ -761,12 +761,13 @@ pub fn icosphere(name: &str, material: usize, radius: f32, max_edge: f32, inward
     }
 }
 
-/// Where the Stanford bunny is looked for: `$VALGI_BUNNY`, then the shared data folder beside
-/// the working directory and beside the crate.
+/// Where the Stanford bunny is looked for: `$VALGI_BUNNY` alone when set, else the shared
+/// data folder beside the working directory and beside the crate.
 pub fn bunny_candidates() -> Vec<PathBuf> {
     let mut paths = vec![];
     if let Some(p) = std::env::var_os("VALGI_BUNNY") {
         paths.push(PathBuf::from(p));
+        return paths;
     }
     let rel = Path::new("../shared/data/bunny/bun_zipper_res2.ply");
     paths.push(rel.to_path_buf());
@@ -787,25 +788,10 @@ fn cornell_bunny(name: &str, moving: bool, max_edge: f32) -> Result<Scene, Scene
         .expect("short box instance");
     let mesh_index = scene.instances[instance].mesh;
     let material = scene.meshes[mesh_index].material;
-    let found = bunny_candidates().into_iter().find(|p| p.is_file());
-    let mut mesh = match &found {
-        Some(path) => {
-            let mut mesh = load_ply(path)?;
-            mesh.name = "bunny".into();
-            mesh
-        }
-        None => {
-            scene.warnings.push(format!(
-                "{name}: Stanford bunny not found (looked for {}); using a procedural stand-in",
-                bunny_candidates()
-                    .iter()
-                    .map(|p| p.display().to_string())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            ));
-            bunny_standin()
-        }
-    };
+    let (mut mesh, warning) = bunny_mesh(&bunny_candidates())?;
+    if let Some(warning) = warning {
+        scene.warnings.push(format!("{name}: {warning}"));
+    }
     // Fit: 0.25 m tall, centred on the node's origin, resting on y = 0, facing −z (the camera).
     let mut lo = Vec3::splat(f32::INFINITY);
     let mut hi = Vec3::splat(f32::NEG_INFINITY);
@@ -839,6 +825,29 @@ fn cornell_bunny(name: &str, moving: bool, max_edge: f32) -> Result<Scene, Scene
         );
     }
     Ok(scene)
+}
+
+/// The bunny from the first existing file of `candidates` (`name` "bunny"), or the procedural
+/// stand-in and a warning saying so when none exists. A malformed file is an error.
+pub fn bunny_mesh(candidates: &[PathBuf]) -> Result<(Mesh, Option<String>), SceneError> {
+    match candidates.iter().find(|p| p.is_file()) {
+        Some(path) => {
+            let mut mesh = load_ply(path)?;
+            mesh.name = "bunny".into();
+            Ok((mesh, None))
+        }
+        None => Ok((
+            bunny_standin(),
+            Some(format!(
+                "Stanford bunny not found (looked for {}); using a procedural stand-in",
+                candidates
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+        )),
+    }
 }
 
 /// A bunny-sized blob (body, head, two ears) standing in for the Stanford bunny.
