@@ -58,6 +58,12 @@ pub fn pareto_chart(path: &Path, title: &str, points: &[ParetoPoint]) -> Result<
     };
     let (x0, x1) = range(&xs, floor_ms);
     let (y0, y1) = range(&ys, floor_err);
+    // FLIP never exceeds 1: no empty decade above it.
+    let y1 = if y1 > 1.0 && ys.iter().all(|y| *y <= 1.0) {
+        1.0_f64.max(y0 * 10.0)
+    } else {
+        y1
+    };
     let (width, height) = (900u32, 600u32);
     let mut buffer = vec![0u8; (width * height * 3) as usize];
     {
