@@ -107,6 +107,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     for path in &request.outputs {
         image.write(path, request.exposure)?;
     }
+    let variance_outputs = write_variance(method.as_ref(), request)?;
     let mut report = serde_json::json!({
         "scene": scene.name,
         "method": method.name(),
@@ -126,6 +127,9 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "warnings": scene.warnings.len(),
         "outputs": request.outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
     });
+    if !variance_outputs.is_empty() {
+        report["variance_outputs"] = serde_json::json!(variance_outputs);
+    }
     if let Some(obj) = report.as_object_mut() {
         obj.extend(method.report());
         obj.insert(
@@ -222,4 +226,29 @@ fn render_frames(
         );
     }
     Ok(report)
+}
+
+/// `<stem>.variance.exr` beside every EXR output of a method that estimates its own per-pixel
+/// variance (the reference): the variance of each pixel's mean, per channel.
+fn write_variance(
+    method: &dyn method::Method,
+    request: &RenderRequest,
+) -> Result<Vec<String>, AppError> {
+    let Some(variance) = method.variance(request.indirect_only) else {
+        return Ok(vec![]);
+    };
+    let mut written = vec![];
+    for path in &request.outputs {
+        if path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            == Some("exr".into())
+        {
+            let out = path.with_extension("variance.exr");
+            variance.write_exr(&out)?;
+            written.push(out.display().to_string());
+        }
+    }
+    Ok(written)
 }

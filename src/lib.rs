@@ -3,11 +3,13 @@
 
 pub mod app;
 pub mod bench;
+pub mod eval;
 pub mod gpu;
 pub mod image_io;
 pub mod method;
 pub mod peers;
 pub mod raster;
+pub mod reference;
 pub mod scene;
 pub mod shaders;
 pub mod shading;

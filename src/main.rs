@@ -26,6 +26,9 @@ enum Command {
     /// Benchmark the sparse method (the paper's Table 1 grid), brute force and the device's
     /// FMA peak; prints a table and writes DIR/bench.csv.
     Bench(BenchArgs),
+    /// Render every method on every scene against cached references; write results.csv,
+    /// speed/accuracy charts and image sheets.
+    Eval(EvalArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -99,6 +102,48 @@ struct RenderArgs {
     /// A method option as key=value (repeatable); the method-specific flags are shorthands.
     #[arg(long = "opt", value_name = "KEY=VALUE")]
     options: Vec<String>,
+    /// Shorthand for --opt bounces=B (reference: 0 = direct only, 1, 2, … or inf).
+    #[arg(long)]
+    bounces: Option<String>,
+    /// Shorthand for --opt spp=N (reference: paths per pixel).
+    #[arg(long)]
+    spp: Option<u32>,
+}
+
+#[derive(clap::Args)]
+struct EvalArgs {
+    /// Comma-separated built-in scene names or glTF files.
+    #[arg(long, default_value = "cornell")]
+    scenes: String,
+    /// Comma-separated method specs: name[:key=value,...] (a key=value after a comma belongs
+    /// to the method before it).
+    #[arg(long, default_value = "direct,reference")]
+    methods: String,
+    /// Output folder (results.csv, <scene>_pareto.png, <scene>_sheet.png, images/, cache/).
+    #[arg(long, default_value = "out/eval")]
+    out: PathBuf,
+    #[arg(long, default_value_t = 256)]
+    width: u32,
+    #[arg(long, default_value_t = 256)]
+    height: u32,
+    /// Camera name or index.
+    #[arg(long)]
+    camera: Option<String>,
+    /// Reference paths per pixel.
+    #[arg(long, default_value_t = 256)]
+    ref_spp: u32,
+    /// Reference bounces (1 = one indirect bounce, as the single-bounce methods; or inf).
+    #[arg(long, default_value = "1")]
+    ref_bounces: String,
+    /// Frames per method (≥ 3 measures flicker); frame f is at time f/30 s.
+    #[arg(long, default_value_t = 1)]
+    frames: u32,
+    /// Tessellation of built-in scenes (metres).
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
+    /// Exposure in stops for FLIP and sheets of the full images (default: automatic).
+    #[arg(long)]
+    exposure: Option<f32>,
 }
 
 #[derive(clap::Args)]
@@ -164,6 +209,12 @@ fn main() -> ExitCode {
                 };
                 options.set(key.trim(), value.trim());
             }
+            if let Some(bounces) = &args.bounces {
+                options.set("bounces", bounces);
+            }
+            if let Some(spp) = args.spp {
+                options.set("spp", spp);
+            }
             let request = RenderRequest {
                 scene: args.scene,
                 method: args.method,
@@ -217,6 +268,7 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Command::Eval(args) => run_eval(args),
         Command::Scenes => {
             for (name, description) in builtin::names() {
                 println!("{name:<16} {description}");
@@ -254,4 +306,48 @@ fn scene_stem(scene: &str) -> String {
         .and_then(|s| s.to_str())
         .unwrap_or("render")
         .to_string()
+}
+
+fn run_eval(args: EvalArgs) -> ExitCode {
+    let ref_bounces = match args.ref_bounces.parse() {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("error: --ref-bounces: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let request = valgi::eval::EvalRequest {
+        scenes: valgi::eval::split_list(&args.scenes),
+        methods: valgi::eval::split_method_specs(&args.methods),
+        out: args.out,
+        width: args.width,
+        height: args.height,
+        camera: args.camera,
+        ref_spp: args.ref_spp,
+        ref_bounces,
+        frames: args.frames,
+        max_edge: args.max_edge,
+        exposure: args.exposure,
+        ..valgi::eval::EvalRequest::default()
+    };
+    let (result, seconds) = valgi::eval::timed(|| valgi::eval::run(&request));
+    match result {
+        Ok(summary) => {
+            let report = serde_json::json!({
+                "csv": summary.csv.display().to_string(),
+                "charts": summary.charts.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "sheets": summary.sheets.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "rows": summary.rows.len(),
+                "references_rendered": summary.references_rendered,
+                "references_cached": summary.references_cached,
+                "wall_s": (seconds * 1000.0).round() / 1000.0,
+            });
+            println!("{report}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }

@@ -29,6 +29,12 @@ pub trait Method {
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         serde_json::Map::new()
     }
+
+    /// Estimated variance of each pixel of the last frame (full or indirect image), for
+    /// Monte Carlo methods; `None` for deterministic ones.
+    fn variance(&self, _indirect_only: bool) -> Option<crate::image_io::Image> {
+        None
+    }
 }
 
 /// Methods `valgi render --method` accepts, with a one-line description.
@@ -44,6 +50,10 @@ pub const METHODS: &[(&str, &str)] = &[
     (
         "brute",
         "direct + every VAL summed at every pixel: the sparse method without interpolation or occlusion (options: rsm, tile, glossy)",
+    ),
+    (
+        "reference",
+        "CPU path tracer, the ground truth (options: bounces=N|inf, spp=N, seed=N)",
     ),
 ];
 
@@ -63,6 +73,7 @@ pub fn create(
         "brute" => Box::new(crate::peers::brute::BruteMethod::new(
             ctx, scene, settings, options,
         )?),
+        "reference" => Box::new(crate::reference::ReferenceMethod::new(settings, options)?),
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

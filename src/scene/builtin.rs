@@ -7,6 +7,8 @@
 //! edge exceeds [`BuiltinParams::max_edge`]: per-vertex methods (sparse-point interpolation,
 //! light atlas texels) need vertices on the big flat walls, which two triangles would not give.
 
+pub mod procedural;
+
 use super::mesh::MeshBuilder;
 use super::{Camera, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs};
 use glam::{Quat, Vec3};
@@ -27,37 +29,42 @@ impl Default for BuiltinParams {
 /// Name and one-line description of every built-in scene, in the order `valgi scenes` lists
 /// them.
 pub fn names() -> &'static [(&'static str, &'static str)] {
-    &[
-        (
-            "cornell",
-            "measured Cornell box (Lambertian walls and boxes), spot light under the ceiling",
-        ),
-        (
-            "cornell-point",
-            "measured Cornell box lit by a point light (0.5 W/sr) in the upper middle",
-        ),
-        (
-            "plane-point",
-            "4 m grey plane under a 1 W/sr point light 1 m above, camera looking down",
-        ),
-        (
-            "plane-spot",
-            "4 m grey plane under a spot light (inner 20°, outer 35°) 1 m above",
-        ),
-        (
-            "plane-blocker",
-            "plane-point with a 0.4 m square blocker at 0.5 m casting a shadow",
-        ),
-        (
-            "plane-directional",
-            "the plane and blocker under a 2 W/m² directional light 30° from vertical",
-        ),
-        (
-            "box-point",
-            "closed 2 m cube of albedo 0.5 (inward-facing) with a 1 W/sr point light at its centre",
-        ),
-    ]
+    static ALL: std::sync::LazyLock<Vec<(&str, &str)>> =
+        std::sync::LazyLock::new(|| BASIC.iter().chain(procedural::NAMES).copied().collect());
+    &ALL
 }
+
+/// The analytic and Cornell scenes defined in this file.
+const BASIC: &[(&str, &str)] = &[
+    (
+        "cornell",
+        "measured Cornell box (Lambertian walls and boxes), spot light under the ceiling",
+    ),
+    (
+        "cornell-point",
+        "measured Cornell box lit by a point light (0.5 W/sr) in the upper middle",
+    ),
+    (
+        "plane-point",
+        "4 m grey plane under a 1 W/sr point light 1 m above, camera looking down",
+    ),
+    (
+        "plane-spot",
+        "4 m grey plane under a spot light (inner 20°, outer 35°) 1 m above",
+    ),
+    (
+        "plane-blocker",
+        "plane-point with a 0.4 m square blocker at 0.5 m casting a shadow",
+    ),
+    (
+        "plane-directional",
+        "the plane and blocker under a 2 W/m² directional light 30° from vertical",
+    ),
+    (
+        "box-point",
+        "closed 2 m cube of albedo 0.5 (inward-facing) with a 1 W/sr point light at its centre",
+    ),
+];
 
 /// Builds the built-in scene `name`.
 pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
@@ -79,7 +86,8 @@ pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
         "plane-blocker" => Ok(plane(name, PlaneLight::Point, true, max_edge)),
         "plane-directional" => Ok(plane(name, PlaneLight::Directional, true, max_edge)),
         "box-point" => Ok(closed_box(name, max_edge)),
-        _ => Err(SceneError::UnknownBuiltin { name: name.into() }),
+        _ => procedural::load(name, max_edge)
+            .unwrap_or_else(|| Err(SceneError::UnknownBuiltin { name: name.into() })),
     }
 }
 
@@ -525,6 +533,10 @@ mod tests {
             assert!(!scene.cameras.is_empty(), "{name}");
             for mesh in &scene.meshes {
                 assert_eq!(mesh.normals.len(), mesh.positions.len());
+                if mesh.name == procedural::COARSE_WALL_MESH {
+                    assert_eq!(mesh.triangle_count(), 2, "the coarse wall stays coarse");
+                    continue;
+                }
                 for n in &mesh.normals {
                     assert!((n.length() - 1.0).abs() < 1e-5, "{name}/{}", mesh.name);
                 }

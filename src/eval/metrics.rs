@@ -1,0 +1,125 @@
+//! Image error metrics against a reference and the temporal-stability metric (DESIGN §7). All
+//! work on linear radiance except FLIP, which compares the documented tone map
+//! (`Image::tone_map`: exposure, clamp, sRGB OETF). See README.md beside this file.
+
+use crate::image_io::Image;
+
+/// ε of the relative MSE: keeps black reference pixels from dominating.
+pub const RELMSE_EPSILON: f64 = 0.01;
+
+fn same_size(a: &Image, b: &Image) {
+    assert_eq!(
+        (a.width, a.height),
+        (b.width, b.height),
+        "images of different sizes"
+    );
+}
+
+/// Root mean square error over every pixel and RGB channel:
+/// `sqrt(1/(3N) Σ_px Σ_c (a − r)²)`.
+pub fn rmse(image: &Image, reference: &Image) -> f64 {
+    same_size(image, reference);
+    let mut sum = 0.0f64;
+    for (a, r) in image.pixels.iter().zip(&reference.pixels) {
+        for c in 0..3 {
+            let d = a[c] as f64 - r[c] as f64;
+            sum += d * d;
+        }
+    }
+    (sum / (3 * image.pixels.len().max(1)) as f64).sqrt()
+}
+
+/// Relative mean square error: `1/(3N) Σ_px Σ_c (a − r)² / (r² + ε)` with ε = 0.01.
+pub fn relmse(image: &Image, reference: &Image) -> f64 {
+    same_size(image, reference);
+    let mut sum = 0.0f64;
+    for (a, r) in image.pixels.iter().zip(&reference.pixels) {
+        for c in 0..3 {
+            let (a, r) = (a[c] as f64, r[c] as f64);
+            sum += (a - r) * (a - r) / (r * r + RELMSE_EPSILON);
+        }
+    }
+    sum / (3 * image.pixels.len().max(1)) as f64
+}
+
+/// Mean FLIP (nv-flip, default 67 pixels per degree) between the tone-mapped images, and the
+/// FLIP error map coloured with the magma LUT.
+pub fn flip_with_map(image: &Image, reference: &Image, exposure: f32) -> (f64, image::RgbImage) {
+    same_size(image, reference);
+    let (w, h) = (image.width, image.height);
+    let a = image.tone_map(exposure);
+    let r = reference.tone_map(exposure);
+    let error_map = nv_flip::flip(
+        nv_flip::FlipImageRgb8::with_data(w, h, r.as_raw()),
+        nv_flip::FlipImageRgb8::with_data(w, h, a.as_raw()),
+        nv_flip::DEFAULT_PIXELS_PER_DEGREE,
+    );
+    let mean = nv_flip::FlipPool::from_image(&error_map).mean() as f64;
+    let lut = error_map.apply_color_lut(&nv_flip::magma_lut());
+    let map =
+        image::RgbImage::from_raw(w, h, lut.to_vec()).unwrap_or_else(|| image::RgbImage::new(w, h));
+    (mean, map)
+}
+
+/// Mean FLIP between the tone-mapped images (0 = identical, 1 = maximal difference).
+pub fn flip(image: &Image, reference: &Image, exposure: f32) -> f64 {
+    flip_with_map(image, reference, exposure).0
+}
+
+/// Luminance (Rec. 709 weights) averaged over the image.
+pub fn mean_luminance(image: &Image) -> f64 {
+    let m = image.mean_rgb();
+    0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2]
+}
+
+/// Exposure (stops) that maps the image's mean luminance to 0.18; 0 for a black image.
+pub fn auto_exposure(reference: &Image) -> f32 {
+    let mean = mean_luminance(reference);
+    if mean > 0.0 && mean.is_finite() {
+        ((0.18 / mean).log2() as f32).clamp(-30.0, 30.0)
+    } else {
+        0.0
+    }
+}
+
+/// Temporal instability of a frame sequence I_0 … I_{T−1} (the indirect images of a smooth
+/// animation): the energy of the second temporal difference relative to the squared mean,
+///
+/// `flicker = mean_{t=1..T−2} mean_{px,c} (I_{t+1} − 2 I_t + I_{t−1})² / (mean_{t,px,c} I)²`.
+///
+/// Motion that is linear in time gives 0; frame-to-frame noise gives a large value. `None`
+/// with fewer than three frames; 0 for an all-black sequence.
+pub fn flicker(frames: &[Image]) -> Option<f64> {
+    if frames.len() < 3 {
+        return None;
+    }
+    for f in &frames[1..] {
+        same_size(&frames[0], f);
+    }
+    let n = frames[0].pixels.len().max(1) as f64 * 3.0;
+    let mut mean = 0.0f64;
+    for f in frames {
+        for p in &f.pixels {
+            mean += (p[0] + p[1] + p[2]) as f64;
+        }
+    }
+    mean /= n * frames.len() as f64;
+    let mut energy = 0.0f64;
+    for t in 1..frames.len() - 1 {
+        let (prev, cur, next) = (&frames[t - 1], &frames[t], &frames[t + 1]);
+        let mut sum = 0.0f64;
+        for i in 0..cur.pixels.len() {
+            for c in 0..3 {
+                let d = next.pixels[i][c] as f64 - 2.0 * cur.pixels[i][c] as f64
+                    + prev.pixels[i][c] as f64;
+                sum += d * d;
+            }
+        }
+        energy += sum / n;
+    }
+    energy /= (frames.len() - 2) as f64;
+    if mean == 0.0 {
+        return Some(if energy == 0.0 { 0.0 } else { f64::INFINITY });
+    }
+    Some(energy / (mean * mean))
+}

@@ -1,0 +1,550 @@
+//! The evaluation harness (`valgi eval`): every method and setting on every scene, measured
+//! against cached path-traced references: error (RMSE, relative MSE, FLIP; full and indirect),
+//! time per pass, GPU bytes, and temporal stability; written as a CSV, a speed/accuracy chart
+//! per scene, and image sheets with error maps. See README.md beside this file.
+
+pub mod metrics;
+pub mod plot;
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use crate::gpu::{GpuContext, GpuError};
+use crate::image_io::{Image, ImageError};
+use crate::method::{self, MethodOptions};
+use crate::raster::{RenderError, RenderSettings};
+use crate::reference::{self, Bounces, ReferenceSettings};
+use crate::scene::{self, builtin::BuiltinParams, Scene, SceneError};
+
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    #[error(transparent)]
+    Image(#[from] ImageError),
+    #[error("{path}: {message}")]
+    Output { path: PathBuf, message: String },
+    #[error("{0}")]
+    Settings(String),
+}
+
+/// One `valgi eval` invocation.
+#[derive(Clone, Debug)]
+pub struct EvalRequest {
+    /// Built-in scene names or glTF paths.
+    pub scenes: Vec<String>,
+    /// Method specs `name[:key=value,...]`.
+    pub methods: Vec<String>,
+    pub out: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    /// Camera name or index (`None` = the scene's first).
+    pub camera: Option<String>,
+    /// Reference paths per pixel.
+    pub ref_spp: u32,
+    /// Reference bounce count (1 compares single-bounce methods).
+    pub ref_bounces: Bounces,
+    pub ref_seed: u64,
+    /// Frames rendered per method; ≥ 3 gives the flicker metric. Frame f is at `f·frame_dt` s.
+    pub frames: u32,
+    pub frame_dt: f32,
+    pub max_edge: f32,
+    /// Tone-map exposure (stops) for FLIP and sheets of full images; `None` = automatic.
+    pub exposure: Option<f32>,
+    pub progress: bool,
+}
+
+impl Default for EvalRequest {
+    fn default() -> Self {
+        Self {
+            scenes: vec!["cornell".into()],
+            methods: vec!["direct".into()],
+            out: PathBuf::from("out/eval"),
+            width: 256,
+            height: 256,
+            camera: None,
+            ref_spp: 256,
+            ref_bounces: Bounces::Limited(1),
+            ref_seed: 0x5EED,
+            frames: 1,
+            frame_dt: 1.0 / 30.0,
+            max_edge: BuiltinParams::default().max_edge,
+            exposure: None,
+            progress: true,
+        }
+    }
+}
+
+/// One row of `results.csv`.
+#[derive(Clone, Debug)]
+pub struct EvalRow {
+    pub scene: String,
+    pub method: String,
+    pub settings: String,
+    pub width: u32,
+    pub height: u32,
+    /// Mean ms per frame of every pass.
+    pub passes: Vec<(String, f64)>,
+    pub total_ms: f64,
+    pub gpu_bytes: u64,
+    pub rmse: f64,
+    pub relmse: f64,
+    pub flip: f64,
+    pub rmse_indirect: f64,
+    pub relmse_indirect: f64,
+    pub flip_indirect: f64,
+    pub flicker: Option<f64>,
+    pub exposure: f32,
+    pub exposure_indirect: f32,
+}
+
+/// What a run wrote.
+#[derive(Clone, Debug)]
+pub struct EvalSummary {
+    pub rows: Vec<EvalRow>,
+    pub csv: PathBuf,
+    pub charts: Vec<PathBuf>,
+    pub sheets: Vec<PathBuf>,
+    /// References rendered this run (the rest came from the cache).
+    pub references_rendered: usize,
+    pub references_cached: usize,
+}
+
+pub const CSV_HEADER: &str = "scene,method,settings,width,height,passes_ms,total_ms,gpu_bytes,rmse,relmse,flip,rmse_indirect,relmse_indirect,flip_indirect,flicker,exposure,exposure_indirect";
+
+/// Splits `--methods` text into specs: commas separate methods, except that a `key=value`
+/// item without a `:` continues the previous method's options, so
+/// `sparse:rsm=64,tile=128,direct` is `sparse:rsm=64,tile=128` and `direct`.
+pub fn split_method_specs(text: &str) -> Vec<String> {
+    let mut specs: Vec<String> = Vec::new();
+    for item in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let continues = item.contains('=') && !item.contains(':');
+        match specs.last_mut() {
+            Some(last) if continues => {
+                last.push(',');
+                last.push_str(item);
+            }
+            _ => specs.push(item.to_string()),
+        }
+    }
+    specs
+}
+
+/// Text → comma-separated list (scenes).
+pub fn split_list(text: &str) -> Vec<String> {
+    text.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(String::from)
+        .collect()
+}
+
+/// FNV-1a, 64 bits: a stable hash for cache keys (std's hasher may change between releases).
+pub fn fnv1a(text: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in text.bytes() {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+/// A reference frame, from the cache or rendered.
+pub struct CachedReference {
+    pub direct: Image,
+    pub indirect: Image,
+    pub rendered: bool,
+    pub key: String,
+}
+
+impl CachedReference {
+    pub fn full(&self) -> Image {
+        self.direct.add(&self.indirect)
+    }
+}
+
+/// The reference's cache key: everything that changes its pixels.
+#[allow(clippy::too_many_arguments)]
+pub fn reference_key(
+    scene: &str,
+    camera: Option<&str>,
+    width: u32,
+    height: u32,
+    bounces: Bounces,
+    spp: u32,
+    seed: u64,
+    max_edge: f32,
+    time: f32,
+) -> String {
+    format!(
+        "v1 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}",
+        camera.unwrap_or("-")
+    )
+}
+
+/// Loads the reference for `key` from `cache_dir`, or renders it with `render` and stores it
+/// (`ref-<hash>.direct.exr`, `.indirect.exr`, `.variance.exr` and the key in `.txt`).
+pub fn cached_reference(
+    cache_dir: &Path,
+    key: &str,
+    render: impl FnOnce() -> reference::ReferenceImage,
+) -> Result<CachedReference, EvalError> {
+    let stem = format!("ref-{:016x}", fnv1a(key));
+    let direct_path = cache_dir.join(format!("{stem}.direct.exr"));
+    let indirect_path = cache_dir.join(format!("{stem}.indirect.exr"));
+    let key_path = cache_dir.join(format!("{stem}.txt"));
+    let stored_key = std::fs::read_to_string(&key_path).unwrap_or_default();
+    if stored_key.trim() == key && direct_path.is_file() && indirect_path.is_file() {
+        match (
+            Image::read_exr(&direct_path),
+            Image::read_exr(&indirect_path),
+        ) {
+            (Ok(direct), Ok(indirect)) => {
+                return Ok(CachedReference {
+                    direct,
+                    indirect,
+                    rendered: false,
+                    key: key.to_string(),
+                })
+            }
+            (Err(e), _) | (_, Err(e)) => {
+                log::warn!("reference cache unreadable, rendering again: {e}");
+            }
+        }
+    }
+    let image = render();
+    image.direct.write_exr(&direct_path)?;
+    image.indirect.write_exr(&indirect_path)?;
+    image
+        .variance
+        .write_exr(&cache_dir.join(format!("{stem}.variance.exr")))?;
+    std::fs::write(&key_path, format!("{key}\n")).map_err(|e| EvalError::Output {
+        path: key_path.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(CachedReference {
+        direct: image.direct,
+        indirect: image.indirect,
+        rendered: true,
+        key: key.to_string(),
+    })
+}
+
+/// File-name-safe version of a label.
+pub fn slug(text: &str) -> String {
+    text.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+fn csv_field(text: &str) -> String {
+    if text.contains(',') || text.contains('"') || text.contains('\n') {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    } else {
+        text.to_string()
+    }
+}
+
+fn num(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.6e}")
+    } else {
+        String::new()
+    }
+}
+
+impl EvalRow {
+    pub fn csv_line(&self) -> String {
+        let passes: Vec<String> = self
+            .passes
+            .iter()
+            .map(|(p, ms)| format!("{p}={ms:.3}"))
+            .collect();
+        [
+            csv_field(&self.scene),
+            csv_field(&self.method),
+            csv_field(&self.settings),
+            self.width.to_string(),
+            self.height.to_string(),
+            csv_field(&passes.join(";")),
+            format!("{:.3}", self.total_ms),
+            self.gpu_bytes.to_string(),
+            num(self.rmse),
+            num(self.relmse),
+            num(self.flip),
+            num(self.rmse_indirect),
+            num(self.relmse_indirect),
+            num(self.flip_indirect),
+            self.flicker.map(num).unwrap_or_default(),
+            format!("{:.3}", self.exposure),
+            format!("{:.3}", self.exposure_indirect),
+        ]
+        .join(",")
+    }
+}
+
+/// Runs the evaluation and writes its files under `request.out`.
+pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
+    if request.scenes.is_empty() || request.methods.is_empty() {
+        return Err(EvalError::Settings(
+            "eval needs at least one scene and one method".into(),
+        ));
+    }
+    if request.width == 0 || request.height == 0 || request.ref_spp == 0 || request.frames == 0 {
+        return Err(EvalError::Settings(
+            "width, height, ref-spp and frames must be at least 1".into(),
+        ));
+    }
+    // Parse every spec before any rendering, so a typo fails at once.
+    let specs: Vec<(String, MethodOptions)> = request
+        .methods
+        .iter()
+        .map(|s| MethodOptions::parse_spec(s))
+        .collect::<Result<_, _>>()?;
+    for (name, _) in &specs {
+        if !method::METHODS.iter().any(|(n, _)| n == name) {
+            return Err(EvalError::Settings(format!(
+                "unknown method '{name}' (available: {})",
+                method::METHODS
+                    .iter()
+                    .map(|(n, _)| *n)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    let out = &request.out;
+    let cache_dir = out.join("cache");
+    std::fs::create_dir_all(&cache_dir).map_err(|e| EvalError::Output {
+        path: cache_dir.clone(),
+        message: e.to_string(),
+    })?;
+    let params = BuiltinParams {
+        max_edge: request.max_edge,
+    };
+    let scenes: Vec<Scene> = request
+        .scenes
+        .iter()
+        .map(|s| scene::load(s, &params))
+        .collect::<Result<_, _>>()?;
+    let ctx = GpuContext::new()?;
+    let settings = RenderSettings {
+        width: request.width,
+        height: request.height,
+        ..RenderSettings::default()
+    };
+    let mut summary = EvalSummary {
+        rows: vec![],
+        csv: out.join("results.csv"),
+        charts: vec![],
+        sheets: vec![],
+        references_rendered: 0,
+        references_cached: 0,
+    };
+    for (scene_spec, scene) in request.scenes.iter().zip(&scenes) {
+        for warning in &scene.warnings {
+            log::warn!("{warning}");
+        }
+        let scene_label = slug(&scene.name);
+        // Build every method first: a bad option fails before the reference renders.
+        let mut methods = Vec::with_capacity(specs.len());
+        for (name, options) in &specs {
+            methods.push(method::create(name, &ctx, scene, settings, options)?);
+        }
+        let aspect = request.width as f32 / request.height as f32;
+        let world0 = scene.world_from_node_at(0.0);
+        let camera0 = scene.camera_view(request.camera.as_deref(), aspect, &world0)?;
+        let key = reference_key(
+            scene_spec,
+            request.camera.as_deref(),
+            request.width,
+            request.height,
+            request.ref_bounces,
+            request.ref_spp,
+            request.ref_seed,
+            request.max_edge,
+            0.0,
+        );
+        let reference = cached_reference(&cache_dir, &key, || {
+            log::info!("rendering reference: {key}");
+            reference::render(
+                scene,
+                &world0,
+                &camera0,
+                &ReferenceSettings {
+                    width: request.width,
+                    height: request.height,
+                    spp: request.ref_spp,
+                    bounces: request.ref_bounces,
+                    seed: request.ref_seed,
+                    progress: request.progress,
+                },
+            )
+        })?;
+        if reference.rendered {
+            summary.references_rendered += 1;
+        } else {
+            summary.references_cached += 1;
+        }
+        let ref_full = reference.full();
+        let ref_indirect = &reference.indirect;
+        let exposure = request
+            .exposure
+            .unwrap_or_else(|| metrics::auto_exposure(&ref_full));
+        let exposure_indirect = metrics::auto_exposure(ref_indirect);
+        let mut sheet_rows = vec![plot::SheetRow {
+            label: format!(
+                "reference ({} spp, {} bounce(s)); exposure {exposure:.1} / indirect {exposure_indirect:.1} stops",
+                request.ref_spp, request.ref_bounces
+            ),
+            tiles: vec![
+                ref_full.tone_map(exposure),
+                ref_full.tone_map(exposure),
+                image::RgbImage::new(request.width, request.height),
+                ref_indirect.tone_map(exposure_indirect),
+                ref_indirect.tone_map(exposure_indirect),
+                image::RgbImage::new(request.width, request.height),
+            ],
+        }];
+        let mut points = vec![];
+        for ((name, options), method) in specs.iter().zip(methods.iter_mut()) {
+            let settings_text = options.to_string();
+            let label = if settings_text.is_empty() {
+                name.clone()
+            } else {
+                format!("{name}:{settings_text}")
+            };
+            let mut passes: Vec<(String, f64)> = vec![];
+            let mut indirect_frames = vec![];
+            let mut first = None;
+            let mut gpu_bytes = 0;
+            for f in 0..request.frames {
+                let time = f as f32 * request.frame_dt;
+                let world = scene.world_from_node_at(time);
+                let camera = scene.camera_view(request.camera.as_deref(), aspect, &world)?;
+                let mut frame = method.render(&ctx, scene, &world, &camera)?;
+                frame.direct.sanitize();
+                frame.indirect.sanitize();
+                for (pass, ms) in &frame.timings.passes {
+                    match passes.iter_mut().find(|(p, _)| p == pass) {
+                        Some((_, total)) => *total += ms,
+                        None => passes.push((pass.clone(), *ms)),
+                    }
+                }
+                gpu_bytes = gpu_bytes.max(frame.gpu_bytes);
+                if request.frames >= 3 {
+                    indirect_frames.push(frame.indirect.clone());
+                }
+                if f == 0 {
+                    first = Some(frame);
+                }
+            }
+            for (_, ms) in &mut passes {
+                *ms /= request.frames as f64;
+            }
+            let total_ms = passes.iter().map(|(_, ms)| ms).sum();
+            let frame = first.expect("at least one frame");
+            let full = frame.direct.add(&frame.indirect);
+            let (flip, flip_map) = metrics::flip_with_map(&full, &ref_full, exposure);
+            let (flip_indirect, flip_map_indirect) =
+                metrics::flip_with_map(&frame.indirect, ref_indirect, exposure_indirect);
+            let row = EvalRow {
+                scene: scene.name.clone(),
+                method: name.clone(),
+                settings: settings_text.clone(),
+                width: request.width,
+                height: request.height,
+                passes,
+                total_ms,
+                gpu_bytes,
+                rmse: metrics::rmse(&full, &ref_full),
+                relmse: metrics::relmse(&full, &ref_full),
+                flip,
+                rmse_indirect: metrics::rmse(&frame.indirect, ref_indirect),
+                relmse_indirect: metrics::relmse(&frame.indirect, ref_indirect),
+                flip_indirect,
+                flicker: metrics::flicker(&indirect_frames),
+                exposure,
+                exposure_indirect,
+            };
+            let images = out.join("images").join(&scene_label);
+            full.write_exr(&images.join(format!("{}.exr", slug(&label))))?;
+            frame
+                .indirect
+                .write_exr(&images.join(format!("{}.indirect.exr", slug(&label))))?;
+            sheet_rows.push(plot::SheetRow {
+                label: format!(
+                    "{label}: {:.1} ms, FLIP {:.3}, indirect FLIP {:.3}",
+                    row.total_ms, row.flip, row.flip_indirect
+                ),
+                tiles: vec![
+                    full.tone_map(exposure),
+                    ref_full.tone_map(exposure),
+                    flip_map,
+                    frame.indirect.tone_map(exposure_indirect),
+                    ref_indirect.tone_map(exposure_indirect),
+                    flip_map_indirect,
+                ],
+            });
+            points.push(plot::ParetoPoint {
+                series: name.clone(),
+                label: settings_text,
+                ms: row.total_ms,
+                error: row.flip_indirect,
+            });
+            summary.rows.push(row);
+        }
+        let chart = out.join(format!("{scene_label}_pareto.png"));
+        plot::pareto_chart(
+            &chart,
+            &format!(
+                "{}: time vs indirect error ({}x{}, reference {} spp)",
+                scene.name, request.width, request.height, request.ref_spp
+            ),
+            &points,
+        )?;
+        summary.charts.push(chart);
+        let sheet = out.join(format!("{scene_label}_sheet.png"));
+        plot::image_sheet(
+            &sheet,
+            &[
+                "image",
+                "reference",
+                "FLIP",
+                "indirect",
+                "ref. indirect",
+                "FLIP indirect",
+            ],
+            &sheet_rows,
+        )?;
+        summary.sheets.push(sheet);
+    }
+    let mut csv = String::new();
+    let _ = writeln!(csv, "{CSV_HEADER}");
+    for row in &summary.rows {
+        let _ = writeln!(csv, "{}", row.csv_line());
+    }
+    std::fs::write(&summary.csv, csv).map_err(|e| EvalError::Output {
+        path: summary.csv.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(summary)
+}
+
+/// Wall time helper for the CLI report.
+pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let start = Instant::now();
+    let value = f();
+    (value, start.elapsed().as_secs_f64())
+}

@@ -1,0 +1,499 @@
+//! The ground truth: a CPU path tracer (rayon over rows, the `obvhs` BVH) with the same scene
+//! model, material model (`crate::shading::brdf`) and punctual lights
+//! (`crate::shading::WorldLight`) as the GPU methods, and an exact bounce count. See README.md
+//! beside this file for the estimators.
+
+pub mod rt;
+pub mod sampling;
+
+use std::fmt;
+use std::io::IsTerminal;
+use std::str::FromStr;
+use std::time::Instant;
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use crate::gpu::timing::PassTimings;
+use crate::gpu::GpuContext;
+use crate::image_io::Image;
+use crate::method::{Method, MethodOptions};
+use crate::raster::{FrameOutput, RenderError, RenderSettings};
+use crate::scene::{CameraView, Scene};
+pub use rt::{Hit, Tracer};
+use sampling::{cosine_hemisphere, sample_brdf, Rng};
+
+/// How many indirect bounces a path may take: `Limited(0)` is direct light only,
+/// `Limited(1)` adds one bounce, …; `Unbounded` ends paths by Russian roulette.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Bounces {
+    Limited(u32),
+    Unbounded,
+}
+
+impl Bounces {
+    fn allows(self, bounce: u32) -> bool {
+        match self {
+            Bounces::Limited(b) => bounce <= b,
+            Bounces::Unbounded => true,
+        }
+    }
+}
+
+impl FromStr for Bounces {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "inf" | "infinite" | "unbounded" => Ok(Bounces::Unbounded),
+            t => t
+                .parse::<u32>()
+                .map(Bounces::Limited)
+                .map_err(|_| format!("bounces '{s}': expected a count (0, 1, …) or 'inf'")),
+        }
+    }
+}
+
+impl fmt::Display for Bounces {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Bounces::Limited(b) => write!(f, "{b}"),
+            Bounces::Unbounded => f.write_str("inf"),
+        }
+    }
+}
+
+/// Russian roulette starts after this many bounces (unbounded paths only).
+const ROULETTE_AFTER: u32 = 3;
+
+/// Knobs of one reference render.
+#[derive(Clone, Copy, Debug)]
+pub struct ReferenceSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Paths per pixel.
+    pub spp: u32,
+    pub bounces: Bounces,
+    pub seed: u64,
+    /// Draw a progress bar with ETA on stderr (only when stderr is a terminal).
+    pub progress: bool,
+}
+
+impl Default for ReferenceSettings {
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            spp: 64,
+            bounces: Bounces::Limited(1),
+            seed: 0,
+            progress: true,
+        }
+    }
+}
+
+/// A reference frame: the direct and indirect parts, and the estimated variance of each pixel
+/// mean (per channel) of the full image and of the indirect image.
+#[derive(Clone, Debug)]
+pub struct ReferenceImage {
+    pub direct: Image,
+    pub indirect: Image,
+    pub variance: Image,
+    pub variance_indirect: Image,
+    /// Camera paths traced (pixels × spp).
+    pub paths: u64,
+    pub seconds: f64,
+}
+
+impl ReferenceImage {
+    pub fn radiance(&self, indirect_only: bool) -> Image {
+        if indirect_only {
+            self.indirect.clone()
+        } else {
+            self.direct.add(&self.indirect)
+        }
+    }
+
+    pub fn variance_of(&self, indirect_only: bool) -> &Image {
+        if indirect_only {
+            &self.variance_indirect
+        } else {
+            &self.variance
+        }
+    }
+}
+
+/// What one camera path brings back, split by where the light came from.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PathSample {
+    pub hit: bool,
+    /// Emission of the first surface.
+    pub emission: Vec3,
+    /// Punctual lights at the first surface (next-event estimation, exact visibility).
+    pub direct: Vec3,
+    /// Everything that arrives after at least one bounce.
+    pub indirect: Vec3,
+}
+
+/// Radiance leaving `hit` toward `wo` straight from the punctual lights, with ray-traced
+/// visibility: `Σ_l f_r · E_l · cos θ · V`.
+pub fn direct_light(tracer: &Tracer, hit: &Hit, wo: Vec3) -> Vec3 {
+    let mut sum = Vec3::ZERO;
+    for light in &tracer.lights {
+        let (wi, irradiance) = light.incident(hit.position);
+        let cos = hit.normal.dot(wi);
+        if cos <= 0.0 || irradiance.max_element() <= 0.0 {
+            continue;
+        }
+        let origin = tracer.spawn(hit, wi);
+        let t_max = match light.kind {
+            crate::scene::LightKind::Directional => f32::INFINITY,
+            _ => (light.position - origin).length() - tracer.epsilon,
+        };
+        if !tracer.unoccluded(origin, wi, t_max) {
+            continue;
+        }
+        sum += crate::shading::brdf(hit.rho_d, hit.rho_s, hit.k, hit.normal, wi, wo)
+            * irradiance
+            * cos;
+    }
+    sum
+}
+
+/// Traces one path from `origin` along `dir`.
+pub fn trace_path(
+    tracer: &Tracer,
+    origin: Vec3,
+    dir: Vec3,
+    bounces: Bounces,
+    rng: &mut Rng,
+) -> PathSample {
+    let Some(first) = tracer.intersect(origin, dir, f32::INFINITY) else {
+        return PathSample::default();
+    };
+    let mut out = PathSample {
+        hit: true,
+        emission: first.emission,
+        direct: direct_light(tracer, &first, -dir),
+        indirect: Vec3::ZERO,
+    };
+    let (mut hit, mut wo) = (first, -dir);
+    let mut throughput = Vec3::ONE;
+    let mut bounce = 1;
+    while bounces.allows(bounce) {
+        let Some((wi, weight)) = sample_brdf(hit.rho_d, hit.rho_s, hit.k, hit.normal, wo, rng)
+        else {
+            break;
+        };
+        throughput *= weight;
+        if bounces == Bounces::Unbounded && bounce > ROULETTE_AFTER {
+            let survive = throughput.max_element().min(0.95);
+            if survive <= 0.0 || rng.next_f32() >= survive {
+                break;
+            }
+            throughput /= survive;
+        }
+        if throughput.max_element() <= 0.0 {
+            break;
+        }
+        let Some(next) = tracer.intersect(tracer.spawn(&hit, wi), wi, f32::INFINITY) else {
+            break;
+        };
+        out.indirect += throughput * (next.emission + direct_light(tracer, &next, -wi));
+        hit = next;
+        wo = -wi;
+        bounce += 1;
+    }
+    out
+}
+
+/// Primary ray through the image-plane point (`px`, `py`) in pixels (top-left origin), matching
+/// the GPU's projection (`CameraView::clip_from_view`).
+pub fn camera_ray(camera: &CameraView, width: u32, height: u32, px: f32, py: f32) -> (Vec3, Vec3) {
+    let ndc_x = px / width as f32 * 2.0 - 1.0;
+    let ndc_y = 1.0 - py / height as f32 * 2.0;
+    let tan = (camera.yfov * 0.5).tan();
+    let view_dir = Vec3::new(ndc_x * tan * camera.aspect, ndc_y * tan, -1.0);
+    let m = camera.world_from_view;
+    let dir = m.transform_vector3(view_dir).normalize();
+    // Start on the near plane, as rasterization does.
+    let origin = m.transform_point3(view_dir * camera.znear);
+    (origin, dir)
+}
+
+/// Renders the scene at `world_from_node` through `camera`. Each pixel averages `spp` paths
+/// through uniformly jittered points of the pixel (a box filter, like the GPU's SSAA resolve).
+pub fn render(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    camera: &CameraView,
+    settings: &ReferenceSettings,
+) -> ReferenceImage {
+    let started = Instant::now();
+    let tracer = Tracer::new(scene, world_from_node);
+    let (w, h) = (settings.width.max(1), settings.height.max(1));
+    let spp = settings.spp.max(1);
+    let bar = progress_bar(settings.progress, h as u64, "path tracing rows");
+    let rows: Vec<Vec<PixelStats>> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let row = (0..w)
+                .map(|x| {
+                    let pixel = (y as u64) * w as u64 + x as u64;
+                    let mut stats = PixelStats::default();
+                    for s in 0..spp {
+                        let mut rng = Rng::new(settings.seed, pixel, s as u64);
+                        let (jx, jy) = (rng.next_f32(), rng.next_f32());
+                        let (o, d) = camera_ray(camera, w, h, x as f32 + jx, y as f32 + jy);
+                        let path = trace_path(&tracer, o, d, settings.bounces, &mut rng);
+                        stats.add(&path);
+                    }
+                    stats
+                })
+                .collect();
+            bar.inc(1);
+            row
+        })
+        .collect();
+    bar.finish_and_clear();
+    let n = spp as f32;
+    let mut out = ReferenceImage {
+        direct: Image::new(w, h),
+        indirect: Image::new(w, h),
+        variance: Image::new(w, h),
+        variance_indirect: Image::new(w, h),
+        paths: w as u64 * h as u64 * spp as u64,
+        seconds: 0.0,
+    };
+    for (y, row) in rows.iter().enumerate() {
+        for (x, s) in row.iter().enumerate() {
+            let i = y * w as usize + x;
+            let alpha = s.hits / n;
+            let direct = s.direct / n;
+            let indirect = s.indirect / n;
+            out.direct.pixels[i] = [direct.x, direct.y, direct.z, alpha];
+            out.indirect.pixels[i] = [indirect.x, indirect.y, indirect.z, alpha];
+            let var = mean_variance(s.full, s.full_sq, n);
+            let var_i = mean_variance(s.indirect, s.indirect_sq, n);
+            out.variance.pixels[i] = [var.x, var.y, var.z, 1.0];
+            out.variance_indirect.pixels[i] = [var_i.x, var_i.y, var_i.z, 1.0];
+        }
+    }
+    out.seconds = started.elapsed().as_secs_f64();
+    out
+}
+
+/// Variance of the mean of `n` samples from their sum and sum of squares:
+/// `s² / n` with the unbiased sample variance `s²` (0 for a single sample).
+fn mean_variance(sum: Vec3, sum_sq: Vec3, n: f32) -> Vec3 {
+    if n < 2.0 {
+        return Vec3::ZERO;
+    }
+    let mean = sum / n;
+    ((sum_sq - mean * sum) / (n - 1.0) / n).max(Vec3::ZERO)
+}
+
+#[derive(Clone, Copy, Default)]
+struct PixelStats {
+    hits: f32,
+    direct: Vec3,
+    indirect: Vec3,
+    full: Vec3,
+    full_sq: Vec3,
+    indirect_sq: Vec3,
+}
+
+impl PixelStats {
+    fn add(&mut self, path: &PathSample) {
+        let direct = sanitize(path.emission + path.direct);
+        let indirect = sanitize(path.indirect);
+        let full = direct + indirect;
+        self.hits += path.hit as u32 as f32;
+        self.direct += direct;
+        self.indirect += indirect;
+        self.full += full;
+        self.full_sq += full * full;
+        self.indirect_sq += indirect * indirect;
+    }
+}
+
+/// A non-finite sample (never expected) is dropped to zero rather than poisoning a pixel.
+fn sanitize(v: Vec3) -> Vec3 {
+    if v.is_finite() {
+        v
+    } else {
+        Vec3::ZERO
+    }
+}
+
+/// A progress bar with ETA on stderr, hidden when `enabled` is false or stderr is no terminal.
+pub fn progress_bar(enabled: bool, len: u64, message: &str) -> indicatif::ProgressBar {
+    if !enabled || !std::io::stderr().is_terminal() {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len);
+    if let Ok(style) = indicatif::ProgressStyle::with_template(
+        "{msg} [{bar:40}] {pos}/{len} ({elapsed} elapsed, ETA {eta})",
+    ) {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar.set_message(message.to_string());
+    bar
+}
+
+/// Which light an irradiance estimate counts.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IrradianceSettings {
+    /// Include the punctual lights' direct irradiance (exact, ray-traced visibility) and the
+    /// emission of surfaces seen directly.
+    pub direct: bool,
+    /// Light that bounced 1..=B times before arriving (`Limited(0)` = none).
+    pub bounces: Bounces,
+    /// Hemisphere samples per point.
+    pub samples: u32,
+    pub seed: u64,
+}
+
+/// Estimated irradiance E(x) = ∫ L_in(x, ω) cos θ dω at each surface point `(x, n)` (world
+/// space, unit normal facing the side to gather from), for checking light atlases and
+/// per-point methods. The direct part is exact next-event estimation; the indirect part uses
+/// cosine-weighted directions: `E_ind ≈ π/N · Σ L_in(ω_i)`. Points are offset along `n`.
+pub fn irradiance_at(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    points: &[(Vec3, Vec3)],
+    settings: &IrradianceSettings,
+) -> Vec<Vec3> {
+    let tracer = Tracer::new(scene, world_from_node);
+    let samples = settings.samples.max(1);
+    points
+        .par_iter()
+        .enumerate()
+        .map(|(i, &(x, n))| {
+            let n = n.try_normalize().unwrap_or(Vec3::Y);
+            let origin = x + n * tracer.epsilon;
+            let mut e = Vec3::ZERO;
+            if settings.direct {
+                for light in &tracer.lights {
+                    let (wi, irradiance) = light.incident(x);
+                    let cos = n.dot(wi);
+                    if cos <= 0.0 {
+                        continue;
+                    }
+                    let t_max = match light.kind {
+                        crate::scene::LightKind::Directional => f32::INFINITY,
+                        _ => (light.position - origin).length() - tracer.epsilon,
+                    };
+                    if tracer.unoccluded(origin, wi, t_max) {
+                        e += irradiance * cos;
+                    }
+                }
+            }
+            let gather_emission = settings.direct;
+            let gather_indirect = settings.bounces != Bounces::Limited(0);
+            if gather_emission || gather_indirect {
+                let rest = match settings.bounces {
+                    Bounces::Limited(b) => Bounces::Limited(b.saturating_sub(1)),
+                    Bounces::Unbounded => Bounces::Unbounded,
+                };
+                let mut sum = Vec3::ZERO;
+                for s in 0..samples {
+                    let mut rng = Rng::new(settings.seed, i as u64, s as u64);
+                    let dir = cosine_hemisphere(n, rng.next_f32(), rng.next_f32());
+                    let path = trace_path(&tracer, origin, dir, rest, &mut rng);
+                    if gather_emission {
+                        sum += sanitize(path.emission);
+                    }
+                    if gather_indirect {
+                        sum += sanitize(path.direct + path.indirect);
+                    }
+                }
+                e += sum * (std::f32::consts::PI / samples as f32);
+            }
+            e
+        })
+        .collect()
+}
+
+/// `--method reference`: the path tracer behind the [`Method`] interface. Options: `bounces`
+/// (count or `inf`, default 1), `spp` (default 64), `seed` (default 1). Timings are wall-clock
+/// ms in one pass, `path_trace`; it owns no GPU memory.
+pub struct ReferenceMethod {
+    pub settings: ReferenceSettings,
+    last: Option<ReferenceImage>,
+}
+
+impl ReferenceMethod {
+    pub const DEFAULT_SPP: u32 = 64;
+    pub const DEFAULT_SEED: u64 = 1;
+
+    pub fn new(settings: RenderSettings, options: &MethodOptions) -> Result<Self, RenderError> {
+        let bounces: String = options.get("bounces", "1".to_string())?;
+        let bounces = bounces.parse::<Bounces>().map_err(RenderError::Settings)?;
+        let spp: u32 = options.get("spp", Self::DEFAULT_SPP)?;
+        if spp == 0 {
+            return Err(RenderError::Settings(
+                "option spp=0: need at least 1".into(),
+            ));
+        }
+        let seed: u64 = options.get("seed", Self::DEFAULT_SEED)?;
+        Ok(Self {
+            settings: ReferenceSettings {
+                width: settings.width,
+                height: settings.height,
+                spp,
+                bounces,
+                seed,
+                progress: true,
+            },
+            last: None,
+        })
+    }
+
+    /// The last frame's per-pixel variance of the full or the indirect image.
+    pub fn last_variance(&self, indirect_only: bool) -> Option<&Image> {
+        self.last.as_ref().map(|r| r.variance_of(indirect_only))
+    }
+}
+
+impl Method for ReferenceMethod {
+    fn name(&self) -> &'static str {
+        "reference"
+    }
+
+    fn render(
+        &mut self,
+        _ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: &CameraView,
+    ) -> Result<FrameOutput, RenderError> {
+        let image = render(scene, world_from_node, camera, &self.settings);
+        let mut timings = PassTimings::default();
+        timings.add("path_trace", image.seconds * 1000.0);
+        let frame = FrameOutput {
+            direct: image.direct.clone(),
+            indirect: image.indirect.clone(),
+            timings,
+            gpu_bytes: 0,
+        };
+        self.last = Some(image);
+        Ok(frame)
+    }
+
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut map = serde_json::Map::new();
+        map.insert("spp".into(), self.settings.spp.into());
+        map.insert("bounces".into(), self.settings.bounces.to_string().into());
+        map.insert("seed".into(), self.settings.seed.into());
+        if let Some(last) = &self.last {
+            map.insert("paths".into(), last.paths.into());
+            let rate = last.paths as f64 / last.seconds.max(1e-9);
+            map.insert("paths_per_s".into(), (rate.round()).into());
+        }
+        map
+    }
+
+    fn variance(&self, indirect_only: bool) -> Option<Image> {
+        self.last_variance(indirect_only).cloned()
+    }
+}

@@ -1,0 +1,306 @@
+//! The scene placed in the world for ray tracing: world-space triangles in a BVH (the `obvhs`
+//! crate's compressed wide BVH), closest-hit and shadow queries, and the material at a hit
+//! reduced to DESIGN §3's (ρ_d, ρ_s, k, emission) exactly as `shaders/gbuffer.wgsl` does it
+//! (base colour, metallic-roughness, normal and emissive textures; back faces shade with the
+//! flipped normal).
+
+use std::time::Duration;
+
+use glam::{Mat3, Mat4, Vec2, Vec3, Vec4};
+use obvhs::cwbvh::builder::build_cwbvh_from_tris;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray, RayHit};
+use obvhs::triangle::Triangle;
+use obvhs::BvhBuildParams;
+
+use crate::scene::{ColorSpace, Material, Scene, Texture};
+use crate::shading::WorldLight;
+
+/// One instance's vertices in world space.
+struct PlacedMesh {
+    mesh: usize,
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    /// World tangent xyz and handedness w; empty when the mesh has none.
+    tangents: Vec<Vec4>,
+}
+
+/// Everything a ray needs to know about the surface it hit.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub t: f32,
+    pub position: Vec3,
+    /// Unit geometric normal, on the side the ray came from.
+    pub geometric_normal: Vec3,
+    /// Unit shading normal (interpolated, normal-mapped), flipped with the geometric one.
+    pub normal: Vec3,
+    pub rho_d: Vec3,
+    pub rho_s: Vec3,
+    pub k: f32,
+    pub emission: Vec3,
+}
+
+/// World-space geometry, BVH, and lights of one frame.
+pub struct Tracer<'a> {
+    scene: &'a Scene,
+    placed: Vec<PlacedMesh>,
+    triangles: Vec<Triangle>,
+    /// (placed mesh, first index into the mesh's index list) per triangle.
+    triangle_source: Vec<(u32, u32)>,
+    bvh: Option<CwBvh>,
+    pub lights: Vec<WorldLight>,
+    /// Offset for secondary-ray origins, metres (scaled with the scene).
+    pub epsilon: f32,
+}
+
+impl<'a> Tracer<'a> {
+    /// Places every instance by `world_from_node` and builds the BVH.
+    pub fn new(scene: &'a Scene, world_from_node: &[Mat4]) -> Self {
+        let mut placed = Vec::with_capacity(scene.instances.len());
+        let mut triangles = Vec::new();
+        let mut triangle_source = Vec::new();
+        for inst in &scene.instances {
+            let mesh = &scene.meshes[inst.mesh];
+            let m = world_from_node[inst.node];
+            let normal_from_model = Mat3::from_mat4(m).inverse().transpose();
+            let linear = Mat3::from_mat4(m);
+            let positions: Vec<Vec3> = mesh
+                .positions
+                .iter()
+                .map(|p| m.transform_point3(*p))
+                .collect();
+            let normals: Vec<Vec3> = mesh
+                .normals
+                .iter()
+                .map(|n| (normal_from_model * *n).normalize_or_zero())
+                .collect();
+            let tangents: Vec<Vec4> = mesh
+                .tangents
+                .iter()
+                .map(|t| (linear * t.truncate()).extend(t.w))
+                .collect();
+            let index = placed.len() as u32;
+            for (i, tri) in mesh.indices.chunks_exact(3).enumerate() {
+                let n = positions.len();
+                if tri.iter().any(|&v| v as usize >= n) {
+                    continue;
+                }
+                let [a, b, c] = [tri[0], tri[1], tri[2]].map(|v| positions[v as usize]);
+                if !(a.is_finite() && b.is_finite() && c.is_finite()) {
+                    continue;
+                }
+                triangles.push(Triangle {
+                    v0: a.into(),
+                    v1: b.into(),
+                    v2: c.into(),
+                });
+                triangle_source.push((index, (i * 3) as u32));
+            }
+            placed.push(PlacedMesh {
+                mesh: inst.mesh,
+                positions,
+                normals,
+                tangents,
+            });
+        }
+        let bounds = scene.world_bounds(world_from_node);
+        let size = if bounds.is_empty() {
+            1.0
+        } else {
+            bounds.extent().max_element().max(1e-3)
+        };
+        let bvh = (!triangles.is_empty()).then(|| {
+            build_cwbvh_from_tris(
+                &triangles,
+                BvhBuildParams::medium_build(),
+                &mut Duration::default(),
+            )
+        });
+        Self {
+            scene,
+            placed,
+            triangles,
+            triangle_source,
+            bvh,
+            lights: WorldLight::from_scene(scene, world_from_node),
+            epsilon: 1e-4 * size,
+        }
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Closest hit along `origin + t·dir`, t in (0, `t_max`).
+    pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        let bvh = self.bvh.as_ref()?;
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let mut hit = RayHit::none();
+        let found = bvh.ray_traverse(ray, &mut hit, |ray, id| {
+            self.triangles[bvh.primitive_indices[id] as usize].intersect(ray)
+        });
+        if !found || !hit.t.is_finite() {
+            return None;
+        }
+        let tri = bvh.primitive_indices[hit.primitive_id as usize] as usize;
+        Some(self.surface(tri, origin, dir, hit.t))
+    }
+
+    /// True when nothing blocks the segment `origin + t·dir`, t in (0, `t_max`).
+    pub fn unoccluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+        let Some(bvh) = self.bvh.as_ref() else {
+            return true;
+        };
+        if t_max <= 0.0 {
+            return true;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        bvh.ray_traverse_miss(ray, |ray, id| {
+            self.triangles[bvh.primitive_indices[id] as usize].intersect(ray)
+        })
+    }
+
+    /// Origin for a ray leaving `hit` toward `dir`: pushed off the surface on `dir`'s side.
+    pub fn spawn(&self, hit: &Hit, dir: Vec3) -> Vec3 {
+        let side = if hit.geometric_normal.dot(dir) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        hit.position + hit.geometric_normal * (side * self.epsilon)
+    }
+
+    fn surface(&self, tri: usize, origin: Vec3, dir: Vec3, t: f32) -> Hit {
+        let (placed_index, first) = self.triangle_source[tri];
+        let placed = &self.placed[placed_index as usize];
+        let mesh = &self.scene.meshes[placed.mesh];
+        let idx = [0, 1, 2].map(|j| mesh.indices[first as usize + j] as usize);
+        let [a, b, c] = idx.map(|i| placed.positions[i]);
+        let position = origin + dir * t;
+        // Barycentrics of the hit point.
+        let (e1, e2) = (b - a, c - a);
+        let cross = e1.cross(e2);
+        let area2 = cross.length_squared().max(1e-30);
+        let rel = position - a;
+        let w1 = rel.cross(e2).dot(cross) / area2;
+        let w2 = e1.cross(rel).dot(cross) / area2;
+        let bary = Vec3::new(1.0 - w1 - w2, w1, w2);
+        let mut ng = cross.normalize_or_zero();
+        // wgpu's default front face is counter-clockwise: the winding normal faces the viewer.
+        let front = ng.dot(-dir) >= 0.0;
+        let side = if front { 1.0 } else { -1.0 };
+        ng *= side;
+        let interp3 = |v: &[Vec3]| -> Option<Vec3> {
+            (v.len() == placed.positions.len())
+                .then(|| v[idx[0]] * bary.x + v[idx[1]] * bary.y + v[idx[2]] * bary.z)
+        };
+        let mut n = interp3(&placed.normals)
+            .and_then(|n| n.try_normalize())
+            .map(|n| n * side)
+            .unwrap_or(ng);
+        let uv = if mesh.uv0.len() == placed.positions.len() {
+            mesh.uv0[idx[0]] * bary.x + mesh.uv0[idx[1]] * bary.y + mesh.uv0[idx[2]] * bary.z
+        } else {
+            Vec2::ZERO
+        };
+        let material = self
+            .scene
+            .materials
+            .get(mesh.material)
+            .cloned()
+            .unwrap_or_default();
+        let sample = |texture: Option<usize>, default: Vec4| -> Vec4 {
+            texture
+                .and_then(|t| self.scene.textures.get(t))
+                .map(|t| sample_bilinear(t, uv))
+                .unwrap_or(default)
+        };
+        // Normal map, as in gbuffer.wgsl.
+        if material.normal_texture.is_some() && placed.tangents.len() == placed.positions.len() {
+            let t4 = placed.tangents[idx[0]] * bary.x
+                + placed.tangents[idx[1]] * bary.y
+                + placed.tangents[idx[2]] * bary.z;
+            let t_raw = t4.truncate();
+            if t_raw.length() > 0.0 {
+                if let Some(t) = (t_raw - n * n.dot(t_raw)).try_normalize() {
+                    let w = if placed.tangents[idx[0]].w < 0.0 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
+                    let bt = n.cross(t) * w;
+                    let tex = sample(material.normal_texture, Vec4::new(0.5, 0.5, 1.0, 1.0));
+                    let tn = tex.truncate() * 2.0 - Vec3::ONE;
+                    let tn = Vec3::new(
+                        tn.x * material.normal_scale,
+                        tn.y * material.normal_scale,
+                        tn.z,
+                    );
+                    let mapped = t * tn.x + bt * tn.y + n * tn.z;
+                    if mapped.length_squared() > 1e-12 {
+                        n = mapped.normalize();
+                    }
+                }
+            }
+        }
+        let base_tex = sample(material.base_color_texture, Vec4::ONE);
+        let mr_tex = sample(material.metallic_roughness_texture, Vec4::ONE);
+        let emissive_tex = sample(material.emissive_texture, Vec4::ONE);
+        let base = material.base_color.truncate() * base_tex.truncate();
+        let roughness = (material.roughness * mr_tex.y).clamp(0.0, 1.0);
+        let metallic = (material.metallic * mr_tex.z).clamp(0.0, 1.0);
+        Hit {
+            t,
+            position,
+            geometric_normal: ng,
+            normal: n,
+            rho_d: Material::diffuse_albedo(base, metallic),
+            rho_s: Material::specular_albedo(base, metallic, material.specular_factor),
+            k: Material::phong_exponent(roughness),
+            emission: material.emissive * emissive_tex.truncate(),
+        }
+    }
+}
+
+/// Bilinear texture lookup with repeat wrapping (the GPU sampler's address mode; the GPU also
+/// filters across mip levels, which the reference, sampling a pixel many times, does not need).
+fn sample_bilinear(texture: &Texture, uv: Vec2) -> Vec4 {
+    let (w, h) = (texture.width.max(1) as i64, texture.height.max(1) as i64);
+    if texture.rgba8.len() < (w * h * 4) as usize || !uv.is_finite() {
+        return Vec4::ONE;
+    }
+    let x = uv.x * w as f32 - 0.5;
+    let y = uv.y * h as f32 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let texel = |ix: i64, iy: i64| -> Vec4 {
+        let (ix, iy) = (ix.rem_euclid(w), iy.rem_euclid(h));
+        let o = ((iy * w + ix) * 4) as usize;
+        let px = &texture.rgba8[o..o + 4];
+        let decode = |v: u8| {
+            let c = v as f32 / 255.0;
+            match texture.color_space {
+                ColorSpace::Srgb => srgb_to_linear(c),
+                ColorSpace::Linear => c,
+            }
+        };
+        Vec4::new(
+            decode(px[0]),
+            decode(px[1]),
+            decode(px[2]),
+            px[3] as f32 / 255.0,
+        )
+    };
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let top = texel(x0, y0).lerp(texel(x0 + 1, y0), fx);
+    let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), fx);
+    top.lerp(bottom, fy)
+}
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}

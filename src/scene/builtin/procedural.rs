@@ -1,0 +1,1002 @@
+//! Built-in scenes for the evaluation: the failure cases of DESIGN §4 ("known limits to test,
+//! not hide") and the animated variants `<scene>-moving` whose node TRS animations drive the
+//! temporal-stability metric. All procedural, in metres, one punctual light each.
+//!
+//! - `corridor`: two rooms joined by a door (opening angle a parameter: `corridor-door<DEG>`);
+//!   the light reaches the second room only by bouncing.
+//! - `coarse-wall`: a large wall of two triangles beside a lit object.
+//! - `aligned-occluders`: two blockers in a row between a lit wall and a receiver.
+//! - `thin-wall`: a 2 cm wall (thinner than any practical LPV cell) with light on one side.
+//! - `glossy-row`: spheres with Phong k = 1, 10, 100, 1000 in a coloured room.
+//! - `cornell-bunny`: the Stanford bunny (ASCII PLY from the shared data folder) in the Cornell
+//!   box in place of the short block; a procedural stand-in, named as such, when absent.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Mat3, Quat, Vec2, Vec3, Vec4};
+
+use super::super::mesh::{compute_normals, tessellate, MeshBuilder};
+use super::super::{
+    Animation, Camera, Channel, Interpolation, LightKind, Material, Mesh, Property, Scene,
+    SceneError, Trs,
+};
+use super::{cornell, CornellLight, SceneBuilder};
+
+/// Seconds of one loop of every built-in animation (it returns to its start pose).
+pub const LOOP_SECONDS: f32 = 4.0;
+
+/// Default door opening of `corridor`, degrees (0 = closed, 90 = wide open).
+pub const CORRIDOR_DOOR_DEGREES: f32 = 60.0;
+
+/// Names this module builds, with descriptions (the `-moving` variants follow each scene).
+pub const NAMES: &[(&str, &str)] = &[
+    (
+        "cornell-moving",
+        "cornell with the spot light sweeping and the short block sliding (4 s loop)",
+    ),
+    (
+        "corridor",
+        "two rooms joined by a door opened 60° (corridor-door<DEG> sets it); light reaches the second room only by bouncing",
+    ),
+    ("corridor-moving", "corridor with the door swinging 10°–90°"),
+    (
+        "coarse-wall",
+        "a 3 m wall of two triangles beside a spot-lit orange block",
+    ),
+    ("coarse-wall-moving", "coarse-wall with the block sliding along the wall"),
+    (
+        "aligned-occluders",
+        "two blockers in a row between a spot-lit wall and a receiving wall",
+    ),
+    (
+        "aligned-occluders-moving",
+        "aligned-occluders with the blockers sliding sideways together",
+    ),
+    (
+        "thin-wall",
+        "a 2 cm wall dividing a room, the light on one side only",
+    ),
+    ("thin-wall-moving", "thin-wall with the light moving along the wall"),
+    (
+        "glossy-row",
+        "spheres with Phong k = 1, 10, 100, 1000 in a red/green/blue room",
+    ),
+    ("glossy-row-moving", "glossy-row with the light moving along the row"),
+    (
+        "cornell-bunny",
+        "Cornell box with the Stanford bunny (../shared/data/bunny; a procedural stand-in when absent)",
+    ),
+    ("cornell-bunny-moving", "cornell-bunny with the bunny turning"),
+];
+
+/// Builds the scene `name` if this module knows it.
+pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
+    let (base, moving) = match name.strip_suffix("-moving") {
+        Some(base) => (base, true),
+        None => (name, false),
+    };
+    let scene = match base {
+        "cornell" if moving => Ok(cornell_moving(name, max_edge)),
+        "corridor" => Ok(corridor(name, CORRIDOR_DOOR_DEGREES, moving, max_edge)),
+        "coarse-wall" => Ok(coarse_wall(name, moving, max_edge)),
+        "aligned-occluders" => Ok(aligned_occluders(name, moving, max_edge)),
+        "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
+        "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
+        "cornell-bunny" => cornell_bunny(name, moving, max_edge),
+        other => {
+            let degrees = other.strip_prefix("corridor-door")?;
+            match degrees.parse::<f32>() {
+                Ok(d) if (0.0..=180.0).contains(&d) => Ok(corridor(name, d, moving, max_edge)),
+                _ => Err(SceneError::Other {
+                    path: name.into(),
+                    message: format!("door angle '{degrees}' must be degrees in 0..=180"),
+                }),
+            }
+        }
+    };
+    Some(scene)
+}
+
+fn grey(b: &mut SceneBuilder, name: &str, rho: f32) -> usize {
+    b.material(Material::lambert(name, Vec3::splat(rho)))
+}
+
+/// A node rotation that looks from `eye` toward `target` with +y up (−z forward).
+fn look_at(eye: Vec3, target: Vec3) -> Trs {
+    let forward = (target - eye).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    Trs {
+        translation: eye,
+        rotation: Quat::from_mat3(&Mat3::from_cols(right, up, -forward)),
+        ..Trs::default()
+    }
+}
+
+fn camera(b: &mut SceneBuilder, eye: Vec3, target: Vec3, yfov_degrees: f32) {
+    b.camera(
+        Camera {
+            name: "camera".into(),
+            node: 0,
+            yfov: yfov_degrees.to_radians(),
+            aspect: None,
+            znear: 0.02,
+            zfar: Some(20.0),
+        },
+        look_at(eye, target),
+    );
+}
+
+/// The four corners of the face of box [min, max] on `axis` (0..3) at the `max` side or not.
+fn box_face(min: Vec3, max: Vec3, axis: usize, high: bool) -> [Vec3; 4] {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let corner = |a: f32, b: f32| {
+        let mut p = Vec3::ZERO;
+        p[axis] = if high { max[axis] } else { min[axis] };
+        p[u] = if a > 0.0 { max[u] } else { min[u] };
+        p[v] = if b > 0.0 { max[v] } else { min[v] };
+        p
+    };
+    [
+        corner(0.0, 0.0),
+        corner(1.0, 0.0),
+        corner(1.0, 1.0),
+        corner(0.0, 1.0),
+    ]
+}
+
+/// Inward-facing walls of the room [min, max], one object per face; `materials` per face in
+/// the order −x, +x, floor (−y), ceiling (+y), −z, +z.
+fn room(b: &mut SceneBuilder, min: Vec3, max: Vec3, materials: [usize; 6], max_edge: f32) {
+    let names = [
+        "wall_-x", "wall_+x", "floor", "ceiling", "wall_-z", "wall_+z",
+    ];
+    let centre = (min + max) * 0.5;
+    for (i, name) in names.iter().enumerate() {
+        let [p0, p1, p2, p3] = box_face(min, max, [0, 0, 1, 1, 2, 2][i], i % 2 == 1);
+        let mut mb = MeshBuilder::new(name, materials[i]);
+        mb.add_quad(p0, p1, p2, p3, centre, max_edge);
+        b.object(name, mb.build(), Trs::default());
+    }
+}
+
+/// A closed box [min, max] (outward normals) added to `mb`.
+fn solid_box(mb: &mut MeshBuilder, min: Vec3, max: Vec3, max_edge: f32) {
+    let centre = (min + max) * 0.5;
+    for i in 0..6 {
+        let face = box_face(min, max, i / 2, i % 2 == 1);
+        let face_centre = (face[0] + face[1] + face[2] + face[3]) * 0.25;
+        mb.add_quad(
+            face[0],
+            face[1],
+            face[2],
+            face[3],
+            face_centre + (face_centre - centre),
+            max_edge,
+        );
+    }
+}
+
+fn add_animation(scene: &mut Scene, name: &str, channels: Vec<Channel>) {
+    scene.animations.push(Animation {
+        name: name.into(),
+        channels,
+    });
+}
+
+/// A linear channel through `values` at evenly spaced keys over one loop.
+fn channel(node: usize, property: Property, values: Vec<Vec4>) -> Channel {
+    let n = values.len().max(2) - 1;
+    Channel {
+        node,
+        property,
+        interpolation: Interpolation::Linear,
+        times: (0..values.len())
+            .map(|i| LOOP_SECONDS * i as f32 / n as f32)
+            .collect(),
+        values,
+    }
+}
+
+fn translations(base: Vec3, offsets: &[Vec3]) -> Vec<Vec4> {
+    offsets.iter().map(|o| (base + *o).extend(0.0)).collect()
+}
+
+fn rotations(quats: &[Quat]) -> Vec<Vec4> {
+    quats.iter().map(|q| Vec4::from(*q)).collect()
+}
+
+fn node_named(scene: &Scene, name: &str) -> usize {
+    scene
+        .nodes
+        .iter()
+        .position(|n| n.name == name)
+        .unwrap_or_else(|| panic!("built-in scene has no node {name}"))
+}
+
+/// `cornell` with the spot sweeping ±20° about z and the short block sliding 8 cm and back.
+fn cornell_moving(name: &str, max_edge: f32) -> Scene {
+    let mut scene = cornell(name, CornellLight::Spot, max_edge);
+    let light = scene.lights[0].node;
+    let rest = scene.nodes[light].local.rotation;
+    let tilt = |deg: f32| Quat::from_rotation_z(deg.to_radians()) * rest;
+    let block = node_named(&scene, "short_box");
+    let origin = scene.nodes[block].local.translation;
+    add_animation(
+        &mut scene,
+        "sweep and slide",
+        vec![
+            channel(
+                light,
+                Property::Rotation,
+                rotations(&[tilt(-20.0), tilt(0.0), tilt(20.0), tilt(0.0), tilt(-20.0)]),
+            ),
+            channel(
+                block,
+                Property::Translation,
+                translations(
+                    origin,
+                    &[Vec3::ZERO, Vec3::new(0.08, 0.0, 0.04), Vec3::ZERO],
+                ),
+            ),
+        ],
+    );
+    scene
+}
+
+/// Two 2.1 × 2.4 × 2 m rooms side by side (x < 2.1 and x > 2.1) sharing a zero-thickness wall
+/// with a 0.8 × 1.9 m doorway; a door panel hinged at the doorway's edge, opened `door_degrees`
+/// into the second room. A spot in the first room points down with a 30° cone that cannot
+/// reach the doorway, so the second room is lit by bounced light only. The camera stands in
+/// the second room looking back at the door.
+fn corridor(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.75);
+    let floor = grey(&mut b, "floor", 0.6);
+    let door_mat = b.material(Material::lambert("door", Vec3::new(0.6, 0.45, 0.3)));
+    let (len, h, d) = (4.2, 2.4, 2.0);
+    room(
+        &mut b,
+        Vec3::ZERO,
+        Vec3::new(len, h, d),
+        [white, white, floor, white, white, white],
+        max_edge,
+    );
+    let x = 2.1;
+    let (z0, z1, door_h) = (0.6, 1.4, 1.9);
+    let mut wall = MeshBuilder::new("partition", white);
+    let facing = Vec3::new(0.0, 1.0, 1.0);
+    let q = |y0: f32, y1: f32, za: f32, zb: f32| {
+        [
+            Vec3::new(x, y0, za),
+            Vec3::new(x, y0, zb),
+            Vec3::new(x, y1, zb),
+            Vec3::new(x, y1, za),
+        ]
+    };
+    for [p0, p1, p2, p3] in [q(0.0, h, 0.0, z0), q(0.0, h, z1, d), q(door_h, h, z0, z1)] {
+        wall.add_quad(p0, p1, p2, p3, facing, max_edge);
+    }
+    b.object("partition", wall.build(), Trs::default());
+    // The door panel in model space spans z ∈ [0, 0.8] at x = 0; its node sits on the hinge
+    // and turns about y, swinging into the second room (+x).
+    let mut door = MeshBuilder::new("door", door_mat);
+    let w = z1 - z0;
+    door.add_quad(
+        Vec3::ZERO,
+        Vec3::new(0.0, 0.0, w),
+        Vec3::new(0.0, door_h, w),
+        Vec3::new(0.0, door_h, 0.0),
+        Vec3::new(-1.0, 0.0, w * 0.5),
+        max_edge,
+    );
+    let hinge = Vec3::new(x, 0.0, z0);
+    let swing = |deg: f32| Quat::from_rotation_y(deg.to_radians());
+    b.object(
+        "door",
+        door.build(),
+        Trs {
+            translation: hinge,
+            rotation: swing(door_degrees),
+            ..Trs::default()
+        },
+    );
+    b.light(
+        "spot",
+        Vec3::new(0.5, 2.3, 1.0),
+        LightKind::Spot {
+            inner_cone_angle: 20f32.to_radians(),
+            outer_cone_angle: 30f32.to_radians(),
+        },
+        2.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(4.0, 1.5, 1.7),
+        Vec3::new(2.1, 0.8, 0.9),
+        65.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let door_node = node_named(&scene, "door");
+        add_animation(
+            &mut scene,
+            "door swing",
+            vec![channel(
+                door_node,
+                Property::Rotation,
+                rotations(&[swing(10.0), swing(90.0), swing(10.0)]),
+            )],
+        );
+    }
+    scene
+}
+
+/// A 3 × 2 m wall made of exactly two triangles (whatever `max_edge` says: the point of the
+/// scene), a tessellated floor, and an orange block 0.3 m in front of the wall under a spot
+/// light. The wall's bounce light from the block is a small bright patch that per-vertex
+/// methods cannot resolve on two triangles.
+fn coarse_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.8);
+    let orange = b.material(Material::lambert("orange", Vec3::new(0.85, 0.4, 0.1)));
+    let mut wall = MeshBuilder::new(COARSE_WALL_MESH, white);
+    wall.add_quad(
+        Vec3::new(-1.5, 0.0, 0.0),
+        Vec3::new(1.5, 0.0, 0.0),
+        Vec3::new(1.5, 2.0, 0.0),
+        Vec3::new(-1.5, 2.0, 0.0),
+        Vec3::new(0.0, 1.0, 1.0),
+        f32::INFINITY,
+    );
+    b.object(COARSE_WALL_MESH, wall.build(), Trs::default());
+    let mut floor = MeshBuilder::new("floor", white);
+    floor.add_quad(
+        Vec3::new(-1.5, 0.0, 0.0),
+        Vec3::new(1.5, 0.0, 0.0),
+        Vec3::new(1.5, 0.0, 3.0),
+        Vec3::new(-1.5, 0.0, 3.0),
+        Vec3::Y,
+        max_edge,
+    );
+    b.object("floor", floor.build(), Trs::default());
+    let mut block = MeshBuilder::new("block", orange);
+    solid_box(
+        &mut block,
+        Vec3::new(-0.2, 0.0, -0.2),
+        Vec3::new(0.2, 0.4, 0.2),
+        max_edge,
+    );
+    let block_at = Vec3::new(0.0, 0.0, 0.5);
+    b.object(
+        "block",
+        block.build(),
+        Trs {
+            translation: block_at,
+            ..Trs::default()
+        },
+    );
+    b.light_along(
+        "spot",
+        Vec3::new(0.0, 1.6, 1.4),
+        Vec3::new(0.0, 0.2, 0.5) - Vec3::new(0.0, 1.6, 1.4),
+        LightKind::Spot {
+            inner_cone_angle: 15f32.to_radians(),
+            outer_cone_angle: 25f32.to_radians(),
+        },
+        2.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(0.0, 1.2, 3.2),
+        Vec3::new(0.0, 0.6, 0.2),
+        55.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let node = node_named(&scene, "block");
+        add_animation(
+            &mut scene,
+            "slide",
+            vec![channel(
+                node,
+                Property::Translation,
+                translations(
+                    block_at,
+                    &[
+                        Vec3::ZERO,
+                        Vec3::new(0.7, 0.0, 0.0),
+                        Vec3::ZERO,
+                        Vec3::new(-0.7, 0.0, 0.0),
+                        Vec3::ZERO,
+                    ],
+                ),
+            )],
+        );
+    }
+    scene
+}
+
+/// Name of the two-triangle wall of `coarse-wall` (exempt from the tessellation bound).
+pub const COARSE_WALL_MESH: &str = "coarse_wall";
+
+/// A wall at x = 0 lit by a spot, a receiving wall at x = 3 facing it, a floor, and two 0.5 m
+/// square blockers in a row on the line between the walls' centres (at x = 1 and x = 2).
+fn aligned_occluders(name: &str, moving: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.8);
+    let dark = grey(&mut b, "blocker", 0.4);
+    let floor_mat = grey(&mut b, "floor", 0.5);
+    let wall = |b: &mut SceneBuilder, name: &str, x: f32, facing_x: f32| {
+        let mut mb = MeshBuilder::new(name, white);
+        mb.add_quad(
+            Vec3::new(x, 0.0, -1.0),
+            Vec3::new(x, 0.0, 1.0),
+            Vec3::new(x, 2.0, 1.0),
+            Vec3::new(x, 2.0, -1.0),
+            Vec3::new(facing_x, 1.0, 0.0),
+            max_edge,
+        );
+        b.object(name, mb.build(), Trs::default());
+    };
+    wall(&mut b, "lit_wall", 0.0, 1.0);
+    wall(&mut b, "receiver", 3.0, 2.0);
+    let mut floor = MeshBuilder::new("floor", floor_mat);
+    floor.add_quad(
+        Vec3::new(0.0, 0.0, -1.0),
+        Vec3::new(3.0, 0.0, -1.0),
+        Vec3::new(3.0, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::Y,
+        max_edge,
+    );
+    b.object("floor", floor.build(), Trs::default());
+    let mut blocker_nodes = vec![];
+    for (i, x) in [1.0f32, 2.0].into_iter().enumerate() {
+        let mut mb = MeshBuilder::new(&format!("blocker_{i}"), dark);
+        solid_box(
+            &mut mb,
+            Vec3::new(-0.05, 0.75, -0.25),
+            Vec3::new(0.05, 1.25, 0.25),
+            max_edge,
+        );
+        let name = format!("blocker_{i}");
+        b.object(
+            &name,
+            mb.build(),
+            Trs {
+                translation: Vec3::new(x, 0.0, 0.0),
+                ..Trs::default()
+            },
+        );
+        blocker_nodes.push((name, x));
+    }
+    b.light_along(
+        "spot",
+        Vec3::new(1.5, 1.9, 0.8),
+        Vec3::new(0.0, 1.0, 0.0) - Vec3::new(1.5, 1.9, 0.8),
+        LightKind::Spot {
+            inner_cone_angle: 20f32.to_radians(),
+            outer_cone_angle: 30f32.to_radians(),
+        },
+        3.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(1.5, 1.3, 3.2),
+        Vec3::new(1.5, 0.9, 0.0),
+        65.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let channels = blocker_nodes
+            .iter()
+            .map(|(name, x)| {
+                channel(
+                    node_named(&scene, name),
+                    Property::Translation,
+                    translations(
+                        Vec3::new(*x, 0.0, 0.0),
+                        &[
+                            Vec3::ZERO,
+                            Vec3::new(0.0, 0.0, 0.4),
+                            Vec3::ZERO,
+                            Vec3::new(0.0, 0.0, -0.4),
+                            Vec3::ZERO,
+                        ],
+                    ),
+                )
+            })
+            .collect();
+        add_animation(&mut scene, "blockers slide", channels);
+    }
+    scene
+}
+
+/// A 4 × 2.4 × 3 m room divided at x = 2 by a 2 cm thick, 1.8 m high wall; a downward spot in
+/// the left half whose cone clears the wall's top, so the right half (where the camera looks
+/// at the wall) receives bounced light only, over the wall.
+fn thin_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.75);
+    let wall_mat = b.material(Material::lambert("wall", Vec3::new(0.7, 0.7, 0.5)));
+    room(
+        &mut b,
+        Vec3::ZERO,
+        Vec3::new(4.0, 2.4, 3.0),
+        [white; 6],
+        max_edge,
+    );
+    let mut wall = MeshBuilder::new("thin_wall", wall_mat);
+    solid_box(
+        &mut wall,
+        Vec3::new(1.99, 0.0, 0.0),
+        Vec3::new(2.01, 1.8, 3.0),
+        max_edge,
+    );
+    b.object("thin_wall", wall.build(), Trs::default());
+    let light_at = Vec3::new(1.0, 2.2, 1.5);
+    b.light(
+        "spot",
+        light_at,
+        LightKind::Spot {
+            inner_cone_angle: 35f32.to_radians(),
+            outer_cone_angle: 45f32.to_radians(),
+        },
+        2.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(3.85, 1.5, 1.5),
+        Vec3::new(2.0, 0.8, 1.5),
+        70.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let node = scene.lights[0].node;
+        add_animation(
+            &mut scene,
+            "light moves",
+            vec![channel(
+                node,
+                Property::Translation,
+                translations(
+                    light_at,
+                    &[
+                        Vec3::ZERO,
+                        Vec3::new(0.0, 0.0, 0.7),
+                        Vec3::ZERO,
+                        Vec3::new(0.0, 0.0, -0.7),
+                        Vec3::ZERO,
+                    ],
+                ),
+            )],
+        );
+    }
+    scene
+}
+
+/// Roughness giving the Phong exponent `k` under DESIGN §3's mapping
+/// (k = 2/α² − 2, α = roughness²).
+pub fn roughness_for_exponent(k: f32) -> f32 {
+    (2.0 / (k + 2.0)).sqrt().sqrt()
+}
+
+/// Exponents of the `glossy-row` spheres, left to right.
+pub const GLOSSY_ROW_EXPONENTS: [f32; 4] = [1.0, 10.0, 100.0, 1000.0];
+
+/// A 4 × 2.5 × 3 m room with a red left wall, green right wall and blue back wall; four
+/// spheres (r = 0.28 m, ρ_d = 0.45, ρ_s ≈ 0.47) with Phong k = 1, 10, 100, 1000 in a row on
+/// the floor, lit by a point light in front of them.
+fn glossy_row(name: &str, moving: bool, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.75);
+    let red = b.material(Material::lambert("red", Vec3::new(0.7, 0.1, 0.1)));
+    let green = b.material(Material::lambert("green", Vec3::new(0.1, 0.6, 0.1)));
+    let blue = b.material(Material::lambert("blue", Vec3::new(0.1, 0.15, 0.7)));
+    room(
+        &mut b,
+        Vec3::ZERO,
+        Vec3::new(4.0, 2.5, 3.0),
+        [red, green, white, white, blue, white],
+        max_edge,
+    );
+    let radius = 0.28;
+    for (i, k) in GLOSSY_ROW_EXPONENTS.into_iter().enumerate() {
+        let material = b.material(Material {
+            name: format!("phong k={k}"),
+            base_color: Vec4::new(0.9, 0.9, 0.9, 1.0),
+            metallic: 0.5,
+            roughness: roughness_for_exponent(k),
+            ..Material::default()
+        });
+        let mesh = icosphere(&format!("sphere_k{k}"), material, radius, max_edge, false);
+        b.object(
+            &format!("sphere_k{k}"),
+            mesh,
+            Trs {
+                translation: Vec3::new(0.8 + 0.8 * i as f32, radius, 1.0),
+                ..Trs::default()
+            },
+        );
+    }
+    let light_at = Vec3::new(2.0, 1.9, 2.0);
+    b.light("point", light_at, LightKind::Point, 1.0);
+    camera(
+        &mut b,
+        Vec3::new(2.0, 1.2, 2.9),
+        Vec3::new(2.0, 0.45, 0.9),
+        60.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let node = scene.lights[0].node;
+        add_animation(
+            &mut scene,
+            "light moves",
+            vec![channel(
+                node,
+                Property::Translation,
+                translations(
+                    light_at,
+                    &[
+                        Vec3::ZERO,
+                        Vec3::new(1.2, 0.0, 0.0),
+                        Vec3::ZERO,
+                        Vec3::new(-1.2, 0.0, 0.0),
+                        Vec3::ZERO,
+                    ],
+                ),
+            )],
+        );
+    }
+    scene
+}
+
+/// A sphere of `radius` about the model origin: an icosahedron subdivided (and projected onto
+/// the sphere) until no edge exceeds `max_edge`; normals radial (inward when `inward`, with the
+/// winding flipped to match).
+pub fn icosphere(name: &str, material: usize, radius: f32, max_edge: f32, inward: bool) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut tris: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    let longest = |positions: &[Vec3], tris: &[[u32; 3]]| {
+        tris.iter()
+            .flat_map(|t| {
+                [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])]
+                    .map(|(a, b)| positions[a as usize].distance(positions[b as usize]))
+            })
+            .fold(0.0f32, f32::max)
+            * radius
+    };
+    let max_edge = if max_edge.is_finite() && max_edge > 0.0 {
+        max_edge
+    } else {
+        f32::INFINITY
+    };
+    // Level 7 is 327 680 triangles: enough for any sensible max_edge.
+    for _ in 0..7 {
+        if longest(&positions, &tris) <= max_edge {
+            break;
+        }
+        let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut mid = |a: u32, b: u32, positions: &mut Vec<Vec3>| -> u32 {
+            let key = (a.min(b), a.max(b));
+            *midpoints.entry(key).or_insert_with(|| {
+                positions.push(((positions[a as usize] + positions[b as usize]) * 0.5).normalize());
+                positions.len() as u32 - 1
+            })
+        };
+        let mut next = Vec::with_capacity(tris.len() * 4);
+        for [a, b, c] in tris {
+            let ab = mid(a, b, &mut positions);
+            let bc = mid(b, c, &mut positions);
+            let ca = mid(c, a, &mut positions);
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        tris = next;
+    }
+    let sign = if inward { -1.0 } else { 1.0 };
+    let normals = positions.iter().map(|p| *p * sign).collect();
+    let uv0 = positions
+        .iter()
+        .map(|p| {
+            Vec2::new(
+                0.5 + p.z.atan2(p.x) / std::f32::consts::TAU,
+                0.5 - p.y.asin() / std::f32::consts::PI,
+            )
+        })
+        .collect();
+    let indices = tris
+        .into_iter()
+        .flat_map(|[a, b, c]| if inward { [a, c, b] } else { [a, b, c] })
+        .collect();
+    Mesh {
+        name: name.into(),
+        positions: positions.iter().map(|p| *p * radius).collect(),
+        normals,
+        tangents: vec![],
+        uv0,
+        uv1: None,
+        indices,
+        material,
+    }
+}
+
+/// Where the Stanford bunny is looked for: `$VALGI_BUNNY` alone when set, else the shared
+/// data folder beside the working directory and beside the crate.
+pub fn bunny_candidates() -> Vec<PathBuf> {
+    let mut paths = vec![];
+    if let Some(p) = std::env::var_os("VALGI_BUNNY") {
+        paths.push(PathBuf::from(p));
+        return paths;
+    }
+    let rel = Path::new("../shared/data/bunny/bun_zipper_res2.ply");
+    paths.push(rel.to_path_buf());
+    paths.push(Path::new(env!("CARGO_MANIFEST_DIR")).join(rel));
+    paths
+}
+
+/// Cornell box with the bunny (0.25 m tall, turned to face the camera) in place of the short
+/// block. A missing PLY gives a procedural stand-in (mesh `bunny (procedural stand-in)`) and a
+/// warning; a malformed one is an error.
+fn cornell_bunny(name: &str, moving: bool, max_edge: f32) -> Result<Scene, SceneError> {
+    let mut scene = cornell(name, CornellLight::Spot, max_edge);
+    let block = node_named(&scene, "short_box");
+    let instance = scene
+        .instances
+        .iter()
+        .position(|i| i.node == block)
+        .expect("short box instance");
+    let mesh_index = scene.instances[instance].mesh;
+    let material = scene.meshes[mesh_index].material;
+    let (mut mesh, warning) = bunny_mesh(&bunny_candidates())?;
+    if let Some(warning) = warning {
+        scene.warnings.push(format!("{name}: {warning}"));
+    }
+    // Fit: 0.25 m tall, centred on the node's origin, resting on y = 0, facing −z (the camera).
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for p in &mesh.positions {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let scale = 0.25 / (hi.y - lo.y).max(1e-6);
+    let centre = Vec3::new((lo.x + hi.x) * 0.5, lo.y, (lo.z + hi.z) * 0.5);
+    let turn = Quat::from_rotation_y(std::f32::consts::PI);
+    for p in &mut mesh.positions {
+        *p = turn * ((*p - centre) * scale);
+    }
+    mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
+    if mesh.uv0.len() != mesh.positions.len() {
+        mesh.uv0 = vec![Vec2::ZERO; mesh.positions.len()];
+    }
+    mesh.material = material;
+    tessellate(&mut mesh, max_edge);
+    scene.meshes[mesh_index] = mesh;
+    scene.nodes[block].name = "bunny".into();
+    if moving {
+        let rest = scene.nodes[block].local.rotation;
+        let turns: Vec<Quat> = (0..=4)
+            .map(|i| Quat::from_rotation_y(i as f32 * std::f32::consts::FRAC_PI_2) * rest)
+            .collect();
+        add_animation(
+            &mut scene,
+            "bunny turns",
+            vec![channel(block, Property::Rotation, rotations(&turns))],
+        );
+    }
+    Ok(scene)
+}
+
+/// The bunny from the first existing file of `candidates` (`name` "bunny"), or the procedural
+/// stand-in and a warning saying so when none exists. A malformed file is an error.
+pub fn bunny_mesh(candidates: &[PathBuf]) -> Result<(Mesh, Option<String>), SceneError> {
+    match candidates.iter().find(|p| p.is_file()) {
+        Some(path) => {
+            let mut mesh = load_ply(path)?;
+            mesh.name = "bunny".into();
+            Ok((mesh, None))
+        }
+        None => Ok((
+            bunny_standin(),
+            Some(format!(
+                "Stanford bunny not found (looked for {}); using a procedural stand-in",
+                candidates
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )),
+        )),
+    }
+}
+
+/// A bunny-sized blob (body, head, two ears) standing in for the Stanford bunny.
+fn bunny_standin() -> Mesh {
+    let mut mesh = Mesh {
+        name: "bunny (procedural stand-in)".into(),
+        ..Mesh::default()
+    };
+    let parts = [
+        (Vec3::new(0.0, 0.06, 0.0), Vec3::new(0.08, 0.06, 0.06)),
+        (Vec3::new(0.0, 0.12, 0.05), Vec3::new(0.04, 0.04, 0.04)),
+        (Vec3::new(-0.015, 0.17, 0.04), Vec3::new(0.012, 0.04, 0.01)),
+        (Vec3::new(0.015, 0.17, 0.04), Vec3::new(0.012, 0.04, 0.01)),
+    ];
+    for (centre, radii) in parts {
+        let part = icosphere("part", 0, 1.0, 0.5, false);
+        let base = mesh.positions.len() as u32;
+        mesh.positions
+            .extend(part.positions.iter().map(|p| centre + *p * radii));
+        mesh.indices.extend(part.indices.iter().map(|i| i + base));
+    }
+    mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
+    mesh
+}
+
+/// Reads an ASCII PLY triangle mesh (vertex x, y, z plus any other properties; faces as vertex
+/// index lists, polygons fanned into triangles). Errors name the file and the problem.
+pub fn load_ply(path: &Path) -> Result<Mesh, SceneError> {
+    let fail = |message: String| SceneError::Other {
+        path: path.display().to_string(),
+        message,
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| fail(format!("cannot read: {e}")))?;
+    let mut lines = text.lines();
+    if lines.next().map(str::trim) != Some("ply") {
+        return Err(fail("not a PLY file (no 'ply' magic line)".into()));
+    }
+    let mut vertex_count = None;
+    let mut face_count = 0usize;
+    let mut vertex_props: Vec<String> = vec![];
+    let mut current = "";
+    let mut header_done = false;
+    for line in lines.by_ref() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["format", fmt, ..] if *fmt != "ascii" => {
+                return Err(fail(format!(
+                    "PLY format '{fmt}' not supported (ASCII only)"
+                )))
+            }
+            ["element", "vertex", n] => {
+                vertex_count = Some(
+                    n.parse::<usize>()
+                        .map_err(|_| fail(format!("bad vertex count '{n}'")))?,
+                );
+                current = "vertex";
+            }
+            ["element", "face", n] => {
+                face_count = n
+                    .parse()
+                    .map_err(|_| fail(format!("bad face count '{n}'")))?;
+                current = "face";
+            }
+            ["element", ..] => current = "other",
+            ["property", "list", ..] => {}
+            ["property", _, prop] if current == "vertex" => vertex_props.push(prop.to_string()),
+            ["end_header"] => {
+                header_done = true;
+                break;
+            }
+            _ => {}
+        }
+    }
+    if !header_done {
+        return Err(fail("header has no end_header".into()));
+    }
+    let vertex_count = vertex_count.ok_or_else(|| fail("no vertex element".into()))?;
+    let axis = |name: &str| {
+        vertex_props
+            .iter()
+            .position(|p| p == name)
+            .ok_or_else(|| fail(format!("vertex has no '{name}' property")))
+    };
+    let (ix, iy, iz) = (axis("x")?, axis("y")?, axis("z")?);
+    let mut positions = Vec::with_capacity(vertex_count);
+    for i in 0..vertex_count {
+        let line = lines
+            .next()
+            .ok_or_else(|| fail(format!("file ends at vertex {i} of {vertex_count}")))?;
+        let values: Vec<f32> = line
+            .split_whitespace()
+            .map(|w| w.parse::<f32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| fail(format!("vertex {i}: not numbers: '{line}'")))?;
+        let get = |j: usize| {
+            values
+                .get(j)
+                .copied()
+                .ok_or_else(|| fail(format!("vertex {i}: too few values")))
+        };
+        let p = Vec3::new(get(ix)?, get(iy)?, get(iz)?);
+        if !p.is_finite() {
+            return Err(fail(format!("vertex {i}: non-finite position")));
+        }
+        positions.push(p);
+    }
+    let mut indices = Vec::with_capacity(face_count * 3);
+    for f in 0..face_count {
+        let line = lines
+            .next()
+            .ok_or_else(|| fail(format!("file ends at face {f} of {face_count}")))?;
+        let values: Vec<usize> = line
+            .split_whitespace()
+            .map(|w| w.parse::<usize>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| fail(format!("face {f}: not indices: '{line}'")))?;
+        let n = *values
+            .first()
+            .ok_or_else(|| fail(format!("face {f}: empty")))?;
+        if n < 3 || values.len() < n + 1 {
+            return Err(fail(format!("face {f}: bad vertex list '{line}'")));
+        }
+        let vs = &values[1..=n];
+        if let Some(bad) = vs.iter().find(|&&v| v >= vertex_count) {
+            return Err(fail(format!(
+                "face {f}: vertex index {bad} out of range (0..{vertex_count})"
+            )));
+        }
+        for k in 1..n - 1 {
+            indices.extend([vs[0] as u32, vs[k] as u32, vs[k + 1] as u32]);
+        }
+    }
+    super::super::mesh::remove_degenerate_triangles(&positions, &mut indices);
+    if indices.is_empty() {
+        return Err(fail("no triangles".into()));
+    }
+    let normals = compute_normals(&positions, &indices);
+    Ok(Mesh {
+        name: path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("ply")
+            .into(),
+        uv0: vec![Vec2::ZERO; positions.len()],
+        positions,
+        normals,
+        tangents: vec![],
+        uv1: None,
+        indices,
+        material: 0,
+    })
+}
