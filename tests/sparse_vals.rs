@@ -769,3 +769,62 @@ fn sparse_indirect_on_cornell_is_close_to_brute_force() {
     // Occlusion only ever darkens: it must move the image away from the unoccluded baseline.
     assert!(flips[2] > flips[0]);
 }
+
+#[test]
+fn brute_force_agrees_with_the_one_bounce_reference_on_a_diffuse_scene() {
+    let Some(ctx) = common::gpu() else { return };
+    // A matte floor lit only by a spot-lit wall: nothing stands between any VAL and any
+    // receiver, so brute force leaves out no visibility, and the difference to the path tracer
+    // is the VALs' discretization (RSM texels as discs) and the shadow maps' filtering.
+    let scene = glossy_scene(0.0, 0.0);
+    let size = 48;
+    let world = scene.world_from_node();
+    let cam = camera(&scene, size);
+    let mut options = MethodOptions::default();
+    options.set("rsm", 64);
+    let mut brute = BruteMethod::new(&ctx, &scene, settings(size), &options).unwrap();
+    let vals_image = brute.render(&ctx, &scene, &world, &cam).unwrap().indirect;
+    let mut ref_options = MethodOptions::default();
+    ref_options.set("bounces", 1);
+    ref_options.set("spp", 256);
+    let mut reference =
+        valgi::method::create("reference", &ctx, &scene, settings(size), &ref_options).unwrap();
+    let truth = reference.render(&ctx, &scene, &world, &cam).unwrap().indirect;
+    // Mean indirect radiance over the floor in front of the wall (away from the corner, where
+    // a disc light is least like the surface it stands for).
+    let mut sums = (0.0f64, 0.0f64);
+    let mut count = 0;
+    for y in 0..size {
+        for x in 0..size {
+            let p = pixel_on_floor(&cam, size, x, y);
+            if p.z > -0.7 && p.z < 0.6 && p.x.abs() < 0.8 {
+                sums.0 += vals_image.get(x, y)[1] as f64;
+                sums.1 += truth.get(x, y)[1] as f64;
+                count += 1;
+            }
+        }
+    }
+    assert!(count > 200, "{count} floor pixels");
+    let relative = (sums.0 - sums.1).abs() / sums.1;
+    eprintln!("floor indirect: VALs {:.4e}, reference {:.4e} ({:.2}% apart)", sums.0 / count as f64, sums.1 / count as f64, 100.0 * relative);
+    assert!(relative < 0.05, "brute-force VALs {} vs reference {} ({:.1}%)", sums.0, sums.1, 100.0 * relative);
+}
+
+#[test]
+fn preprocessing_is_cached_per_mesh_and_points_ride_with_rigid_motion() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell-moving", &BuiltinParams { max_edge: 0.1 }).unwrap();
+    let s = sparse_settings(32, 333, OcclusionMode::Off, true);
+    let first = SparseMethod::new(&ctx, &scene, settings(32), s).unwrap();
+    let second = SparseMethod::new(&ctx, &scene, settings(32), s).unwrap();
+    assert!(first.meshes_computed > 0);
+    assert_eq!(second.meshes_computed, 0, "the second method recomputed points");
+    // Points are placed once in model space: moving the scene moves them rigidly.
+    let (t0, t1) = (scene.world_from_node_at(0.0), scene.world_from_node_at(1.0));
+    let (a, b) = (first.sparse.decoded_points(&scene, &t0), first.sparse.decoded_points(&scene, &t1));
+    let moved = a.iter().zip(&b).filter(|(p, q)| (p.position - q.position).length() > 1e-4).count();
+    assert!(moved > 0 && moved < a.len(), "{moved} of {} points moved", a.len());
+    for (p, q) in a.iter().zip(&b) {
+        assert_eq!(p.disc_radius, q.disc_radius);
+    }
+}

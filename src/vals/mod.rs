@@ -116,8 +116,9 @@ pub struct SparseMethod {
     pub points: Vec<Arc<MeshPoints>>,
     /// Run the frame only up to this pass (tests read intermediate buffers).
     pub last_stage: Stage,
-    preprocess_ms: f64,
-    meshes_computed: usize,
+    pub preprocess_ms: f64,
+    /// Meshes whose points were computed rather than taken from the cache.
+    pub meshes_computed: usize,
     report: serde_json::Map<String, serde_json::Value>,
 }
 
