@@ -23,6 +23,9 @@ struct Cli {
 enum Command {
     /// Render a scene to linear EXR and/or tone-mapped PNG; prints one JSON line of timings.
     Render(RenderArgs),
+    /// Bake the multi-bounce light atlas of a scene to an EXR (irradiance per texel); prints
+    /// one JSON line with stage times, VPLs, texels and the energy account.
+    Bake(BakeArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -71,6 +74,34 @@ struct RenderArgs {
     /// A method option as key=value (repeatable); the method-specific flags are shorthands.
     #[arg(long = "opt", value_name = "KEY=VALUE")]
     options: Vec<String>,
+    /// Baked light atlas for `--method atlas` (shorthand for --opt atlas=FILE).
+    #[arg(long)]
+    atlas: Option<PathBuf>,
+}
+
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
+    #[arg(long, default_value = "cornell")]
+    scene: String,
+    /// Output atlas (.exr, linear irradiance in W/m², alpha 1 on texels that hold a surface).
+    #[arg(long)]
+    out: PathBuf,
+    /// Number of VPL patches.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().vpls)]
+    vpls: usize,
+    /// Indirect bounces kept.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().bounces)]
+    bounces: u32,
+    /// Atlas width and height in texels.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().atlas_res)]
+    atlas_res: u32,
+    /// Write bounces K..B only (2 leaves bounce 1 to a dynamic method).
+    #[arg(long, default_value_t = 1)]
+    from_bounce: u32,
+    /// Tessellation of built-in scenes (render with the same value).
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
 }
 
 fn main() -> ExitCode {
@@ -94,6 +125,9 @@ fn main() -> ExitCode {
                     return ExitCode::FAILURE;
                 };
                 options.set(key.trim(), value.trim());
+            }
+            if let Some(atlas) = &args.atlas {
+                options.set("atlas", atlas.display());
             }
             let request = RenderRequest {
                 scene: args.scene,
@@ -124,6 +158,7 @@ fn main() -> ExitCode {
                 }
             }
         }
+        Command::Bake(args) => bake(args),
         Command::Scenes => {
             for (name, description) in builtin::names() {
                 println!("{name:<16} {description}");
@@ -150,6 +185,63 @@ fn main() -> ExitCode {
                 println!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
             }
             ExitCode::SUCCESS
+        }
+    }
+}
+
+/// `valgi bake`: progress bar on a terminal, Ctrl-C stops cleanly (no file is left).
+fn bake(args: BakeArgs) -> ExitCode {
+    use std::io::IsTerminal;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        if let Err(e) = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed)) {
+            log::warn!("Ctrl-C handler: {e}");
+        }
+    }
+    let bar = if std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::new(1)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let progress = |stage: &str, done: usize, total: usize| {
+        bar.set_message(stage.to_string());
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let request = valgi::atlas::BakeRequest {
+        scene: args.scene,
+        max_edge: args.max_edge,
+        settings: valgi::atlas::BakeSettings {
+            vpls: args.vpls,
+            bounces: args.bounces,
+            atlas_res: args.atlas_res,
+            ..Default::default()
+        },
+        from_bounce: args.from_bounce,
+        out: args.out,
+    };
+    let result = valgi::atlas::bake_to_file(&request, &progress, &cancel);
+    bar.finish_and_clear();
+    match result {
+        Ok(summary) => {
+            println!("{summary}");
+            ExitCode::SUCCESS
+        }
+        Err(valgi::atlas::BakeError::Cancelled) => {
+            eprintln!("cancelled: no atlas written");
+            ExitCode::from(130)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
         }
     }
 }

@@ -32,10 +32,16 @@ pub trait Method {
 }
 
 /// Methods `valgi render --method` accepts, with a one-line description.
-pub const METHODS: &[(&str, &str)] = &[(
-    "direct",
-    "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
-)];
+pub const METHODS: &[(&str, &str)] = &[
+    (
+        "direct",
+        "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
+    ),
+    (
+        "atlas",
+        "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
+    ),
+];
 
 /// Builds a method by name for one scene and output size.
 pub fn create(
@@ -49,6 +55,9 @@ pub fn create(
         "direct" => Box::new(DirectMethod {
             raster: Rasterizer::new(ctx, scene, settings)?,
         }),
+        "atlas" => Box::new(crate::atlas::AtlasMethod::new(
+            ctx, scene, settings, options,
+        )?),
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

@@ -15,6 +15,14 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/direct_light.wgsl"),
     ),
     ("resolve.wgsl", include_str!("../shaders/resolve.wgsl")),
+    (
+        "atlas_render.wgsl",
+        include_str!("../shaders/atlas_render.wgsl"),
+    ),
+    (
+        "atlas_apply.wgsl",
+        include_str!("../shaders/atlas_apply.wgsl"),
+    ),
 ];
 
 /// Files that are only included by others (no entry points of their own).
