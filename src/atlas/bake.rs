@@ -214,6 +214,30 @@ pub fn transfer(p: Vec3, n_p: Vec3, area: f32, x: Vec3, n_x: Vec3) -> f32 {
     c / (std::f32::consts::PI * d2 + area)
 }
 
+/// Transfer from a whole patch: the disc formula from its VPL far away; within four disc
+/// radii the patch is split into its sample points (each a disc of area `sample_area`), so
+/// receivers near a patch (corners, contact) see its real extent instead of one clamped
+/// point, which would darken concave corners.
+#[inline]
+pub fn patch_transfer(
+    patch: &Patch,
+    samples: &[SurfaceSample],
+    sample_area: f32,
+    x: Vec3,
+    n_x: Vec3,
+) -> f32 {
+    let d2 = patch.position.distance_squared(x);
+    if d2 > 16.0 * patch.area / std::f32::consts::PI {
+        return transfer(patch.position, patch.normal, patch.area, x, n_x);
+    }
+    let own = &samples[patch.samples.clone()];
+    let sum: f32 = own
+        .iter()
+        .map(|s| transfer(s.position, s.normal, sample_area, x, n_x))
+        .sum();
+    sum / own.len() as f32
+}
+
 /// Bakes the scene as placed by `world_from_node`. `progress` is called with the stage and
 /// counts; setting `cancel` stops the bake at the next check with [`BakeError::Cancelled`].
 pub fn bake(
@@ -450,7 +474,7 @@ pub fn bake(
                     let pj = &patches[j];
                     let mut sum = 0.0;
                     for s in &samples[pj.samples.clone()] {
-                        let t = transfer(pi.position, pi.normal, pi.area, s.position, s.normal);
+                        let t = patch_transfer(pi, &samples, sample_area, s.position, s.normal);
                         if t > 0.0 {
                             sum += t * cubes[i].visibility(s.position, s.normal, 0);
                         }
@@ -586,7 +610,7 @@ pub fn bake(
             }
             for (k, t) in block.iter().enumerate() {
                 for (i, p) in patches.iter().enumerate() {
-                    let g = transfer(p.position, p.normal, p.area, t.position, t.normal);
+                    let g = patch_transfer(p, &samples, sample_area, t.position, t.normal);
                     if g <= 0.0 {
                         continue;
                     }

@@ -297,7 +297,7 @@ mod tests {
     }
 
     #[test]
-    fn hemisphere_coverage_of_a_floor_and_a_closed_box() {
+    fn hemisphere_coverage_above_a_floor() {
         // Above an infinite-ish floor looking down: all of the lower hemisphere is covered.
         let tris = quad(-1.0, 1000.0);
         let cube = DepthCube::new(Vec3::ZERO, 32, 1e-3, &tris);

@@ -450,3 +450,92 @@ pub fn dilate(values: &mut [[f32; 3]], filled: &mut [bool], resolution: u32, pas
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sliver_that_covers_no_centre_still_gets_texels() {
+        // A needle from (0.6, 2.1) to (9.4, 2.3), far thinner than a texel and below the row
+        // of centres at y = 2.5: plain rasterization finds nothing.
+        let sliver = [
+            Vec2::new(0.6, 2.1),
+            Vec2::new(9.4, 2.3),
+            Vec2::new(9.4, 2.31),
+        ];
+        let found = rasterize_uv_triangles(&[sliver], 16);
+        assert!(found.iter().all(|f| !f.3), "no centre is covered");
+        let xs: Vec<u32> = found.iter().map(|f| f.0 % 16).collect();
+        for x in 0..=9 {
+            assert!(
+                xs.contains(&x),
+                "texel column {x} touched by the sliver: {xs:?}"
+            );
+        }
+        for f in &found {
+            assert_eq!(f.0 / 16, 2, "only row 2 is touched");
+            assert!((f.2.element_sum() - 1.0).abs() < 1e-5 && f.2.min_element() >= 0.0);
+        }
+    }
+
+    #[test]
+    fn every_touched_texel_is_found_once() {
+        // A triangle with edges through texel interiors: the found set is exactly the texels
+        // whose square overlaps it, centres first.
+        let t = [
+            Vec2::new(1.3, 1.2),
+            Vec2::new(7.7, 2.9),
+            Vec2::new(3.1, 6.6),
+        ];
+        let found = rasterize_uv_triangles(&[t], 10);
+        let mut expected = 0;
+        for y in 0..10 {
+            for x in 0..10 {
+                let lo = Vec2::new(x as f32, y as f32);
+                if triangle_overlaps_square(t[0], t[1], t[2], lo, lo + Vec2::ONE) {
+                    expected += 1;
+                    assert!(found.iter().any(|f| f.0 == y * 10 + x), "texel ({x}, {y})");
+                }
+            }
+        }
+        assert_eq!(found.len(), expected);
+        assert!(found.iter().any(|f| f.3) && found.iter().any(|f| !f.3));
+    }
+
+    #[test]
+    fn square_overlap_and_closest_point() {
+        let (a, b, c) = (Vec2::ZERO, Vec2::new(4.0, 0.0), Vec2::new(0.0, 4.0));
+        assert!(triangle_overlaps_square(
+            a,
+            b,
+            c,
+            Vec2::new(1.0, 1.0),
+            Vec2::new(2.0, 2.0)
+        ));
+        // Beyond the hypotenuse x + y = 4.
+        assert!(!triangle_overlaps_square(
+            a,
+            b,
+            c,
+            Vec2::new(2.6, 2.6),
+            Vec2::new(3.5, 3.5)
+        ));
+        let w = closest_barycentric(Vec2::new(3.0, 3.0), a, b, c);
+        let p = a * w.x + b * w.y + c * w.z;
+        assert!((p - Vec2::new(2.0, 2.0)).length() < 1e-5, "{p}");
+    }
+
+    #[test]
+    fn dilation_fills_the_padding_from_the_chart() {
+        let res = 6;
+        let mut values = vec![[0.0f32; 3]; 36];
+        let mut filled = vec![false; 36];
+        values[2 * 6 + 2] = [1.0, 2.0, 3.0];
+        filled[2 * 6 + 2] = true;
+        dilate(&mut values, &mut filled, res, 2);
+        assert_eq!(values[6 + 1], [1.0, 2.0, 3.0]);
+        assert_eq!(values[4 * 6 + 4], [1.0, 2.0, 3.0]);
+        assert!(!filled[5 * 6 + 5], "two passes reach two texels");
+    }
+}

@@ -158,6 +158,7 @@ pub struct AtlasLayer {
     apply_group: wgpu::BindGroup,
     /// Per-pixel atlas irradiance E (render resolution, Rgba32Float, alpha 1 on surfaces).
     pub irradiance: wgpu::TextureView,
+    irradiance_texture: wgpu::Texture,
     depth: wgpu::TextureView,
     atlas_size: u32,
     render_size: [u32; 2],
@@ -300,15 +301,17 @@ impl AtlasLayer {
         );
         let atlas_view = atlas_texture.create_view(&Default::default());
         let (rw, rh) = (raster.targets.render_width, raster.targets.render_height);
-        let irradiance = texture(
+        let irradiance_texture = texture(
             &mut bytes,
             "atlas irradiance",
             rw,
             rh,
             RADIANCE_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
-        )
-        .create_view(&Default::default());
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+        );
+        let irradiance = irradiance_texture.create_view(&Default::default());
         let depth = texture(
             &mut bytes,
             "atlas depth",
@@ -411,6 +414,7 @@ impl AtlasLayer {
             apply_pipeline,
             apply_group,
             irradiance,
+            irradiance_texture,
             depth,
             atlas_size: res,
             render_size: [rw, rh],
@@ -443,6 +447,17 @@ impl AtlasLayer {
         };
         ctx.queue
             .write_buffer(&self.apply_buffer, 0, bytemuck::bytes_of(&apply));
+    }
+
+    /// Reads back the last frame's per-pixel atlas irradiance (render resolution; alpha 1
+    /// where a light-mapped surface was drawn, 0 on background).
+    pub fn read_irradiance(&self, ctx: &GpuContext) -> Result<Image, GpuError> {
+        let [w, h] = self.render_size;
+        Ok(Image::from_rgba(
+            w,
+            h,
+            crate::gpu::read_texture_rgba32f(ctx, &self.irradiance_texture)?,
+        ))
     }
 
     /// Atlas lookup (render pass) and ρ_d/π·E into `radiance_indirect` (compute pass). Needs
@@ -510,6 +525,13 @@ impl AtlasMethod {
         let raster = Rasterizer::new(ctx, scene, settings)?;
         let layer = AtlasLayer::new(ctx, scene, &raster, &atlas)?;
         Ok(Self { raster, layer })
+    }
+}
+
+impl AtlasMethod {
+    /// The atlas layer (for tests and composed methods).
+    pub fn layer(&self) -> &AtlasLayer {
+        &self.layer
     }
 }
 
