@@ -137,7 +137,7 @@ fn bake_and_atlas_errors_are_clear() {
 fn interrupt_stops_the_bake_cleanly() {
     let dir = common::temp_dir("cli-bake-int");
     let atlas = dir.join("big.exr");
-    let mut child = valgi()
+    let child = valgi()
         .args(["bake", "--scene", "cornell", "--vpls", "6400", "--out"])
         .arg(&atlas)
         .stdout(std::process::Stdio::piped())

@@ -452,7 +452,7 @@ pub fn bake(
                 &triangles,
             );
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
-            if d % 64 == 0 || d == n {
+            if d.is_multiple_of(64) || d == n {
                 progress("visibility", d, n);
             }
             cube
@@ -529,7 +529,7 @@ pub fn bake(
     let mut shots = 0usize;
     let max_shots = n * b_count * 4;
     while b_count > 1 && shots < max_shots {
-        if shots % 256 == 0 {
+        if shots.is_multiple_of(256) {
             check(cancel)?;
             progress("shoot", shots, n * (b_count - 1));
         }

@@ -12,7 +12,7 @@ pub type Triangles = [[Vec3; 3]];
 /// along the face axis, `u`, `v` along the next two axes.
 fn face_local(face: usize, d: Vec3) -> Vec3 {
     let a = face / 2;
-    let s = if face % 2 == 0 { 1.0 } else { -1.0 };
+    let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
     Vec3::new(d[(a + 1) % 3], d[(a + 2) % 3], s * d[a])
 }
 
@@ -137,9 +137,9 @@ impl DepthCube {
         let step = 2.0 / res as f32;
         let mut covered = 0.0f64;
         let mut total = 0.0f64;
-        for face in 0..6 {
+        for face in 0..6usize {
             let a = face / 2;
-            let s = if face % 2 == 0 { 1.0 } else { -1.0 };
+            let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
             for y in 0..res {
                 for x in 0..res {
                     let u = (x as f32 + 0.5) * step - 1.0;

@@ -176,7 +176,7 @@ fn build_layout(
 
 /// Generated charts for every placed instance, packed into one page with 2 texels padding.
 /// A mesh that has TEXCOORD_1 keeps its islands (repacked); the others are unwrapped.
-fn unwrap(scene: &Scene, meshes: &mut Vec<ChartMesh>, resolution: u32) -> Result<(), String> {
+fn unwrap(scene: &Scene, meshes: &mut [ChartMesh], resolution: u32) -> Result<(), String> {
     let positions: Vec<Vec<[f32; 3]>> = meshes
         .iter()
         .map(|m| m.world_positions.iter().map(|p| p.to_array()).collect())
