@@ -199,3 +199,30 @@ fn an_atlas_for_another_scene_is_rejected() {
     .to_string();
     assert!(err.contains("--atlas"), "{err}");
 }
+
+/// The atlas's Rust mirrors of WGSL structs have the layout naga reflects.
+#[test]
+fn atlas_structs_match_naga_layout() {
+    for layout in valgi::atlas::shared_layouts() {
+        let module = valgi::shaders::validate(layout.file).unwrap_or_else(|e| panic!("{e}"));
+        let ty = module
+            .types
+            .iter()
+            .find(|(_, t)| t.name.as_deref() == Some(layout.wgsl_name))
+            .unwrap_or_else(|| panic!("struct {} not found", layout.wgsl_name))
+            .1;
+        let naga::TypeInner::Struct { members, span } = &ty.inner else {
+            panic!("{} is not a struct", layout.wgsl_name);
+        };
+        assert_eq!(*span as usize, layout.size, "{}", layout.wgsl_name);
+        assert_eq!(members.len(), layout.fields.len(), "{}", layout.wgsl_name);
+        for (member, (name, offset)) in members.iter().zip(&layout.fields) {
+            assert_eq!(member.name.as_deref(), Some(*name));
+            assert_eq!(
+                member.offset as usize, *offset,
+                "{}.{name}",
+                layout.wgsl_name
+            );
+        }
+    }
+}

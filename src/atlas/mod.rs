@@ -124,6 +124,34 @@ pub struct ApplyParams {
     pub pad: [u32; 2],
 }
 
+/// The atlas's structs shared with WGSL, for the layout test (same form as
+/// `raster::types::shared_layouts`).
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::SharedLayout;
+    use std::mem::{offset_of, size_of};
+    vec![
+        SharedLayout {
+            wgsl_name: "AtlasFrame",
+            file: "atlas_render.wgsl",
+            size: size_of::<AtlasFrame>(),
+            fields: vec![
+                ("clip_from_world", offset_of!(AtlasFrame, clip_from_world)),
+                ("atlas_size", offset_of!(AtlasFrame, atlas_size)),
+                ("pad", offset_of!(AtlasFrame, pad)),
+            ],
+        },
+        SharedLayout {
+            wgsl_name: "ApplyParams",
+            file: "atlas_apply.wgsl",
+            size: size_of::<ApplyParams>(),
+            fields: vec![
+                ("render_size", offset_of!(ApplyParams, render_size)),
+                ("pad", offset_of!(ApplyParams, pad)),
+            ],
+        },
+    ]
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 struct AtlasVertex {
