@@ -334,3 +334,28 @@ fn irradiance_is_continuous_across_chart_seams() {
         "rms jump across seams {rs} of the mean irradiance"
     );
 }
+
+/// A mesh with TEXCOORD_1 keeps it: the layout uses the given UVs (here the plane's [0, 1]
+/// UVs), and every texel of the page stands for a point of the plane.
+#[test]
+fn texcoord1_is_used_when_present() {
+    let mut scene = scene::load("plane-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    assert_eq!(scene.instances.len(), 1, "plane-point has one placed mesh");
+    let mesh = &mut scene.meshes[scene.instances[0].mesh];
+    let (lo, hi) = mesh.uv0.iter().fold(
+        (glam::Vec2::splat(f32::MAX), glam::Vec2::splat(f32::MIN)),
+        |(lo, hi), uv| (lo.min(*uv), hi.max(*uv)),
+    );
+    mesh.uv1 = Some(mesh.uv0.iter().map(|uv| (*uv - lo) / (hi - lo)).collect());
+    let result = bake(
+        &scene,
+        &scene.world_from_node(),
+        &small(50),
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    assert_eq!(result.layout.source, "texcoord1");
+    assert_eq!(result.layout.texels.len(), 64 * 64);
+    assert!(result.layout.texels.iter().all(|t| t.centre));
+}

@@ -169,6 +169,8 @@ fn no_black_texels_in_view_on_cornell() {
         "indirect radiance black on a lit surface"
     );
     assert!(m.report()["atlas_missing_texels"] == 0);
+    // Regression guard on the whole pipeline (bake + lookup), tone-mapped at +2 stops.
+    common::assert_matches_reference("atlas_cornell_indirect", &frame.indirect, 2.0, 0.05);
 }
 
 #[test]
