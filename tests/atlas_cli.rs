@@ -27,6 +27,8 @@ fn bake_writes_an_atlas_and_render_uses_it() {
             "3",
             "--atlas-res",
             "64",
+            "--from-bounce",
+            "2",
             "--out",
         ])
         .arg(&atlas)
@@ -61,6 +63,7 @@ fn bake_writes_an_atlas_and_render_uses_it() {
         );
     }
     assert!(report["energy"]["relative_residual"].as_f64().unwrap() < 1e-6);
+    assert_eq!(report["from_bounce"], 2);
     assert!(atlas.is_file());
     let names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()

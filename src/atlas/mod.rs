@@ -491,6 +491,13 @@ impl AtlasLayer {
     /// Atlas lookup (render pass) and ρ_d/π·E into `radiance_indirect` (compute pass). Needs
     /// the G-buffer of this frame.
     pub fn record(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        self.record_lookup(passes)?;
+        self.record_apply(passes)
+    }
+
+    /// Only the lookup: per-pixel atlas irradiance into [`AtlasLayer::irradiance`], for a
+    /// method that applies it together with its own indirect light.
+    pub fn record_lookup(&self, passes: &mut Passes) -> Result<(), GpuError> {
         passes.render(
             "atlas lookup",
             &[Some(wgpu::RenderPassColorAttachment {
@@ -520,7 +527,11 @@ impl AtlasLayer {
                     pass.draw_indexed(0..m.index_count, 0, i..i + 1);
                 }
             },
-        )?;
+        )
+    }
+
+    /// ρ_d/π·E into `radiance_indirect` (overwrites it).
+    pub fn record_apply(&self, passes: &mut Passes) -> Result<(), GpuError> {
         let [w, h] = self.render_size;
         passes.compute("atlas apply", |pass| {
             pass.set_pipeline(&self.apply_pipeline);
