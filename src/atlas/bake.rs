@@ -82,6 +82,8 @@ pub struct EnergyAccount {
     pub absorbed: [f64; 3],
     pub escaped: [f64; 3],
     pub unshot: [f64; 3],
+    /// Direct light that reached the patches (part of the split above, reported apart).
+    pub direct_received: [f64; 3],
 }
 
 impl EnergyAccount {
@@ -102,6 +104,7 @@ impl EnergyAccount {
             "absorbed": r(self.absorbed),
             "escaped": r(self.escaped),
             "unshot": r(self.unshot),
+            "direct_received": r(self.direct_received),
             "relative_residual": self.relative_residual(),
         })
     }
@@ -419,8 +422,8 @@ pub fn bake(
     lap("direct", &mut stage_ms);
     check(cancel)?;
     let mut escaped = [0.0f64; 3];
+    let mut received = [0.0f64; 3];
     {
-        let mut received = [0.0f64; 3];
         for (j, e) in direct.iter().enumerate() {
             for c in 0..3 {
                 received[c] += (e[c] * patches[j].area) as f64;
@@ -583,6 +586,7 @@ pub fn bake(
         absorbed,
         escaped,
         unshot: unshot_power,
+        direct_received: received,
     };
     lap("shoot", &mut stage_ms);
     check(cancel)?;
