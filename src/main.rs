@@ -198,7 +198,13 @@ fn bake(args: BakeArgs) -> ExitCode {
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let cancel = cancel.clone();
-        if let Err(e) = ctrlc::set_handler(move || cancel.store(true, Ordering::Relaxed)) {
+        // First Ctrl-C: stop at the next check; a second one: leave at once.
+        let handler = move || {
+            if cancel.swap(true, Ordering::Relaxed) {
+                std::process::exit(130);
+            }
+        };
+        if let Err(e) = ctrlc::set_handler(handler) {
             log::warn!("Ctrl-C handler: {e}");
         }
     }
