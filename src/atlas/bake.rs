@@ -613,8 +613,13 @@ pub fn bake(
             if cancel.load(Ordering::Relaxed) {
                 return out;
             }
-            for (k, t) in block.iter().enumerate() {
-                for (i, p) in patches.iter().enumerate() {
+            // Patches outside, texels inside: each patch's depth cube stays in cache for the
+            // whole block (per texel, the sum still runs over patches in order).
+            for (i, p) in patches.iter().enumerate() {
+                if power.iter().all(|pw| pw[i] == Vec3::ZERO) {
+                    continue;
+                }
+                for (k, t) in block.iter().enumerate() {
                     let g = patch_transfer(p, &samples, sample_area, t.position, t.normal);
                     if g <= 0.0 {
                         continue;
