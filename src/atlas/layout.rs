@@ -113,9 +113,9 @@ fn build_layout(
     world_from_node: &[Mat4],
     resolution: u32,
 ) -> Result<AtlasLayout, String> {
-    if !(16..=8192).contains(&resolution) {
+    if !(16..=4096).contains(&resolution) {
         return Err(format!(
-            "atlas resolution {resolution} is out of range (16..8192)"
+            "atlas resolution {resolution} is out of range (16..4096)"
         ));
     }
     let mut meshes = Vec::new();
