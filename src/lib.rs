@@ -4,6 +4,7 @@
 pub mod app;
 pub mod bench;
 pub mod eval;
+pub mod atlas;
 pub mod gpu;
 pub mod image_io;
 pub mod method;

@@ -29,6 +29,9 @@ enum Command {
     /// Render every method on every scene against cached references; write results.csv,
     /// speed/accuracy charts and image sheets.
     Eval(EvalArgs),
+    /// Bake the multi-bounce light atlas of a scene to an EXR (irradiance per texel); prints
+    /// one JSON line with stage times, VPLs, texels and the energy account.
+    Bake(BakeArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -108,6 +111,9 @@ struct RenderArgs {
     /// Shorthand for --opt spp=N (reference: paths per pixel).
     #[arg(long)]
     spp: Option<u32>,
+    /// Baked light atlas for `--method atlas` (shorthand for --opt atlas=FILE).
+    #[arg(long)]
+    atlas: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -170,6 +176,31 @@ struct BenchArgs {
     out: PathBuf,
 }
 
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
+    #[arg(long, default_value = "cornell")]
+    scene: String,
+    /// Output atlas (.exr, linear irradiance in W/m², alpha 1 on texels that hold a surface).
+    #[arg(long)]
+    out: PathBuf,
+    /// Number of VPL patches.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().vpls)]
+    vpls: usize,
+    /// Indirect bounces kept.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().bounces)]
+    bounces: u32,
+    /// Atlas width and height in texels.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().atlas_res)]
+    atlas_res: u32,
+    /// Write bounces K..B only (2 leaves bounce 1 to a dynamic method).
+    #[arg(long, default_value_t = 1)]
+    from_bounce: u32,
+    /// Tessellation of built-in scenes (render with the same value).
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
+}
+
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
@@ -214,6 +245,9 @@ fn main() -> ExitCode {
             }
             if let Some(spp) = args.spp {
                 options.set("spp", spp);
+            }
+            if let Some(atlas) = &args.atlas {
+                options.set("atlas", atlas.display());
             }
             let request = RenderRequest {
                 scene: args.scene,
@@ -269,6 +303,7 @@ fn main() -> ExitCode {
             }
         }
         Command::Eval(args) => run_eval(args),
+        Command::Bake(args) => bake(args),
         Command::Scenes => {
             for (name, description) in builtin::names() {
                 println!("{name:<16} {description}");
@@ -295,6 +330,69 @@ fn main() -> ExitCode {
                 println!("{} ({:?}, {:?})", info.name, info.backend, info.device_type);
             }
             ExitCode::SUCCESS
+        }
+    }
+}
+
+/// `valgi bake`: progress bar on a terminal, Ctrl-C stops cleanly (no file is left).
+fn bake(args: BakeArgs) -> ExitCode {
+    use std::io::IsTerminal;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::Arc;
+
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let cancel = cancel.clone();
+        // First Ctrl-C: stop at the next check; a second one: leave at once.
+        let handler = move || {
+            if cancel.swap(true, Ordering::Relaxed) {
+                std::process::exit(130);
+            }
+        };
+        if let Err(e) = ctrlc::set_handler(handler) {
+            log::warn!("Ctrl-C handler: {e}");
+        }
+    }
+    let bar = if std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::new(1)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    let progress = |stage: &str, done: usize, total: usize| {
+        bar.set_message(stage.to_string());
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    };
+    let request = valgi::atlas::BakeRequest {
+        scene: args.scene,
+        max_edge: args.max_edge,
+        settings: valgi::atlas::BakeSettings {
+            vpls: args.vpls,
+            bounces: args.bounces,
+            atlas_res: args.atlas_res,
+            ..Default::default()
+        },
+        from_bounce: args.from_bounce,
+        out: args.out,
+    };
+    let result = valgi::atlas::bake_to_file(&request, &progress, &cancel);
+    bar.finish_and_clear();
+    match result {
+        Ok(summary) => {
+            println!("{summary}");
+            ExitCode::SUCCESS
+        }
+        Err(valgi::atlas::BakeError::Cancelled) => {
+            eprintln!("cancelled: no atlas written");
+            ExitCode::from(130)
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
         }
     }
 }

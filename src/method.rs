@@ -55,6 +55,10 @@ pub const METHODS: &[(&str, &str)] = &[
         "reference",
         "CPU path tracer, the ground truth (options: bounces=N|inf, spp=N, seed=N)",
     ),
+    (
+        "atlas",
+        "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
+    ),
 ];
 
 /// Builds a method by name for one scene and output size.
@@ -74,6 +78,9 @@ pub fn create(
             ctx, scene, settings, options,
         )?),
         "reference" => Box::new(crate::reference::ReferenceMethod::new(settings, options)?),
+        "atlas" => Box::new(crate::atlas::AtlasMethod::new(
+            ctx, scene, settings, options,
+        )?),
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

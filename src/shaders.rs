@@ -49,6 +49,14 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/brute_vals.wgsl"),
     ),
     ("bench_fma.wgsl", include_str!("../shaders/bench_fma.wgsl")),
+    (
+        "atlas_render.wgsl",
+        include_str!("../shaders/atlas_render.wgsl"),
+    ),
+    (
+        "atlas_apply.wgsl",
+        include_str!("../shaders/atlas_apply.wgsl"),
+    ),
 ];
 
 /// Files that are only included by others (no entry points of their own).

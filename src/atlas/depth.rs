@@ -1,0 +1,318 @@
+//! CPU depth maps for the bake's visibility: a depth cube around a point (a point or spot light,
+//! or a shooting VPL) and an orthographic map for directional lights. Faces store the depth
+//! along the face axis; lookups compare a point's depth with a slope-scaled bias and average a
+//! (2r+1)² neighbourhood (PCF) for soft visibility.
+
+use glam::{Vec2, Vec3};
+
+/// Triangles in world space.
+pub type Triangles = [[Vec3; 3]];
+
+/// Face `f` looks along axis `f / 2` with sign `+` for even `f`. Local coordinates: depth `z`
+/// along the face axis, `u`, `v` along the next two axes.
+fn face_local(face: usize, d: Vec3) -> Vec3 {
+    let a = face / 2;
+    let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
+    Vec3::new(d[(a + 1) % 3], d[(a + 2) % 3], s * d[a])
+}
+
+fn major_face(d: Vec3) -> usize {
+    let a = d.abs();
+    let axis = if a.x >= a.y && a.x >= a.z {
+        0
+    } else if a.y >= a.z {
+        1
+    } else {
+        2
+    };
+    axis * 2 + usize::from(d[axis] < 0.0)
+}
+
+/// Rasterizes a screen-space triangle (x, y in texels, w = 1/depth) into `depth` (keeps the
+/// smallest depth).
+fn raster_triangle(depth: &mut [f32], res: usize, t: [Vec3; 3], perspective: bool) {
+    let (a, b, c) = (t[0], t[1], t[2]);
+    let area = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let lo = a.min(b).min(c);
+    let hi = a.max(b).max(c);
+    let x0 = (lo.x - 0.5).ceil().max(0.0) as i64;
+    let y0 = (lo.y - 0.5).ceil().max(0.0) as i64;
+    let x1 = ((hi.x - 0.5).floor() as i64).min(res as i64 - 1);
+    let y1 = ((hi.y - 0.5).floor() as i64).min(res as i64 - 1);
+    for y in y0..=y1 {
+        for x in x0..=x1 {
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let w0 = ((b.x - p.x) * (c.y - p.y) - (b.y - p.y) * (c.x - p.x)) / area;
+            let w1 = ((c.x - p.x) * (a.y - p.y) - (c.y - p.y) * (a.x - p.x)) / area;
+            let w2 = 1.0 - w0 - w1;
+            if w0 < -1e-6 || w1 < -1e-6 || w2 < -1e-6 {
+                continue;
+            }
+            let z = w0 * a.z + w1 * b.z + w2 * c.z;
+            let d = if perspective { 1.0 / z.max(1e-12) } else { z };
+            let slot = &mut depth[y as usize * res + x as usize];
+            if d < *slot {
+                *slot = d;
+            }
+        }
+    }
+}
+
+/// Six perspective faces (90° each) around `origin`.
+pub struct DepthCube {
+    pub origin: Vec3,
+    pub res: usize,
+    pub near: f32,
+    /// 6 · res² depths along the face axis (∞ where nothing was drawn).
+    pub depth: Vec<f32>,
+}
+
+impl DepthCube {
+    pub fn new(origin: Vec3, res: usize, near: f32, triangles: &Triangles) -> Self {
+        let mut depth = vec![f32::INFINITY; 6 * res * res];
+        let half = res as f32 * 0.5;
+        for face in 0..6 {
+            let slice = &mut depth[face * res * res..(face + 1) * res * res];
+            for tri in triangles {
+                let l = tri.map(|p| face_local(face, p - origin));
+                // Quick rejects: behind the near plane or outside a side plane (|u| ≤ z).
+                if l.iter().all(|p| p.z < near)
+                    || l.iter().all(|p| p.x > p.z)
+                    || l.iter().all(|p| p.x < -p.z)
+                    || l.iter().all(|p| p.y > p.z)
+                    || l.iter().all(|p| p.y < -p.z)
+                {
+                    continue;
+                }
+                // Clip against z ≥ near (Sutherland–Hodgman), then project and fan.
+                let mut poly: [Vec3; 4] = [Vec3::ZERO; 4];
+                let mut n = 0;
+                for i in 0..3 {
+                    let (p, q) = (l[i], l[(i + 1) % 3]);
+                    let (pin, qin) = (p.z >= near, q.z >= near);
+                    if pin {
+                        poly[n] = p;
+                        n += 1;
+                    }
+                    if pin != qin {
+                        let t = (near - p.z) / (q.z - p.z);
+                        poly[n] = p + (q - p) * t;
+                        n += 1;
+                    }
+                }
+                if n < 3 {
+                    continue;
+                }
+                let proj = |p: Vec3| {
+                    Vec3::new(
+                        (p.x / p.z + 1.0) * half,
+                        (p.y / p.z + 1.0) * half,
+                        1.0 / p.z,
+                    )
+                };
+                let s0 = proj(poly[0]);
+                for k in 1..n - 1 {
+                    raster_triangle(slice, res, [s0, proj(poly[k]), proj(poly[k + 1])], true);
+                }
+            }
+        }
+        Self {
+            origin,
+            res,
+            near,
+            depth,
+        }
+    }
+
+    /// Fraction of the (2r+1)² texels around the direction to `p` whose surface is not in
+    /// front of `p` (1 = visible). The bias grows with distance (texel footprint).
+    /// Fraction of the cosine-weighted hemisphere around `n` in which the cube sees geometry:
+    /// the exact form-factor sum from the cube's centre to the whole scene (1 in a closed
+    /// room, less where light can leave).
+    pub fn hemisphere_coverage(&self, n: Vec3) -> f32 {
+        let res = self.res;
+        let step = 2.0 / res as f32;
+        let mut covered = 0.0f64;
+        let mut total = 0.0f64;
+        for face in 0..6usize {
+            let a = face / 2;
+            let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
+            for y in 0..res {
+                for x in 0..res {
+                    let u = (x as f32 + 0.5) * step - 1.0;
+                    let v = (y as f32 + 0.5) * step - 1.0;
+                    let mut d = Vec3::ZERO;
+                    d[(a + 1) % 3] = u;
+                    d[(a + 2) % 3] = v;
+                    d[a] = s;
+                    let r2 = 1.0 + u * u + v * v;
+                    let cos = n.dot(d) / r2.sqrt();
+                    if cos <= 0.0 {
+                        continue;
+                    }
+                    let w = (cos * step * step / (r2 * r2.sqrt())) as f64;
+                    total += w;
+                    if self.depth[face * res * res + y * res + x].is_finite() {
+                        covered += w;
+                    }
+                }
+            }
+        }
+        if total > 0.0 {
+            (covered / total) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// `n` is the receiver's normal: the point is pushed off its surface by about one texel
+    /// footprint (normal-offset shadow mapping) so grazing receivers do not shadow themselves.
+    pub fn visibility(&self, p: Vec3, n: Vec3, radius: i64) -> f32 {
+        let dist = (p - self.origin).length();
+        let p = p + n * (dist * 2.0 / self.res as f32);
+        let d = p - self.origin;
+        let face = major_face(d);
+        let l = face_local(face, d);
+        if l.z <= self.near {
+            return 1.0;
+        }
+        let res = self.res as i64;
+        let half = self.res as f32 * 0.5;
+        let x = ((l.x / l.z + 1.0) * half).floor() as i64;
+        let y = ((l.y / l.z + 1.0) * half).floor() as i64;
+        let bias = l.z * (1.0 / self.res as f32) + 1e-5;
+        let base = face * self.res * self.res;
+        let mut lit = 0u32;
+        let mut count = 0u32;
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
+                let xx = (x + dx).clamp(0, res - 1) as usize;
+                let yy = (y + dy).clamp(0, res - 1) as usize;
+                let stored = self.depth[base + yy * self.res + xx];
+                count += 1;
+                if l.z <= stored + bias {
+                    lit += 1;
+                }
+            }
+        }
+        lit as f32 / count as f32
+    }
+}
+
+/// An orthographic depth map looking along `direction` over a bounding sphere.
+pub struct DepthOrtho {
+    pub direction: Vec3,
+    pub u: Vec3,
+    pub v: Vec3,
+    pub center: Vec3,
+    pub radius: f32,
+    pub res: usize,
+    pub depth: Vec<f32>,
+}
+
+impl DepthOrtho {
+    pub fn new(
+        direction: Vec3,
+        center: Vec3,
+        radius: f32,
+        res: usize,
+        triangles: &Triangles,
+    ) -> Self {
+        let direction = direction.normalize();
+        let u = direction.any_orthonormal_vector();
+        let v = direction.cross(u);
+        let mut map = Self {
+            direction,
+            u,
+            v,
+            center,
+            radius,
+            res,
+            depth: vec![f32::INFINITY; res * res],
+        };
+        for tri in triangles {
+            let s = tri.map(|p| map.project(p));
+            raster_triangle(&mut map.depth, res, s, false);
+        }
+        map
+    }
+
+    fn project(&self, p: Vec3) -> Vec3 {
+        let d = p - self.center;
+        let half = self.res as f32 * 0.5;
+        Vec3::new(
+            (d.dot(self.u) / self.radius + 1.0) * half,
+            (d.dot(self.v) / self.radius + 1.0) * half,
+            d.dot(self.direction) + self.radius,
+        )
+    }
+
+    pub fn visibility(&self, p: Vec3, n: Vec3, radius: i64) -> f32 {
+        let p = p + n * (2.0 * self.radius / self.res as f32);
+        let s = self.project(p);
+        let res = self.res as i64;
+        let (x, y) = (s.x.floor() as i64, s.y.floor() as i64);
+        let bias = 2.0 * self.radius / self.res as f32 + 1e-5;
+        let mut lit = 0u32;
+        let mut count = 0u32;
+        for dy in -radius..=radius {
+            for dx in -radius..=radius {
+                let xx = (x + dx).clamp(0, res - 1) as usize;
+                let yy = (y + dy).clamp(0, res - 1) as usize;
+                count += 1;
+                if s.z <= self.depth[yy * self.res + xx] + bias {
+                    lit += 1;
+                }
+            }
+        }
+        lit as f32 / count as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(y: f32, half: f32) -> Vec<[Vec3; 3]> {
+        let a = Vec3::new(-half, y, -half);
+        let b = Vec3::new(half, y, -half);
+        let c = Vec3::new(half, y, half);
+        let d = Vec3::new(-half, y, half);
+        vec![[a, b, c], [a, c, d]]
+    }
+
+    #[test]
+    fn cube_sees_a_blocker() {
+        // A small blocker 0.5 below the origin shadows the floor at y = -1 straight below it,
+        // not the floor far to the side.
+        let mut tris = quad(-0.5, 0.1);
+        tris.extend(quad(-1.0, 5.0));
+        let cube = DepthCube::new(Vec3::ZERO, 64, 1e-3, &tris);
+        assert_eq!(cube.visibility(Vec3::new(0.0, -1.0, 0.0), Vec3::Y, 0), 0.0);
+        assert_eq!(cube.visibility(Vec3::new(2.0, -1.0, 0.5), Vec3::Y, 0), 1.0);
+        assert_eq!(cube.visibility(Vec3::new(0.0, -0.5, 0.0), Vec3::Y, 0), 1.0);
+    }
+
+    #[test]
+    fn hemisphere_coverage_above_a_floor() {
+        // Above an infinite-ish floor looking down: all of the lower hemisphere is covered.
+        let tris = quad(-1.0, 1000.0);
+        let cube = DepthCube::new(Vec3::ZERO, 32, 1e-3, &tris);
+        assert!((cube.hemisphere_coverage(Vec3::NEG_Y) - 1.0).abs() < 1e-3);
+        assert!(cube.hemisphere_coverage(Vec3::Y) < 1e-3);
+        // Half covered when the normal is horizontal.
+        assert!((cube.hemisphere_coverage(Vec3::X) - 0.5).abs() < 0.02);
+    }
+
+    #[test]
+    fn ortho_sees_a_blocker() {
+        let mut tris = quad(0.5, 0.2);
+        tris.extend(quad(-1.0, 3.0));
+        let map = DepthOrtho::new(Vec3::NEG_Y, Vec3::ZERO, 4.0, 256, &tris);
+        assert_eq!(map.visibility(Vec3::new(0.0, -1.0, 0.0), Vec3::Y, 0), 0.0);
+        assert_eq!(map.visibility(Vec3::new(1.0, -1.0, 1.0), Vec3::Y, 0), 1.0);
+    }
+}

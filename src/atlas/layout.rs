@@ -1,0 +1,541 @@
+//! Light-map UVs and the atlas layout: which world point (and normal) every atlas texel stands
+//! for. UVs come from TEXCOORD_1 when every placed mesh has it and is placed once; otherwise
+//! charts are generated with `uvunwrap` (segmentation, flattening, packing with padding), one
+//! input per placed instance in world space so every instance owns its texels.
+//!
+//! Texels are found by rasterizing every triangle in UV space at texel centres, then adding
+//! the texels a triangle touches without covering a centre (edges, vertices, slivers: the
+//! CPU form of the points-lines-triangles passes of seed 001 §4). A touched texel stands for
+//! the triangle point closest to its centre.
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, OnceLock};
+
+use glam::{Mat3, Mat4, Vec2, Vec3};
+
+use crate::scene::Scene;
+
+/// UV-space mesh of one placed instance: world positions and normals at bake time, model
+/// positions for rendering, and atlas UVs in [0, 1] (v down, texel (0, 0) at the top left).
+#[derive(Clone, Debug)]
+pub struct ChartMesh {
+    pub instance: usize,
+    pub material: usize,
+    pub model_positions: Vec<Vec3>,
+    pub world_positions: Vec<Vec3>,
+    pub world_normals: Vec<Vec3>,
+    pub uvs: Vec<Vec2>,
+    pub indices: Vec<u32>,
+}
+
+/// One atlas texel that stands for a surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct Texel {
+    /// Row-major texel index `y·R + x`.
+    pub index: u32,
+    pub position: Vec3,
+    pub normal: Vec3,
+    pub material: u32,
+    /// True when a triangle covers the texel centre; false for texels only touched.
+    pub centre: bool,
+}
+
+#[derive(Clone, Debug)]
+pub struct AtlasLayout {
+    pub resolution: u32,
+    /// `"texcoord1"` or `"generated"`.
+    pub source: &'static str,
+    pub meshes: Vec<ChartMesh>,
+    pub texels: Vec<Texel>,
+}
+
+/// World transform's normal matrix (inverse transpose).
+fn normal_matrix(m: Mat4) -> Mat3 {
+    let m3 = Mat3::from_mat4(m);
+    if m3.determinant().abs() > 1e-20 {
+        m3.inverse().transpose()
+    } else {
+        Mat3::IDENTITY
+    }
+}
+
+type LayoutCache = Mutex<HashMap<u64, Arc<AtlasLayout>>>;
+
+fn cache() -> &'static LayoutCache {
+    static CACHE: OnceLock<LayoutCache> = OnceLock::new();
+    CACHE.get_or_init(Default::default)
+}
+
+fn layout_key(scene: &Scene, world_from_node: &[Mat4], resolution: u32) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    resolution.hash(&mut h);
+    for inst in &scene.instances {
+        let mesh = &scene.meshes[inst.mesh];
+        inst.mesh.hash(&mut h);
+        for v in world_from_node[inst.node].to_cols_array() {
+            v.to_bits().hash(&mut h);
+        }
+        mesh.indices.hash(&mut h);
+        for p in &mesh.positions {
+            p.x.to_bits().hash(&mut h);
+            p.y.to_bits().hash(&mut h);
+            p.z.to_bits().hash(&mut h);
+        }
+        if let Some(uv1) = &mesh.uv1 {
+            for t in uv1 {
+                t.x.to_bits().hash(&mut h);
+                t.y.to_bits().hash(&mut h);
+            }
+        }
+    }
+    h.finish()
+}
+
+/// The atlas layout of a scene placed at `world_from_node`, cached per scene content and
+/// resolution in this process (bake and render of one scene share it).
+pub fn layout(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    resolution: u32,
+) -> Result<Arc<AtlasLayout>, String> {
+    let key = layout_key(scene, world_from_node, resolution);
+    if let Some(found) = cache().lock().unwrap().get(&key) {
+        return Ok(found.clone());
+    }
+    let built = Arc::new(build_layout(scene, world_from_node, resolution)?);
+    cache().lock().unwrap().insert(key, built.clone());
+    Ok(built)
+}
+
+fn build_layout(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    resolution: u32,
+) -> Result<AtlasLayout, String> {
+    if !(16..=4096).contains(&resolution) {
+        return Err(format!(
+            "atlas resolution {resolution} is out of range (16..4096)"
+        ));
+    }
+    let mut meshes = Vec::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let mesh = &scene.meshes[inst.mesh];
+        if mesh.indices.is_empty() {
+            continue;
+        }
+        let m = world_from_node[inst.node];
+        let nm = normal_matrix(m);
+        meshes.push(ChartMesh {
+            instance: i,
+            material: mesh.material,
+            model_positions: mesh.positions.clone(),
+            world_positions: mesh
+                .positions
+                .iter()
+                .map(|&p| m.transform_point3(p))
+                .collect(),
+            world_normals: mesh
+                .normals
+                .iter()
+                .map(|&n| (nm * n).try_normalize().unwrap_or(Vec3::Y))
+                .collect(),
+            uvs: Vec::new(),
+            indices: mesh.indices.clone(),
+        });
+    }
+    if meshes.is_empty() {
+        return Err(format!("scene '{}' has no triangles to bake", scene.name));
+    }
+    let mut uses = HashMap::new();
+    for inst in &scene.instances {
+        *uses.entry(inst.mesh).or_insert(0usize) += 1;
+    }
+    let all_uv1 = scene
+        .instances
+        .iter()
+        .all(|inst| scene.meshes[inst.mesh].uv1.is_some() && uses[&inst.mesh] == 1);
+    let source = if all_uv1 {
+        for cm in &mut meshes {
+            let inst = &scene.instances[cm.instance];
+            cm.uvs = scene.meshes[inst.mesh].uv1.clone().unwrap_or_default();
+        }
+        "texcoord1"
+    } else {
+        unwrap(scene, &mut meshes, resolution)?;
+        "generated"
+    };
+    let texels = find_texels(&meshes, resolution);
+    Ok(AtlasLayout {
+        resolution,
+        source,
+        meshes,
+        texels,
+    })
+}
+
+/// Generated charts for every placed instance, packed into one page with 2 texels padding.
+/// A mesh that has TEXCOORD_1 keeps its islands (repacked); the others are unwrapped.
+fn unwrap(scene: &Scene, meshes: &mut [ChartMesh], resolution: u32) -> Result<(), String> {
+    let positions: Vec<Vec<[f32; 3]>> = meshes
+        .iter()
+        .map(|m| m.world_positions.iter().map(|p| p.to_array()).collect())
+        .collect();
+    let uv1: Vec<Option<Vec<[f32; 2]>>> = meshes
+        .iter()
+        .map(|m| {
+            scene.meshes[scene.instances[m.instance].mesh]
+                .uv1
+                .as_ref()
+                .map(|uv| uv.iter().map(|t| t.to_array()).collect())
+        })
+        .collect();
+    let inputs: Vec<uvunwrap::MeshInput> = meshes
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let mut input = uvunwrap::MeshInput::new(&positions[i], &m.indices);
+            input.existing_uvs = uv1[i].as_deref();
+            input
+        })
+        .collect();
+    let options = uvunwrap::Options {
+        density: uvunwrap::Density::Auto {
+            page_size: resolution,
+        },
+        padding: 2,
+        ..Default::default()
+    };
+    let atlas = uvunwrap::generate(&inputs, &options).map_err(|e| format!("unwrap: {e:?}"))?;
+    if atlas.page_count > 1 {
+        return Err(format!(
+            "the charts need {} atlas pages at {resolution}²; raise --atlas-res",
+            atlas.page_count
+        ));
+    }
+    // uvunwrap's UVs are relative to the (possibly cropped) page; rescale to the square atlas.
+    let sx = atlas.width as f32 / resolution as f32;
+    let sy = atlas.height as f32 / resolution as f32;
+    for (cm, out) in meshes.iter_mut().zip(&atlas.meshes) {
+        let xref: Vec<usize> = out.vertices.iter().map(|v| v.xref as usize).collect();
+        cm.model_positions = xref.iter().map(|&i| cm.model_positions[i]).collect();
+        cm.world_positions = xref.iter().map(|&i| cm.world_positions[i]).collect();
+        cm.world_normals = xref.iter().map(|&i| cm.world_normals[i]).collect();
+        cm.uvs = out
+            .vertices
+            .iter()
+            .map(|v| Vec2::new(v.uv[0] * sx, v.uv[1] * sy))
+            .collect();
+        cm.indices = out.indices.clone();
+    }
+    Ok(())
+}
+
+/// Whether triangle (a, b, c) overlaps the axis-aligned square [lo, hi] (separating axes).
+pub fn triangle_overlaps_square(a: Vec2, b: Vec2, c: Vec2, lo: Vec2, hi: Vec2) -> bool {
+    let tmin = a.min(b).min(c);
+    let tmax = a.max(b).max(c);
+    if tmax.x < lo.x || tmin.x > hi.x || tmax.y < lo.y || tmin.y > hi.y {
+        return false;
+    }
+    let corners = [lo, Vec2::new(hi.x, lo.y), hi, Vec2::new(lo.x, hi.y)];
+    for (p, q, r) in [(a, b, c), (b, c, a), (c, a, b)] {
+        let e = q - p;
+        let axis = Vec2::new(-e.y, e.x);
+        let side = axis.dot(r - p);
+        // The square is separated when all corners lie strictly on the other side.
+        if corners.iter().all(|&k| axis.dot(k - p) * side < 0.0) {
+            return false;
+        }
+    }
+    true
+}
+
+/// Barycentric coordinates of the point of triangle (a, b, c) closest to p (2D).
+pub fn closest_barycentric(p: Vec2, a: Vec2, b: Vec2, c: Vec2) -> Vec3 {
+    if let Some(w) = barycentric(p, a, b, c) {
+        if w.min_element() >= 0.0 {
+            return w;
+        }
+    }
+    let seg = |p: Vec2, a: Vec2, b: Vec2| {
+        let ab = b - a;
+        let len2 = ab.length_squared();
+        let t = if len2 > 0.0 {
+            ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        (t, (a + ab * t).distance_squared(p))
+    };
+    let (t0, d0) = seg(p, a, b);
+    let (t1, d1) = seg(p, b, c);
+    let (t2, d2) = seg(p, c, a);
+    if d0 <= d1 && d0 <= d2 {
+        Vec3::new(1.0 - t0, t0, 0.0)
+    } else if d1 <= d2 {
+        Vec3::new(0.0, 1.0 - t1, t1)
+    } else {
+        Vec3::new(t2, 0.0, 1.0 - t2)
+    }
+}
+
+fn barycentric(p: Vec2, a: Vec2, b: Vec2, c: Vec2) -> Option<Vec3> {
+    let v0 = b - a;
+    let v1 = c - a;
+    let det = v0.perp_dot(v1);
+    if det.abs() < 1e-20 {
+        return None;
+    }
+    let v2 = p - a;
+    let w1 = v2.perp_dot(v1) / det;
+    let w2 = v0.perp_dot(v2) / det;
+    Some(Vec3::new(1.0 - w1 - w2, w1, w2))
+}
+
+/// Texels of triangles given in texel units: first the texels whose centre a triangle covers,
+/// then the touched ones no triangle covers, each standing for the closest triangle point.
+/// Returns (texel index, triangle index, barycentrics, covers centre).
+pub fn rasterize_uv_triangles(
+    triangles: &[[Vec2; 3]],
+    resolution: u32,
+) -> Vec<(u32, usize, Vec3, bool)> {
+    let r = resolution as i64;
+    let mut owner: Vec<Option<(usize, Vec3, bool)>> = vec![None; (r * r) as usize];
+    let bbox = |t: &[Vec2; 3]| {
+        let lo = t[0].min(t[1]).min(t[2]);
+        let hi = t[0].max(t[1]).max(t[2]);
+        (
+            (lo.x.floor() as i64).clamp(0, r - 1),
+            (lo.y.floor() as i64).clamp(0, r - 1),
+            (hi.x.floor() as i64).clamp(0, r - 1),
+            (hi.y.floor() as i64).clamp(0, r - 1),
+        )
+    };
+    // Pass 1: centres covered.
+    for (ti, t) in triangles.iter().enumerate() {
+        let (x0, y0, x1, y1) = bbox(t);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                if let Some(w) = barycentric(p, t[0], t[1], t[2]) {
+                    if w.min_element() >= -1e-6 {
+                        let slot = &mut owner[(y * r + x) as usize];
+                        if slot.is_none() {
+                            *slot = Some((
+                                ti,
+                                w.max(Vec3::ZERO) / w.max(Vec3::ZERO).element_sum(),
+                                true,
+                            ));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // Pass 2: touched but not covered (edges, vertices, slivers).
+    for (ti, t) in triangles.iter().enumerate() {
+        let (x0, y0, x1, y1) = bbox(t);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let i = (y * r + x) as usize;
+                if owner[i].is_some() {
+                    continue;
+                }
+                let lo = Vec2::new(x as f32, y as f32);
+                if triangle_overlaps_square(t[0], t[1], t[2], lo, lo + Vec2::ONE) {
+                    let w = closest_barycentric(lo + Vec2::splat(0.5), t[0], t[1], t[2]);
+                    owner[i] = Some((ti, w, false));
+                }
+            }
+        }
+    }
+    owner
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, o)| o.map(|(t, w, c)| (i as u32, t, w, c)))
+        .collect()
+}
+
+fn find_texels(meshes: &[ChartMesh], resolution: u32) -> Vec<Texel> {
+    let scale = resolution as f32;
+    let mut triangles = Vec::new();
+    let mut refs = Vec::new();
+    for (mi, m) in meshes.iter().enumerate() {
+        for (ti, tri) in m.indices.chunks_exact(3).enumerate() {
+            triangles.push([
+                m.uvs[tri[0] as usize] * scale,
+                m.uvs[tri[1] as usize] * scale,
+                m.uvs[tri[2] as usize] * scale,
+            ]);
+            refs.push((mi, ti));
+        }
+    }
+    rasterize_uv_triangles(&triangles, resolution)
+        .into_iter()
+        .map(|(index, t, w, centre)| {
+            let (mi, ti) = refs[t];
+            let m = &meshes[mi];
+            let idx = &m.indices[ti * 3..ti * 3 + 3];
+            let p = |a: &[Vec3]| {
+                a[idx[0] as usize] * w.x + a[idx[1] as usize] * w.y + a[idx[2] as usize] * w.z
+            };
+            let face = (m.world_positions[idx[1] as usize] - m.world_positions[idx[0] as usize])
+                .cross(m.world_positions[idx[2] as usize] - m.world_positions[idx[0] as usize]);
+            let mut normal = p(&m.world_normals).try_normalize().unwrap_or(Vec3::Y);
+            if let Some(f) = face.try_normalize() {
+                if f.dot(normal) < 0.0 {
+                    normal = -normal;
+                }
+            }
+            Texel {
+                index,
+                position: p(&m.world_positions),
+                normal,
+                material: m.material as u32,
+                centre,
+            }
+        })
+        .collect()
+}
+
+/// Fills empty texels next to filled ones with the mean of their filled neighbours, `passes`
+/// times, so bilinear lookups at chart borders never blend in black. `filled` marks texels
+/// that hold values; it is updated.
+pub fn dilate(values: &mut [[f32; 3]], filled: &mut [bool], resolution: u32, passes: u32) {
+    let r = resolution as i64;
+    for _ in 0..passes {
+        let mut updates = Vec::new();
+        for y in 0..r {
+            for x in 0..r {
+                let i = (y * r + x) as usize;
+                if filled[i] {
+                    continue;
+                }
+                let mut sum = [0.0f32; 3];
+                let mut n = 0;
+                for (dx, dy) in [
+                    (-1, 0),
+                    (1, 0),
+                    (0, -1),
+                    (0, 1),
+                    (-1, -1),
+                    (1, 1),
+                    (-1, 1),
+                    (1, -1),
+                ] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= r || ny >= r {
+                        continue;
+                    }
+                    let j = (ny * r + nx) as usize;
+                    if filled[j] {
+                        for c in 0..3 {
+                            sum[c] += values[j][c];
+                        }
+                        n += 1;
+                    }
+                }
+                if n > 0 {
+                    updates.push((i, sum.map(|s| s / n as f32)));
+                }
+            }
+        }
+        if updates.is_empty() {
+            break;
+        }
+        for (i, v) in updates {
+            values[i] = v;
+            filled[i] = true;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_sliver_that_covers_no_centre_still_gets_texels() {
+        // A needle from (0.6, 2.1) to (9.4, 2.3), far thinner than a texel and below the row
+        // of centres at y = 2.5: plain rasterization finds nothing.
+        let sliver = [
+            Vec2::new(0.6, 2.1),
+            Vec2::new(9.4, 2.3),
+            Vec2::new(9.4, 2.31),
+        ];
+        let found = rasterize_uv_triangles(&[sliver], 16);
+        assert!(found.iter().all(|f| !f.3), "no centre is covered");
+        let xs: Vec<u32> = found.iter().map(|f| f.0 % 16).collect();
+        for x in 0..=9 {
+            assert!(
+                xs.contains(&x),
+                "texel column {x} touched by the sliver: {xs:?}"
+            );
+        }
+        for f in &found {
+            assert_eq!(f.0 / 16, 2, "only row 2 is touched");
+            assert!((f.2.element_sum() - 1.0).abs() < 1e-5 && f.2.min_element() >= 0.0);
+        }
+    }
+
+    #[test]
+    fn every_touched_texel_is_found_once() {
+        // A triangle with edges through texel interiors: the found set is exactly the texels
+        // whose square overlaps it, centres first.
+        let t = [
+            Vec2::new(1.3, 1.2),
+            Vec2::new(7.7, 2.9),
+            Vec2::new(3.1, 6.6),
+        ];
+        let found = rasterize_uv_triangles(&[t], 10);
+        let mut expected = 0;
+        for y in 0..10 {
+            for x in 0..10 {
+                let lo = Vec2::new(x as f32, y as f32);
+                if triangle_overlaps_square(t[0], t[1], t[2], lo, lo + Vec2::ONE) {
+                    expected += 1;
+                    assert!(found.iter().any(|f| f.0 == y * 10 + x), "texel ({x}, {y})");
+                }
+            }
+        }
+        assert_eq!(found.len(), expected);
+        assert!(found.iter().any(|f| f.3) && found.iter().any(|f| !f.3));
+    }
+
+    #[test]
+    fn square_overlap_and_closest_point() {
+        let (a, b, c) = (Vec2::ZERO, Vec2::new(4.0, 0.0), Vec2::new(0.0, 4.0));
+        assert!(triangle_overlaps_square(
+            a,
+            b,
+            c,
+            Vec2::new(1.0, 1.0),
+            Vec2::new(2.0, 2.0)
+        ));
+        // Beyond the hypotenuse x + y = 4.
+        assert!(!triangle_overlaps_square(
+            a,
+            b,
+            c,
+            Vec2::new(2.6, 2.6),
+            Vec2::new(3.5, 3.5)
+        ));
+        let w = closest_barycentric(Vec2::new(3.0, 3.0), a, b, c);
+        let p = a * w.x + b * w.y + c * w.z;
+        assert!((p - Vec2::new(2.0, 2.0)).length() < 1e-5, "{p}");
+    }
+
+    #[test]
+    fn dilation_fills_the_padding_from_the_chart() {
+        let res = 6;
+        let mut values = vec![[0.0f32; 3]; 36];
+        let mut filled = vec![false; 36];
+        values[2 * 6 + 2] = [1.0, 2.0, 3.0];
+        filled[2 * 6 + 2] = true;
+        dilate(&mut values, &mut filled, res, 2);
+        assert_eq!(values[6 + 1], [1.0, 2.0, 3.0]);
+        assert_eq!(values[4 * 6 + 4], [1.0, 2.0, 3.0]);
+        assert!(!filled[5 * 6 + 5], "two passes reach two texels");
+    }
+}

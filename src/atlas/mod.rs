@@ -1,0 +1,615 @@
+//! The static base: a multi-bounce light atlas (seed 000, DESIGN §5). `bake` computes it on
+//! the CPU; [`AtlasLayer`] looks it up on the GPU and writes indirect radiance ρ_d/π·E; the
+//! `atlas` method is direct light plus that layer. See `src/atlas/README.md`.
+
+pub mod bake;
+pub mod depth;
+pub mod layout;
+
+use std::path::Path;
+
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+
+pub use bake::{bake, Bake, BakeError, BakeSettings, EnergyAccount};
+
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::image_io::Image;
+use crate::method::{Method, MethodOptions};
+use crate::raster::{
+    buffer_binding, compute_pipeline, storage_texture_entry, texture_entry, uniform_entry,
+    view_binding, FrameOutput, Rasterizer, RenderError, RenderSettings, DEPTH_FORMAT,
+    RADIANCE_FORMAT,
+};
+use crate::scene::{CameraView, Scene};
+
+/// One `valgi bake` invocation.
+#[derive(Clone, Debug)]
+pub struct BakeRequest {
+    /// Built-in scene name or a `.gltf`/`.glb` path.
+    pub scene: String,
+    /// Built-in scenes' tessellation; render with the same value (the layout depends on it).
+    pub max_edge: f32,
+    pub settings: BakeSettings,
+    /// First bounce written (1 = all); bounces `from_bounce..=bounces` go into the file.
+    pub from_bounce: u32,
+    pub out: std::path::PathBuf,
+}
+
+/// Loads the scene, bakes, and writes the atlas EXR (through a temporary file renamed into
+/// place, so a failed or cancelled bake leaves no file). Returns the JSON summary.
+pub fn bake_to_file(
+    request: &BakeRequest,
+    progress: bake::Progress,
+    cancel: &std::sync::atomic::AtomicBool,
+) -> Result<serde_json::Value, BakeError> {
+    let started = std::time::Instant::now();
+    if !matches!(
+        request
+            .out
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref(),
+        Some("exr")
+    ) {
+        return Err(BakeError::Settings(format!(
+            "{}: the atlas is written as .exr",
+            request.out.display()
+        )));
+    }
+    crate::image_io::prepare_output(&request.out)?;
+    if request.from_bounce == 0 || request.from_bounce > request.settings.bounces {
+        return Err(BakeError::Settings(format!(
+            "--from-bounce {} must be between 1 and --bounces {}",
+            request.from_bounce, request.settings.bounces
+        )));
+    }
+    let scene = crate::scene::load(
+        &request.scene,
+        &crate::scene::builtin::BuiltinParams {
+            max_edge: request.max_edge,
+        },
+    )?;
+    let world_from_node = scene.world_from_node();
+    let result = bake(
+        &scene,
+        &world_from_node,
+        &request.settings,
+        progress,
+        cancel,
+    )?;
+    let image = result.atlas(request.from_bounce, request.settings.bounces);
+    if cancel.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(BakeError::Cancelled);
+    }
+    let write_started = std::time::Instant::now();
+    bake::write_atlas_exr(&image, &request.out)?;
+    let mut summary = result.summary();
+    if let Some(obj) = summary.as_object_mut() {
+        obj.insert("scene".into(), serde_json::json!(scene.name));
+        obj.insert("from_bounce".into(), serde_json::json!(request.from_bounce));
+        obj.insert(
+            "out".into(),
+            serde_json::json!(request.out.display().to_string()),
+        );
+        if let Some(stages) = obj.get_mut("stages_ms").and_then(|s| s.as_object_mut()) {
+            stages.insert(
+                "write".into(),
+                serde_json::json!(write_started.elapsed().as_secs_f64() * 1000.0),
+            );
+        }
+        obj.insert(
+            "wall_ms".into(),
+            serde_json::json!((started.elapsed().as_secs_f64() * 1e6).round() / 1000.0),
+        );
+    }
+    Ok(summary)
+}
+
+/// Mirrors `AtlasFrame` in `shaders/atlas_render.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct AtlasFrame {
+    pub clip_from_world: [[f32; 4]; 4],
+    pub atlas_size: [u32; 2],
+    pub pad: [u32; 2],
+}
+
+/// Mirrors `ApplyParams` in `shaders/atlas_apply.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+pub struct ApplyParams {
+    pub render_size: [u32; 2],
+    pub pad: [u32; 2],
+}
+
+/// The atlas's structs shared with WGSL, for the layout test (same form as
+/// `raster::types::shared_layouts`).
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::SharedLayout;
+    use std::mem::{offset_of, size_of};
+    vec![
+        SharedLayout {
+            wgsl_name: "AtlasFrame",
+            file: "atlas_render.wgsl",
+            size: size_of::<AtlasFrame>(),
+            fields: vec![
+                ("clip_from_world", offset_of!(AtlasFrame, clip_from_world)),
+                ("atlas_size", offset_of!(AtlasFrame, atlas_size)),
+                ("pad", offset_of!(AtlasFrame, pad)),
+            ],
+        },
+        SharedLayout {
+            wgsl_name: "ApplyParams",
+            file: "atlas_apply.wgsl",
+            size: size_of::<ApplyParams>(),
+            fields: vec![
+                ("render_size", offset_of!(ApplyParams, render_size)),
+                ("pad", offset_of!(ApplyParams, pad)),
+            ],
+        },
+    ]
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct AtlasVertex {
+    position: [f32; 3],
+    uv: [f32; 2],
+}
+
+struct LayerMesh {
+    vertices: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    index_count: u32,
+    node: usize,
+}
+
+/// Reads an atlas EXR written by `valgi bake` and checks it against the scene's layout.
+pub fn load_atlas(path: &Path) -> Result<Image, RenderError> {
+    Image::read_exr(path).map_err(|e| RenderError::Settings(format!("--atlas: {e}")))
+}
+
+/// GPU lookup of a baked atlas: rasterizes the light-map meshes from the camera into an
+/// irradiance target (pass "atlas lookup"), then writes ρ_d/π·E into the rasterizer's
+/// `radiance_indirect` (pass "atlas apply"). A layer for any method that wants the atlas's
+/// bounces (`atlas`, later `sparse+atlas`), which can also read [`AtlasLayer::irradiance`].
+pub struct AtlasLayer {
+    meshes: Vec<LayerMesh>,
+    frame_buffer: wgpu::Buffer,
+    transforms: wgpu::Buffer,
+    apply_buffer: wgpu::Buffer,
+    render_pipeline: wgpu::RenderPipeline,
+    render_group: wgpu::BindGroup,
+    apply_pipeline: wgpu::ComputePipeline,
+    apply_group: wgpu::BindGroup,
+    /// Per-pixel atlas irradiance E (render resolution, Rgba32Float, alpha 1 on surfaces).
+    pub irradiance: wgpu::TextureView,
+    irradiance_texture: wgpu::Texture,
+    depth: wgpu::TextureView,
+    atlas_size: u32,
+    render_size: [u32; 2],
+    pub bytes: GpuBytes,
+    /// Layout texels missing from the atlas file (0 when it matches the scene).
+    pub missing_texels: usize,
+}
+
+impl AtlasLayer {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        raster: &Rasterizer,
+        atlas: &Image,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        if atlas.width != atlas.height {
+            return Err(RenderError::Settings(format!(
+                "the atlas is {}×{}; a baked atlas is square",
+                atlas.width, atlas.height
+            )));
+        }
+        let res = atlas.width;
+        let layout = layout::layout(scene, &scene.world_from_node(), res)
+            .map_err(|e| RenderError::Settings(format!("atlas layout: {e}")))?;
+        let missing_texels = layout
+            .texels
+            .iter()
+            .filter(|t| atlas.pixels[t.index as usize][3] <= 0.0)
+            .count();
+        if missing_texels * 100 > layout.texels.len() {
+            return Err(RenderError::Settings(format!(
+                "the atlas does not match this scene's light-map layout ({missing_texels} of {} texels missing); bake it for the same scene and --max-edge",
+                layout.texels.len()
+            )));
+        }
+        let mut bytes = GpuBytes::default();
+        let vertex_usage = wgpu::BufferUsages::VERTEX;
+        let mut meshes = Vec::new();
+        for m in &layout.meshes {
+            let vertices: Vec<AtlasVertex> = m
+                .model_positions
+                .iter()
+                .zip(&m.uvs)
+                .map(|(p, uv)| AtlasVertex {
+                    position: p.to_array(),
+                    uv: uv.to_array(),
+                })
+                .collect();
+            meshes.push(LayerMesh {
+                vertices: bytes.buffer_init(
+                    device,
+                    "atlas vertices",
+                    bytemuck::cast_slice(&vertices),
+                    vertex_usage,
+                ),
+                indices: bytes.buffer_init(
+                    device,
+                    "atlas indices",
+                    bytemuck::cast_slice(&m.indices),
+                    wgpu::BufferUsages::INDEX,
+                ),
+                index_count: m.indices.len() as u32,
+                node: scene.instances[m.instance].node,
+            });
+        }
+        let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+        let frame_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("atlas frame"),
+                size: std::mem::size_of::<AtlasFrame>() as u64,
+                usage: uniform,
+                mapped_at_creation: false,
+            },
+        );
+        let apply_buffer = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("atlas apply"),
+                size: std::mem::size_of::<ApplyParams>() as u64,
+                usage: uniform,
+                mapped_at_creation: false,
+            },
+        );
+        let transforms = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("atlas transforms"),
+                size: (meshes.len().max(1) * 64) as u64,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            },
+        );
+        let texture = |bytes: &mut GpuBytes, label, w, h, format, usage| {
+            bytes.texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: wgpu::Extent3d {
+                        width: w,
+                        height: h,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage,
+                    view_formats: &[],
+                },
+            )
+        };
+        let atlas_texture = texture(
+            &mut bytes,
+            "light atlas",
+            res,
+            res,
+            wgpu::TextureFormat::Rgba32Float,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        ctx.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &atlas_texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(&atlas.pixels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(res * 16),
+                rows_per_image: Some(res),
+            },
+            wgpu::Extent3d {
+                width: res,
+                height: res,
+                depth_or_array_layers: 1,
+            },
+        );
+        let atlas_view = atlas_texture.create_view(&Default::default());
+        let (rw, rh) = (raster.targets.render_width, raster.targets.render_height);
+        let irradiance_texture = texture(
+            &mut bytes,
+            "atlas irradiance",
+            rw,
+            rh,
+            RADIANCE_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+        );
+        let irradiance = irradiance_texture.create_view(&Default::default());
+        let depth = texture(
+            &mut bytes,
+            "atlas depth",
+            rw,
+            rh,
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+        )
+        .create_view(&Default::default());
+
+        let render_module = ctx.shader("atlas_render.wgsl");
+        let render_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("atlas lookup"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT),
+                crate::raster::storage_entry(1, wgpu::ShaderStages::VERTEX),
+                texture_entry(2, wgpu::ShaderStages::FRAGMENT),
+            ],
+        });
+        let render_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("atlas lookup"),
+            layout: &render_bgl,
+            entries: &[
+                buffer_binding(0, &frame_buffer),
+                buffer_binding(1, &transforms),
+                view_binding(2, &atlas_view),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("atlas lookup"),
+            bind_group_layouts: &[Some(&render_bgl)],
+            immediate_size: 0,
+        });
+        const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
+            wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2];
+        let render_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("atlas lookup"),
+            layout: Some(&pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &render_module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: std::mem::size_of::<AtlasVertex>() as u64,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &ATTRIBUTES,
+                })],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Less),
+                stencil: wgpu::StencilState::default(),
+                bias: wgpu::DepthBiasState::default(),
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &render_module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: RADIANCE_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+
+        let apply_module = ctx.shader("atlas_apply.wgsl");
+        let apply_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("atlas apply"),
+            entries: &[
+                uniform_entry(0, wgpu::ShaderStages::COMPUTE),
+                texture_entry(1, wgpu::ShaderStages::COMPUTE),
+                texture_entry(2, wgpu::ShaderStages::COMPUTE),
+                storage_texture_entry(3, wgpu::ShaderStages::COMPUTE),
+            ],
+        });
+        let apply_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("atlas apply"),
+            layout: &apply_bgl,
+            entries: &[
+                buffer_binding(0, &apply_buffer),
+                view_binding(1, &irradiance),
+                view_binding(2, &raster.targets.diffuse),
+                view_binding(3, &raster.targets.radiance_indirect),
+            ],
+        });
+        let apply_pipeline = compute_pipeline(device, "atlas apply", &apply_module, &apply_bgl);
+        Ok(Self {
+            meshes,
+            frame_buffer,
+            transforms,
+            apply_buffer,
+            render_pipeline,
+            render_group,
+            apply_pipeline,
+            apply_group,
+            irradiance,
+            irradiance_texture,
+            depth,
+            atlas_size: res,
+            render_size: [rw, rh],
+            bytes,
+            missing_texels,
+        })
+    }
+
+    /// Uploads the camera and the instances' transforms.
+    pub fn prepare(&self, ctx: &GpuContext, world_from_node: &[Mat4], camera: &CameraView) {
+        let frame = AtlasFrame {
+            clip_from_world: camera.clip_from_world().to_cols_array_2d(),
+            atlas_size: [self.atlas_size; 2],
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+        let transforms: Vec<[[f32; 4]; 4]> = self
+            .meshes
+            .iter()
+            .map(|m| world_from_node[m.node].to_cols_array_2d())
+            .collect();
+        if !transforms.is_empty() {
+            ctx.queue
+                .write_buffer(&self.transforms, 0, bytemuck::cast_slice(&transforms));
+        }
+        let apply = ApplyParams {
+            render_size: self.render_size,
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&self.apply_buffer, 0, bytemuck::bytes_of(&apply));
+    }
+
+    /// Reads back the last frame's per-pixel atlas irradiance (render resolution; alpha 1
+    /// where a light-mapped surface was drawn, 0 on background).
+    pub fn read_irradiance(&self, ctx: &GpuContext) -> Result<Image, GpuError> {
+        let [w, h] = self.render_size;
+        Ok(Image::from_rgba(
+            w,
+            h,
+            crate::gpu::read_texture_rgba32f(ctx, &self.irradiance_texture)?,
+        ))
+    }
+
+    /// Atlas lookup (render pass) and ρ_d/π·E into `radiance_indirect` (compute pass). Needs
+    /// the G-buffer of this frame.
+    pub fn record(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        self.record_lookup(passes)?;
+        self.record_apply(passes)
+    }
+
+    /// Only the lookup: per-pixel atlas irradiance into [`AtlasLayer::irradiance`], for a
+    /// method that applies it together with its own indirect light.
+    pub fn record_lookup(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        passes.render(
+            "atlas lookup",
+            &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.irradiance,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            |pass| {
+                pass.set_pipeline(&self.render_pipeline);
+                pass.set_bind_group(0, &self.render_group, &[]);
+                for (i, m) in self.meshes.iter().enumerate() {
+                    pass.set_vertex_buffer(0, m.vertices.slice(..));
+                    pass.set_index_buffer(m.indices.slice(..), wgpu::IndexFormat::Uint32);
+                    let i = i as u32;
+                    pass.draw_indexed(0..m.index_count, 0, i..i + 1);
+                }
+            },
+        )
+    }
+
+    /// ρ_d/π·E into `radiance_indirect` (overwrites it).
+    pub fn record_apply(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        let [w, h] = self.render_size;
+        passes.compute("atlas apply", |pass| {
+            pass.set_pipeline(&self.apply_pipeline);
+            pass.set_bind_group(0, &self.apply_group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        })
+    }
+}
+
+/// Direct light plus every indirect bounce stored in a baked atlas (`--atlas FILE`).
+pub struct AtlasMethod {
+    raster: Rasterizer,
+    layer: AtlasLayer,
+}
+
+impl AtlasMethod {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        settings: RenderSettings,
+        options: &MethodOptions,
+    ) -> Result<Self, RenderError> {
+        let path: String = options.get("atlas", String::new())?;
+        if path.is_empty() {
+            return Err(RenderError::Settings(
+                "method 'atlas' needs --atlas FILE.exr (from `valgi bake`)".into(),
+            ));
+        }
+        let atlas = load_atlas(Path::new(&path))?;
+        let raster = Rasterizer::new(ctx, scene, settings)?;
+        let layer = AtlasLayer::new(ctx, scene, &raster, &atlas)?;
+        Ok(Self { raster, layer })
+    }
+}
+
+impl AtlasMethod {
+    /// The atlas layer (for tests and composed methods).
+    pub fn layer(&self) -> &AtlasLayer {
+        &self.layer
+    }
+}
+
+impl Method for AtlasMethod {
+    fn name(&self) -> &'static str {
+        "atlas"
+    }
+
+    fn render(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: &CameraView,
+    ) -> Result<FrameOutput, RenderError> {
+        self.raster.prepare(ctx, scene, world_from_node, camera);
+        self.layer.prepare(ctx, world_from_node, camera);
+        let mut passes = Passes::new(ctx, 6 * scene.lights.len() as u32 + 10);
+        self.raster.record_shadows(&mut passes)?;
+        self.raster.record_gbuffer(&mut passes)?;
+        self.raster.record_direct(&mut passes)?;
+        self.layer.record(&mut passes)?;
+        self.raster.record_resolve(ctx, &mut passes, true)?;
+        let timings = passes.finish()?;
+        let (direct, indirect) = self.raster.read_outputs(ctx, true)?;
+        Ok(FrameOutput {
+            direct,
+            indirect,
+            timings,
+            gpu_bytes: self.raster.gpu_bytes() + self.layer.bytes.0,
+        })
+    }
+
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut map = serde_json::Map::new();
+        map.insert(
+            "atlas_missing_texels".into(),
+            serde_json::json!(self.layer.missing_texels),
+        );
+        map
+    }
+}

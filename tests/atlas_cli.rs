@@ -1,0 +1,165 @@
+//! `valgi bake` and `valgi render --method atlas` end to end.
+
+mod common;
+
+use std::process::Command;
+
+fn valgi() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_valgi"))
+}
+
+fn json_line(stdout: &[u8]) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(stdout);
+    let line = stdout.lines().last().expect("a JSON line");
+    serde_json::from_str(line).expect("valid JSON")
+}
+
+#[test]
+fn bake_writes_an_atlas_and_render_uses_it() {
+    let dir = common::temp_dir("cli-bake");
+    let atlas = dir.join("box.exr");
+    let output = valgi()
+        .args(["bake", "--scene", "box-point", "--max-edge", "0.25"])
+        .args([
+            "--vpls",
+            "100",
+            "--bounces",
+            "3",
+            "--atlas-res",
+            "64",
+            "--from-bounce",
+            "2",
+            "--out",
+        ])
+        .arg(&atlas)
+        .output()
+        .expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "bake failed: {stderr}");
+    let report = json_line(&output.stdout);
+    for key in [
+        "vpls",
+        "samples",
+        "texels",
+        "stages_ms",
+        "energy",
+        "wall_ms",
+        "shots",
+    ] {
+        assert!(report.get(key).is_some(), "missing {key}: {report}");
+    }
+    for stage in [
+        "unwrap",
+        "discretize",
+        "direct",
+        "visibility",
+        "shoot",
+        "fill",
+        "write",
+    ] {
+        assert!(
+            report["stages_ms"].get(stage).is_some(),
+            "stage {stage}: {report}"
+        );
+    }
+    assert!(report["energy"]["relative_residual"].as_f64().unwrap() < 1e-6);
+    assert_eq!(report["from_bounce"], 2);
+    assert!(atlas.is_file());
+    let names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(names.len(), 1, "only the atlas: {names:?}");
+
+    if common::gpu().is_none() {
+        return;
+    }
+    let image = dir.join("render.exr");
+    let output = valgi()
+        .args(["render", "--scene", "box-point", "--max-edge", "0.25"])
+        .args(["--method", "atlas", "--width", "32", "--height", "32"])
+        .args(["--indirect-only", "--atlas"])
+        .arg(&atlas)
+        .arg("--out")
+        .arg(&image)
+        .output()
+        .expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "render failed: {stderr}");
+    let report = json_line(&output.stdout);
+    assert_eq!(report["method"], "atlas");
+    assert_eq!(report["atlas_missing_texels"], 0);
+    let indirect = valgi::image_io::Image::read_exr(&image).unwrap();
+    assert!(indirect.mean_rgb()[1] > 0.0);
+}
+
+#[test]
+fn bake_and_atlas_errors_are_clear() {
+    let output = valgi()
+        .args([
+            "bake",
+            "--scene",
+            "box-point",
+            "--out",
+            "/proc/valgi-none/a.exr",
+        ])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("/proc/valgi-none/a.exr"), "{stderr}");
+
+    let output = valgi()
+        .args(["bake", "--scene", "no-such-scene", "--out", "/tmp/x.exr"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+
+    if common::gpu().is_none() {
+        return;
+    }
+    let output = valgi()
+        .args(["render", "--scene", "box-point", "--method", "atlas"])
+        .args([
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--out",
+            "/tmp/valgi-x.png",
+        ])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--atlas"), "{stderr}");
+}
+
+/// Ctrl-C (SIGINT) during a long bake stops it with exit code 130 and leaves no file.
+#[test]
+fn interrupt_stops_the_bake_cleanly() {
+    let dir = common::temp_dir("cli-bake-int");
+    let atlas = dir.join("big.exr");
+    let child = valgi()
+        .args(["bake", "--scene", "cornell", "--vpls", "6400", "--out"])
+        .arg(&atlas)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("cancelled"), "{stderr}");
+    let names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(names.is_empty(), "nothing written: {names:?}");
+}
