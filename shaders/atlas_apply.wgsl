@@ -23,3 +23,18 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let rho = textureLoad(gbuffer_diffuse, id.xy, 0).rgb;
     textureStore(radiance_indirect, id.xy, vec4<f32>(rho * INV_PI * e.rgb * e.a, 1.0));
 }
+
+// `sparse+atlas`: the VAL bounce (drawn by the sparse apply pass into `vals_indirect`) plus
+// ρ_d/π · E of an atlas baked with --from-bounce 2, so each bounce is counted once.
+@group(0) @binding(4) var vals_indirect: texture_2d<f32>;
+
+@compute @workgroup_size(8, 8, 1)
+fn cs_add(@builtin(global_invocation_id) id: vec3<u32>) {
+    if (id.x >= params.render_size.x || id.y >= params.render_size.y) {
+        return;
+    }
+    let e = textureLoad(irradiance, id.xy, 0);
+    let rho = textureLoad(gbuffer_diffuse, id.xy, 0).rgb;
+    let vals = textureLoad(vals_indirect, id.xy, 0).rgb;
+    textureStore(radiance_indirect, id.xy, vec4<f32>(vals + rho * INV_PI * e.rgb * e.a, 1.0));
+}

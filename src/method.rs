@@ -59,6 +59,10 @@ pub const METHODS: &[(&str, &str)] = &[
         "atlas",
         "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
     ),
+    (
+        "sparse+atlas",
+        "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2 (--atlas FILE)",
+    ),
 ];
 
 /// Builds a method by name for one scene and output size.
@@ -81,6 +85,7 @@ pub fn create(
         "atlas" => Box::new(crate::atlas::AtlasMethod::new(
             ctx, scene, settings, options,
         )?),
+        "sparse+atlas" => crate::atlas::create_sparse_atlas(ctx, scene, settings, options)?,
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

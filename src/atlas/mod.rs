@@ -3,6 +3,7 @@
 //! `atlas` method is direct light plus that layer. See `src/atlas/README.md`.
 
 pub mod bake;
+pub mod compose;
 pub mod depth;
 pub mod layout;
 
@@ -12,6 +13,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
 pub use bake::{bake, Bake, BakeError, BakeSettings, EnergyAccount};
+pub use compose::{create_sparse_atlas, AtlasOnVals};
 
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::image_io::Image;

@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use glam::Mat4;
 
-use crate::gpu::{GpuContext, Passes};
+use crate::gpu::{GpuContext, GpuError, Passes};
 use crate::method::{Method, MethodOptions};
 use crate::raster::{FrameOutput, Rasterizer, RenderError, RenderSettings};
 use crate::scene::{CameraView, Scene};
@@ -108,6 +108,26 @@ pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
     })
 }
 
+/// Indirect light that a composed method adds on top of the VAL bounce (`sparse+atlas`: the
+/// atlas's bounces 2..B). With a layer set, the sparse apply pass draws the VAL bounce into
+/// [`IndirectLayer::vals_target`] and the layer's `record` then writes `radiance_indirect`
+/// (VAL bounce + its own light) after it. The layer reads the same G-buffer.
+pub trait IndirectLayer {
+    /// The composed method's name (as given to `--method`).
+    fn method_name(&self) -> &'static str;
+    /// Per-frame uploads (camera, transforms).
+    fn prepare(&self, ctx: &GpuContext, world_from_node: &[Mat4], camera: &CameraView);
+    /// Where the sparse apply pass draws (`RADIANCE_FORMAT`, render resolution).
+    fn vals_target(&self) -> &wgpu::TextureView;
+    /// Writes `radiance_indirect` from the VAL bounce in `vals_target` plus the layer's light.
+    fn record(&self, passes: &mut Passes) -> Result<(), GpuError>;
+    fn gpu_bytes(&self) -> u64;
+    /// Extra keys for the method's JSON report.
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::Map::new()
+    }
+}
+
 pub struct SparseMethod {
     pub settings: SparseSettings,
     pub raster: Rasterizer,
@@ -119,6 +139,8 @@ pub struct SparseMethod {
     pub preprocess_ms: f64,
     /// Meshes whose points were computed rather than taken from the cache.
     pub meshes_computed: usize,
+    /// Further indirect light added after the apply pass (`None` for `--method sparse`).
+    pub layer: Option<Box<dyn IndirectLayer>>,
     report: serde_json::Map<String, serde_json::Value>,
 }
 
@@ -154,6 +176,7 @@ impl SparseMethod {
             last_stage: Stage::Apply,
             preprocess_ms,
             meshes_computed,
+            layer: None,
             report: Default::default(),
         })
     }
@@ -166,7 +189,7 @@ impl SparseMethod {
 
 impl Method for SparseMethod {
     fn name(&self) -> &'static str {
-        "sparse"
+        self.layer.as_ref().map_or("sparse", |l| l.method_name())
     }
 
     fn render(
@@ -180,19 +203,35 @@ impl Method for SparseMethod {
         self.raster.prepare(ctx, scene, world_from_node, camera);
         self.rsm.prepare(ctx, scene, world_from_node);
         self.sparse.prepare(ctx, camera.position(), &opts);
-        let mut passes = Passes::new(ctx, self.rsm.layer_count + 32);
+        if let Some(layer) = &self.layer {
+            layer.prepare(ctx, world_from_node, camera);
+        }
+        let mut passes = Passes::new(ctx, self.rsm.layer_count + 36);
         self.raster.record_shadows(&mut passes)?;
         self.raster.record_gbuffer(&mut passes)?;
         self.raster.record_direct(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
-        self.sparse.record(
-            &mut passes,
-            &self.raster.scene_gpu,
-            &self.raster.targets,
-            &opts,
-            self.last_stage,
-        )?;
         let has_indirect = self.last_stage == Stage::Apply;
+        match self.layer.as_ref().filter(|_| has_indirect) {
+            None => self.sparse.record(
+                &mut passes,
+                &self.raster.scene_gpu,
+                &self.raster.targets,
+                &opts,
+                self.last_stage,
+            )?,
+            Some(layer) => {
+                self.sparse.record_into(
+                    &mut passes,
+                    &self.raster.scene_gpu,
+                    &self.raster.targets,
+                    &opts,
+                    self.last_stage,
+                    layer.vals_target(),
+                )?;
+                layer.record(&mut passes)?;
+            }
+        }
         self.raster.record_resolve(ctx, &mut passes, has_indirect)?;
         let timings = passes.finish()?;
         let (direct, indirect) = self.raster.read_outputs(ctx, has_indirect)?;
@@ -223,11 +262,16 @@ impl Method for SparseMethod {
         .as_object()
         .cloned()
         .unwrap_or_default();
+        let mut gpu_bytes = self.raster.gpu_bytes() + self.rsm.bytes.0 + solution;
+        if let Some(layer) = &self.layer {
+            self.report.extend(layer.report());
+            gpu_bytes += layer.gpu_bytes();
+        }
         Ok(FrameOutput {
             direct,
             indirect,
             timings,
-            gpu_bytes: self.raster.gpu_bytes() + self.rsm.bytes.0 + solution,
+            gpu_bytes,
         })
     }
 

@@ -525,6 +525,28 @@ impl SparseGpu {
         options: &SparseOptions,
         last: Stage,
     ) -> Result<(), GpuError> {
+        self.record_into(
+            passes,
+            scene_gpu,
+            targets,
+            options,
+            last,
+            &targets.radiance_indirect,
+        )
+    }
+
+    /// [`SparseGpu::record`] with the apply pass drawing into `indirect` (cleared first)
+    /// instead of `targets.radiance_indirect`, for methods that add further indirect light
+    /// (a render target of `RADIANCE_FORMAT` at render resolution).
+    pub fn record_into(
+        &self,
+        passes: &mut Passes,
+        scene_gpu: &SceneGpu,
+        targets: &FrameTargets,
+        options: &SparseOptions,
+        last: Stage,
+        indirect: &wgpu::TextureView,
+    ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
         let groups = self.point_count.div_ceil(64);
         let mut compute =
@@ -553,7 +575,7 @@ impl SparseGpu {
             passes.render(
                 "apply",
                 &[Some(wgpu::RenderPassColorAttachment {
-                    view: &targets.radiance_indirect,
+                    view: indirect,
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
