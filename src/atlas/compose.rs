@@ -12,8 +12,8 @@ use super::{load_atlas, AtlasLayer};
 use crate::gpu::{GpuContext, GpuError, Passes};
 use crate::method::{Method, MethodOptions};
 use crate::raster::{
-    buffer_binding, storage_texture_entry, texture_entry, uniform_entry, view_binding,
-    RenderError, RenderSettings, RADIANCE_FORMAT,
+    buffer_binding, storage_texture_entry, texture_entry, uniform_entry, view_binding, RenderError,
+    RenderSettings, RADIANCE_FORMAT,
 };
 use crate::scene::{CameraView, Scene};
 use crate::vals::{IndirectLayer, SparseMethod, SparseSettings};
