@@ -32,6 +32,10 @@ enum Command {
     /// Bake the multi-bounce light atlas of a scene to an EXR (irradiance per texel); prints
     /// one JSON line with stage times, VPLs, texels and the energy account.
     Bake(BakeArgs),
+    /// Bake time and indirect error against the B-bounce reference per VPL count and scene,
+    /// with the path tracer's time to the same error; writes DIR/bake.csv,
+    /// DIR/reference_convergence.csv and DIR/bake_<scene>.png.
+    BakeBench(BakeBenchArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -201,6 +205,86 @@ struct BakeArgs {
     max_edge: f32,
 }
 
+#[derive(clap::Args)]
+struct BakeBenchArgs {
+    /// Comma-separated built-in scene names or glTF files.
+    #[arg(long, default_value = "cornell,corridor")]
+    scenes: String,
+    /// VPL counts baked per scene.
+    #[arg(long, value_delimiter = ',', default_value = "100,400,1600,6400")]
+    vpls: Vec<usize>,
+    /// Bounces of the bake and of the reference.
+    #[arg(long, default_value_t = 4)]
+    bounces: u32,
+    #[arg(long, default_value_t = 256)]
+    atlas_res: u32,
+    /// Image size of the error measurement.
+    #[arg(long, default_value_t = 128)]
+    width: u32,
+    #[arg(long, default_value_t = 128)]
+    height: u32,
+    /// Paths per pixel of the reference.
+    #[arg(long, default_value_t = 4096)]
+    ref_spp: u32,
+    /// Paths per pixel of the path tracer's convergence runs.
+    #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256,1024")]
+    pt_spp: Vec<u32>,
+    /// FLIP at which the path tracer's time is reported.
+    #[arg(long, default_value_t = 0.05)]
+    flip_target: f64,
+    /// Tessellation of built-in scenes (metres).
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
+    #[arg(long, default_value = "out/bake-bench")]
+    out: PathBuf,
+}
+
+fn bake_bench(args: BakeBenchArgs) -> ExitCode {
+    let request = valgi::atlas::bench::BakeBenchRequest {
+        scenes: valgi::eval::split_list(&args.scenes),
+        vpls: args.vpls,
+        bounces: args.bounces,
+        atlas_res: args.atlas_res,
+        width: args.width,
+        height: args.height,
+        ref_spp: args.ref_spp,
+        pt_spp: args.pt_spp,
+        flip_target: args.flip_target,
+        max_edge: args.max_edge,
+        out: args.out,
+        ..Default::default()
+    };
+    match valgi::atlas::bench::run(&request) {
+        Ok(summary) => {
+            let rows: Vec<serde_json::Value> = summary
+                .rows
+                .iter()
+                .map(|r| {
+                    serde_json::json!({
+                        "scene": r.scene, "vpls": r.vpls, "bake_ms": r.bake_ms.round(),
+                        "flip_indirect": r.flip_indirect, "mean_ratio": r.mean_ratio,
+                        "pt_ms_same_flip": r.pt_ms_same_flip.map(f64::round),
+                        "speedup": r.speedup(),
+                    })
+                })
+                .collect();
+            let report = serde_json::json!({
+                "csv": summary.csv.display().to_string(),
+                "convergence_csv": summary.convergence_csv.display().to_string(),
+                "charts": summary.charts.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+                "pt_ms_at_flip_target": summary.pt_ms_at_target.iter().map(|(s, t)| (s.clone(), serde_json::json!(t.map(f64::round)))).collect::<serde_json::Map<_, _>>(),
+                "rows": rows,
+            });
+            println!("{report}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let cli = Cli::parse();
@@ -304,6 +388,7 @@ fn main() -> ExitCode {
         }
         Command::Eval(args) => run_eval(args),
         Command::Bake(args) => bake(args),
+        Command::BakeBench(args) => bake_bench(args),
         Command::Scenes => {
             for (name, description) in builtin::names() {
                 println!("{name:<16} {description}");

@@ -3,6 +3,7 @@
 //! `atlas` method is direct light plus that layer. See `src/atlas/README.md`.
 
 pub mod bake;
+pub mod bench;
 pub mod compose;
 pub mod depth;
 pub mod layout;
