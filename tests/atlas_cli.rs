@@ -163,3 +163,93 @@ fn interrupt_stops_the_bake_cleanly() {
         .collect();
     assert!(names.is_empty(), "nothing written: {names:?}");
 }
+
+/// `--method sparse+atlas` from `valgi render` and as a `valgi eval` spec (with '+' in the
+/// name and the atlas as an option), and `valgi bake-bench` writing its CSVs and chart.
+#[test]
+fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-sparse-atlas");
+    let atlas = dir.join("box2.exr");
+    let output = valgi()
+        .args(["bake", "--scene", "box-point", "--max-edge", "0.25"])
+        .args(["--vpls", "100", "--bounces", "3", "--atlas-res", "64"])
+        .args(["--from-bounce", "2", "--out"])
+        .arg(&atlas)
+        .output()
+        .expect("run valgi");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let output = valgi()
+        .args(["render", "--scene", "box-point", "--max-edge", "0.25"])
+        .args([
+            "--method",
+            "sparse+atlas",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ])
+        .args(["--rsm", "32", "--indirect-only", "--atlas"])
+        .arg(&atlas)
+        .arg("--out")
+        .arg(dir.join("render.exr"))
+        .output()
+        .expect("run valgi");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report = json_line(&output.stdout);
+    assert_eq!(report["method"], "sparse+atlas");
+    assert_eq!(report["atlas_missing_texels"], 0);
+    assert!(report["passes"].get("atlas add").is_some(), "{report}");
+
+    let eval = dir.join("eval");
+    let output = valgi()
+        .args(["eval", "--scenes", "box-point", "--max-edge", "0.25"])
+        .arg("--methods")
+        .arg(format!(
+            "sparse:rsm=32,sparse+atlas:atlas={},rsm=32",
+            atlas.display()
+        ))
+        .args(["--width", "24", "--height", "24", "--ref-spp", "4"])
+        .args(["--ref-bounces", "3", "--out"])
+        .arg(&eval)
+        .output()
+        .expect("run valgi");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let csv = std::fs::read_to_string(eval.join("results.csv")).unwrap();
+    assert!(csv.contains("\nbox-point,sparse+atlas,"), "{csv}");
+
+    let bench = dir.join("bench");
+    let output = valgi()
+        .args(["bake-bench", "--scenes", "box-point", "--max-edge", "0.25"])
+        .args(["--vpls", "30,60", "--bounces", "2", "--atlas-res", "64"])
+        .args(["--width", "24", "--height", "24", "--ref-spp", "8"])
+        .args(["--pt-spp", "1,4", "--out"])
+        .arg(&bench)
+        .output()
+        .expect("run valgi");
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let csv = std::fs::read_to_string(bench.join("bake.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(csv.starts_with("scene,vpls,"));
+    let curve = std::fs::read_to_string(bench.join("reference_convergence.csv")).unwrap();
+    assert_eq!(curve.lines().count(), 3, "{curve}");
+    assert!(bench.join("bake_box-point.png").is_file());
+}

@@ -227,9 +227,10 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             });
         }
         curve.sort_by_key(|p| p.spp);
-        summary
-            .pt_ms_at_target
-            .push((scene.name.clone(), time_to_flip(&curve, request.flip_target)));
+        summary.pt_ms_at_target.push((
+            scene.name.clone(),
+            time_to_flip(&curve, request.flip_target),
+        ));
 
         let mut rows = vec![];
         for &vpls in &request.vpls {
@@ -378,10 +379,11 @@ fn chart_scene(
             .map_err(|e| err(e.to_string()))?;
         let (left, right) = root.split_horizontally(width / 2);
         let log_range = |v: &mut dyn Iterator<Item = f64>| {
-            let (lo, hi) = v.filter(|x| *x > 0.0 && x.is_finite()).fold(
-                (f64::INFINITY, 0.0f64),
-                |(lo, hi), x| (lo.min(x), hi.max(x)),
-            );
+            let (lo, hi) = v
+                .filter(|x| *x > 0.0 && x.is_finite())
+                .fold((f64::INFINITY, 0.0f64), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                });
             if lo.is_finite() && hi > 0.0 {
                 (lo / 2.0, hi * 2.0)
             } else {
@@ -480,7 +482,10 @@ fn chart_scene(
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
                 });
             chart
-                .draw_series(pts.iter().map(|p| Circle::new((p.0, p.1), 4, color.filled())))
+                .draw_series(
+                    pts.iter()
+                        .map(|p| Circle::new((p.0, p.1), 4, color.filled())),
+                )
                 .map_err(|e| err(e.to_string()))?;
             chart
                 .draw_series(pts.iter().map(|p| {
