@@ -340,6 +340,9 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
     Ok(summary)
 }
 
+/// (x, y, label) of a chart point.
+type LabelledPoint = (f64, f64, String);
+
 fn tick(v: f64) -> String {
     if v >= 1e4 || (v < 1e-2 && v > 0.0) {
         format!("{v:.0e}")
@@ -408,14 +411,14 @@ fn chart_scene(
             .axis_desc_style((font, 15))
             .draw()
             .map_err(|e| err(e.to_string()))?;
-        let blue = Palette99::pick(0).to_rgba();
-        let red = Palette99::pick(1).to_rgba();
+        let first = Palette99::pick(0).to_rgba();
+        let second = Palette99::pick(1).to_rgba();
         let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.vpls as f64, r.bake_ms)).collect();
         chart
-            .draw_series(LineSeries::new(pts.clone(), blue.stroke_width(2)))
+            .draw_series(LineSeries::new(pts.clone(), first.stroke_width(2)))
             .map_err(|e| err(e.to_string()))?;
         chart
-            .draw_series(pts.iter().map(|p| Circle::new(*p, 5, blue.filled())))
+            .draw_series(pts.iter().map(|p| Circle::new(*p, 5, first.filled())))
             .map_err(|e| err(e.to_string()))?;
 
         let (x0, x1) = log_range(
@@ -447,7 +450,7 @@ fn chart_scene(
             .axis_desc_style((font, 15))
             .draw()
             .map_err(|e| err(e.to_string()))?;
-        let series: [(&str, Vec<(f64, f64, String)>, RGBAColor); 2] = [
+        let series: [(&str, Vec<LabelledPoint>, RGBAColor); 2] = [
             (
                 "atlas (VPLs)",
                 rows.iter()
@@ -459,7 +462,7 @@ fn chart_scene(
                         )
                     })
                     .collect(),
-                blue,
+                first,
             ),
             (
                 "path tracer (spp)",
@@ -467,7 +470,7 @@ fn chart_scene(
                     .iter()
                     .map(|p| (p.ms, p.flip_indirect, format!("{}", p.spp)))
                     .collect(),
-                red,
+                second,
             ),
         ];
         for (name, pts, color) in series {
