@@ -292,3 +292,50 @@ fn no_black_texels_in_view_on_corridor() {
     assert_eq!(indirect_black, 0, "indirect radiance black on a surface");
     assert!(m.report()["atlas_missing_texels"] == 0);
 }
+
+/// Zero-thickness sheets get charts for both faces: on `corridor` the partition and the door
+/// are sheets (nothing else), on `cornell` nothing is; and the corridor's atlas no longer
+/// carries the lit room's light through the partition into the dark room (before the back
+/// faces had their own texels its mean indirect luminance was 2.2× the reference's).
+#[test]
+fn corridor_sheets_have_two_faces_and_do_not_leak() {
+    let names = |scene: &Scene| -> Vec<String> {
+        let layout = valgi::atlas::layout::layout(scene, &scene.world_from_node(), 128).unwrap();
+        let mut names: Vec<String> = layout
+            .meshes
+            .iter()
+            .filter(|m| m.sheet_face)
+            .map(|m| scene.meshes[scene.instances[m.instance].mesh].name.clone())
+            .collect();
+        names.sort();
+        names
+    };
+    let cornell = scene::load("cornell", &BuiltinParams::default()).unwrap();
+    assert!(names(&cornell).is_empty(), "{:?}", names(&cornell));
+    let scene = scene::load("corridor", &BuiltinParams::default()).unwrap();
+    assert_eq!(
+        names(&scene),
+        ["door", "door", "partition", "partition"],
+        "both faces of the door and the partition"
+    );
+
+    let Some(ctx) = common::gpu() else { return };
+    let bounces = 2;
+    let files = bake_files(
+        &scene,
+        &BakeSettings {
+            vpls: 400,
+            bounces,
+            atlas_res: 256,
+            ..Default::default()
+        },
+        "corridor-leak",
+        &[1],
+    );
+    let atlas = indirect(&ctx, &scene, &format!("atlas:atlas={}", files[0]));
+    let reference = reference_indirect(&scene, bounces, 128, 21);
+    let ratio = metrics::mean_luminance(&atlas) / metrics::mean_luminance(&reference);
+    let flip = metrics::flip(&atlas, &reference, metrics::auto_exposure(&reference));
+    eprintln!("corridor, {bounces} bounces: mean ratio {ratio:.3}, indirect FLIP {flip:.4}");
+    assert!((0.75..1.25).contains(&ratio), "mean ratio {ratio}");
+}

@@ -26,6 +26,10 @@ pub struct ChartMesh {
     pub world_normals: Vec<Vec3>,
     pub uvs: Vec<Vec2>,
     pub indices: Vec<u32>,
+    /// One face of a two-sided sheet ([`sheet_meshes`]): its triangles are wound
+    /// counter-clockwise about its normals, and the lookup draws it with back faces culled so
+    /// each side of the sheet reads its own texels.
+    pub sheet_face: bool,
 }
 
 /// One atlas texel that stands for a surface point.
@@ -142,6 +146,7 @@ fn build_layout(
                 .collect(),
             uvs: Vec::new(),
             indices: mesh.indices.clone(),
+            sheet_face: false,
         });
     }
     if meshes.is_empty() {
@@ -162,7 +167,24 @@ fn build_layout(
         }
         "texcoord1"
     } else {
+        // Both faces of a zero-thickness sheet (a partition, a door) are seen, and one texel
+        // cannot hold both sides' light: the back face gets charts of its own.
+        for i in sheet_meshes(&meshes) {
+            let mut back = meshes[i].clone();
+            for n in &mut back.world_normals {
+                *n = -*n;
+            }
+            for tri in back.indices.chunks_exact_mut(3) {
+                tri.swap(1, 2);
+            }
+            back.sheet_face = true;
+            meshes[i].sheet_face = true;
+            meshes.push(back);
+        }
         unwrap(scene, &mut meshes, resolution)?;
+        for m in meshes.iter_mut().filter(|m| m.sheet_face) {
+            orient_to_normals(m);
+        }
         "generated"
     };
     let texels = find_texels(&meshes, resolution);
@@ -172,6 +194,140 @@ fn build_layout(
         meshes,
         texels,
     })
+}
+
+/// Rays per mesh of the sheet test.
+const SHEET_RAYS: usize = 64;
+/// A mesh is a sheet when at least this fraction of the rays leaving its back side hit the
+/// front of a surface. Closed rooms (back sides face outwards: rays escape) and solid or
+/// open-bottomed boxes (back sides face the box's own back faces) stay far below it; a wall
+/// between two rooms is near 1.
+const SHEET_FRACTION: f32 = 0.8;
+
+/// Meshes whose back side faces the inside of the scene: zero-thickness sheets seen from both
+/// sides. Brute-force ray casting from area-uniform points (fixed seed), directions
+/// cosine-distributed about the back normal; a hit counts when it meets the front of a
+/// triangle (vertex normals facing the ray).
+pub fn sheet_meshes(meshes: &[ChartMesh]) -> Vec<usize> {
+    use rayon::prelude::*;
+    struct Tri {
+        p: [Vec3; 3],
+        n: Vec3,
+        area: f32,
+    }
+    let tris: Vec<Vec<Tri>> = meshes
+        .iter()
+        .map(|m| {
+            m.indices
+                .chunks_exact(3)
+                .map(|t| {
+                    let p = [0, 1, 2].map(|k| m.world_positions[t[k] as usize]);
+                    let n = [0, 1, 2]
+                        .map(|k| m.world_normals[t[k] as usize])
+                        .iter()
+                        .sum::<Vec3>()
+                        .normalize_or_zero();
+                    let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+                    Tri { p, n, area }
+                })
+                .collect()
+        })
+        .collect();
+    let (lo, hi) = tris.iter().flatten().flat_map(|t| t.p).fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), p| (lo.min(p), hi.max(p)),
+    );
+    let eps = 1e-4 * (hi - lo).length().max(1e-3);
+    let closest = |o: Vec3, d: Vec3| -> Option<(f32, Vec3)> {
+        let mut best: Option<(f32, Vec3)> = None;
+        for t in tris.iter().flatten() {
+            // Möller–Trumbore.
+            let (e1, e2) = (t.p[1] - t.p[0], t.p[2] - t.p[0]);
+            let q = d.cross(e2);
+            let det = e1.dot(q);
+            if det.abs() < 1e-12 {
+                continue;
+            }
+            let s = o - t.p[0];
+            let u = s.dot(q) / det;
+            if !(0.0..=1.0).contains(&u) {
+                continue;
+            }
+            let r = s.cross(e1);
+            let v = d.dot(r) / det;
+            if v < 0.0 || u + v > 1.0 {
+                continue;
+            }
+            let dist = e2.dot(r) / det;
+            if dist > eps && best.is_none_or(|(b, _)| dist < b) {
+                best = Some((dist, t.n));
+            }
+        }
+        best
+    };
+    (0..meshes.len())
+        .into_par_iter()
+        .filter(|&i| {
+            let own = &tris[i];
+            let total: f32 = own.iter().map(|t| t.area).sum();
+            if own.is_empty() || total <= 0.0 {
+                return false;
+            }
+            let mut state =
+                0x9E37_79B9_7F4A_7C15u64 ^ (i as u64).wrapping_mul(0xA24B_AED4_963E_E407);
+            let mut next = || {
+                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                ((z ^ (z >> 31)) >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let mut front = 0;
+            for _ in 0..SHEET_RAYS {
+                let mut pick = next() * total;
+                let t = own
+                    .iter()
+                    .find(|t| {
+                        pick -= t.area;
+                        pick <= 0.0
+                    })
+                    .unwrap_or(&own[own.len() - 1]);
+                let (mut a, mut b) = (next(), next());
+                if a + b > 1.0 {
+                    (a, b) = (1.0 - a, 1.0 - b);
+                }
+                let p = t.p[0] + (t.p[1] - t.p[0]) * a + (t.p[2] - t.p[0]) * b;
+                let back = -t.n;
+                let (u1, u2) = (next(), next());
+                let (r, phi) = (u1.sqrt(), std::f32::consts::TAU * u2);
+                let (x, y) = back.any_orthonormal_pair();
+                let d =
+                    (x * (r * phi.cos()) + y * (r * phi.sin()) + back * (1.0 - u1).max(0.0).sqrt())
+                        .normalize();
+                if let Some((_, n)) = closest(p + back * eps, d) {
+                    if n.dot(d) < 0.0 {
+                        front += 1;
+                    }
+                }
+            }
+            front as f32 >= SHEET_FRACTION * SHEET_RAYS as f32
+        })
+        .collect()
+}
+
+/// Winds every triangle counter-clockwise about its vertex normals (front faces for the
+/// lookup's culling).
+fn orient_to_normals(m: &mut ChartMesh) {
+    for tri in m.indices.chunks_exact_mut(3) {
+        let p = [0, 1, 2].map(|k| m.world_positions[tri[k] as usize]);
+        let n: Vec3 = [0, 1, 2]
+            .map(|k| m.world_normals[tri[k] as usize])
+            .iter()
+            .sum();
+        if (p[1] - p[0]).cross(p[2] - p[0]).dot(n) < 0.0 {
+            tri.swap(1, 2);
+        }
+    }
 }
 
 /// Generated charts for every placed instance, packed into one page with 2 texels padding.

@@ -167,6 +167,8 @@ struct LayerMesh {
     indices: wgpu::Buffer,
     index_count: u32,
     node: usize,
+    /// One face of a two-sided sheet: drawn with back faces culled.
+    sheet_face: bool,
 }
 
 /// Reads an atlas EXR written by `valgi bake` and checks it against the scene's layout.
@@ -184,6 +186,8 @@ pub struct AtlasLayer {
     transforms: wgpu::Buffer,
     apply_buffer: wgpu::Buffer,
     render_pipeline: wgpu::RenderPipeline,
+    /// The same with back faces culled, for the two faces of sheets.
+    sheet_pipeline: wgpu::RenderPipeline,
     render_group: wgpu::BindGroup,
     apply_pipeline: wgpu::ComputePipeline,
     apply_group: wgpu::BindGroup,
@@ -254,6 +258,7 @@ impl AtlasLayer {
                 ),
                 index_count: m.indices.len() as u32,
                 node: scene.instances[m.instance].node,
+                sheet_face: m.sheet_face,
             });
         }
         let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
@@ -378,41 +383,48 @@ impl AtlasLayer {
         });
         const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2];
-        let render_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("atlas lookup"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &render_module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<AtlasVertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &ATTRIBUTES,
-                })],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &render_module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: RADIANCE_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let make_render_pipeline = |cull_mode| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("atlas lookup"),
+                layout: Some(&pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &render_module,
+                    entry_point: Some("vs_main"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<AtlasVertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &ATTRIBUTES,
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    cull_mode,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: wgpu::StencilState::default(),
+                    bias: wgpu::DepthBiasState::default(),
+                }),
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &render_module,
+                    entry_point: Some("fs_main"),
+                    compilation_options: Default::default(),
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: RADIANCE_FORMAT,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let render_pipeline = make_render_pipeline(None);
+        let sheet_pipeline = make_render_pipeline(Some(wgpu::Face::Back));
 
         let apply_module = ctx.shader("atlas_apply.wgsl");
         let apply_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -441,6 +453,7 @@ impl AtlasLayer {
             transforms,
             apply_buffer,
             render_pipeline,
+            sheet_pipeline,
             render_group,
             apply_pipeline,
             apply_group,
@@ -521,9 +534,13 @@ impl AtlasLayer {
                 stencil_ops: None,
             }),
             |pass| {
-                pass.set_pipeline(&self.render_pipeline);
                 pass.set_bind_group(0, &self.render_group, &[]);
                 for (i, m) in self.meshes.iter().enumerate() {
+                    pass.set_pipeline(if m.sheet_face {
+                        &self.sheet_pipeline
+                    } else {
+                        &self.render_pipeline
+                    });
                     pass.set_vertex_buffer(0, m.vertices.slice(..));
                     pass.set_index_buffer(m.indices.slice(..), wgpu::IndexFormat::Uint32);
                     let i = i as u32;
