@@ -43,9 +43,11 @@ pub struct BenchRequest {
 /// `FmaParams` in `shaders/bench_fma.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct FmaParams {
-    iterations: u32,
-    pad: [u32; 3],
+pub struct FmaParams {
+    pub iterations: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// Fused multiply-adds per second of the trivial kernel (best of three runs).
@@ -84,7 +86,9 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
             0,
             bytemuck::bytes_of(&FmaParams {
                 iterations,
-                pad: [0; 3],
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
             }),
         );
         let mut passes = Passes::new(ctx, 2);
