@@ -240,9 +240,7 @@ impl Method for SparseMethod {
         self.rsm.prepare(ctx, scene, world_from_node);
         self.sparse.prepare(ctx, camera.position(), &opts);
         let mut passes = Passes::new(ctx, self.rsm.layer_count + 32);
-        self.raster.record_shadows(&mut passes)?;
-        self.raster.record_gbuffer(&mut passes)?;
-        self.raster.record_direct(&mut passes)?;
+        self.raster.record_base(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
         self.sparse.record(
             &mut passes,
