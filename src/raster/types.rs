@@ -186,7 +186,7 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             "LpvFace",
             "lpv_common.wgsl",
             crate::peers::lpv::LpvFace,
-            [y0, y1, y2, offset]
+            [y0, y1, y2, offset, corners_lo, corners_hi]
         ),
     ]
 }

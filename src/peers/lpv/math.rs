@@ -115,7 +115,7 @@ fn axis_index(dim: usize, sign: i32) -> usize {
 }
 
 /// The 30 faces of 6-direction propagation (LPV): for each face neighbour, its far face and
-/// the four side faces it does not share with the source. Sorted by offset.
+/// the four side faces it does not share with the source. Sorted by normal axis (5 each).
 pub fn faces6() -> Vec<Face> {
     let mut faces = Vec::new();
     for dim in 0..3 {
@@ -136,12 +136,14 @@ pub fn faces6() -> Vec<Face> {
             }
         }
     }
+    faces.sort_by_key(|f| f.axis);
     faces
 }
 
 /// The 54 faces of 26-direction propagation (HO-LPV): for every neighbour, its faces on the
 /// outside of the 3×3×3 block around the source (1 for a face, 2 for an edge, 3 for a
 /// corner neighbour). They tile the block's surface, so their solid angles sum to 4π exactly.
+/// Sorted by normal axis (9 each: the 3×3 squares of one side of the block).
 pub fn faces26() -> Vec<Face> {
     let mut faces = Vec::new();
     for z in -1..=1 {
@@ -161,6 +163,7 @@ pub fn faces26() -> Vec<Face> {
             }
         }
     }
+    faces.sort_by_key(|f| f.axis);
     faces
 }
 
@@ -291,34 +294,38 @@ pub fn geometry(grid: &Grid, surfels: &[Surfel]) -> Vec<f32> {
     gv
 }
 
+/// Weights of a destination cell's 8 geometry-volume corners (corner i at offset
+/// (i & 1, i >> 1 & 1, i >> 2 & 1)) that interpolate the GV at the midpoint between the
+/// destination d and its source d − offset: a face neighbour averages the 4 GV cells on the
+/// shared face's corners, an edge neighbour the 2 on the shared edge, a corner neighbour takes
+/// the shared corner.
+pub fn corner_weights(offset: IVec3) -> [f32; 8] {
+    let mut w = [0.0; 8];
+    for (corner, wc) in w.iter_mut().enumerate() {
+        let bit = [corner & 1, (corner >> 1) & 1, (corner >> 2) & 1];
+        *wc = (0..3)
+            .map(|i| match offset[i] {
+                0 => 0.5,
+                o if (bit[i] == 1) == (o < 0) => 1.0,
+                _ => 0.0,
+            })
+            .product();
+    }
+    w
+}
+
 /// The blocker coefficients at the midpoint between a destination cell `d` and its source
-/// `d − offset`: the geometry volume interpolated there (a face neighbour averages the 4 GV
-/// cells on the shared face's corners, an edge neighbour 2, a corner neighbour takes 1).
+/// `d − offset`, interpolated from the geometry volume with [`corner_weights`].
 pub fn blocker(gv: &[f32], dims: UVec3, d: IVec3, offset: IVec3) -> [f32; 4] {
     let gd = dims.as_ivec3() + IVec3::ONE;
+    let w = corner_weights(offset);
     let mut out = [0.0; 4];
-    for corner in 0..8 {
-        let bit = IVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
-        let mut w = 1.0;
-        for i in 0..3 {
-            w *= match offset[i] {
-                0 => 0.5,
-                o => {
-                    if (bit[i] == 1) == (o < 0) {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                }
-            };
-        }
-        if w == 0.0 {
-            continue;
-        }
-        let g = d + bit;
+    for (corner, wc) in w.iter().enumerate() {
+        let c = corner as i32;
+        let g = d + IVec3::new(c & 1, (c >> 1) & 1, (c >> 2) & 1);
         let index = (g.x + gd.x * (g.y + gd.y * g.z)) as usize * 4;
         for k in 0..4 {
-            out[k] += w * gv[index + k];
+            out[k] += wc * gv[index + k];
         }
     }
     out
@@ -496,11 +503,21 @@ mod tests {
         assert!((s26 - 4.0 * PI).abs() < 1e-5 * 4.0 * PI, "26: {s26}");
         assert!((s6 - 4.0 * PI).abs() < 1e-4 * 4.0 * PI, "6: {s6}");
         // Kaplanyan & Dachsbacher's numbers: far face 0.4006, side face 0.4234 sr.
-        assert!((f6[0].solid_angle - 0.400_6).abs() < 1e-4);
-        assert!((f6[1].solid_angle - 0.423_4).abs() < 1e-4);
+        let far = f6.iter().find(|f| f.offset.abs().max_element() == 1 && f.direction.x > 0.99);
+        let far = far.unwrap().solid_angle;
+        let side = f6.iter().find(|f| f.offset == IVec3::Y && f.axis == 0).unwrap();
+        assert!((far - 0.400_6).abs() < 1e-4, "{far}");
+        assert!((side.solid_angle - 0.423_4).abs() < 1e-4, "{}", side.solid_angle);
         // A square seen face-on: 4·atan(ab/(d·√(a²+b²+d²))).
         let exact = 4.0 * (0.25f32 / (1.5 * (0.5f32 + 2.25).sqrt())).atan();
-        assert!((f6[0].solid_angle - exact).abs() < 1e-6);
+        assert!((far - exact).abs() < 1e-6);
+        // Each axis gets the same number of faces, contiguous (the shader's loop relies on it).
+        for faces in [&f6, &f26] {
+            let per = faces.len() / 6;
+            for (i, f) in faces.iter().enumerate() {
+                assert_eq!(f.axis, i / per);
+            }
+        }
     }
 
     fn middle_source(sh: usize, c: [[f32; 9]; 3]) -> Volume {
