@@ -2,9 +2,9 @@
 //! points, on top of a baked multi-bounce light atlas. See README.md and DESIGN notes.
 
 pub mod app;
+pub mod atlas;
 pub mod bench;
 pub mod eval;
-pub mod atlas;
 pub mod gpu;
 pub mod image_io;
 pub mod method;

@@ -89,13 +89,9 @@ pub fn create(
         "atlas" => Box::new(crate::atlas::AtlasMethod::new(
             ctx, scene, settings, options,
         )?),
-        "lpv" => crate::peers::lpv::create(
-            ctx,
-            scene,
-            settings,
-            crate::peers::lpv::Order::Lpv,
-            options,
-        )?,
+        "lpv" => {
+            crate::peers::lpv::create(ctx, scene, settings, crate::peers::lpv::Order::Lpv, options)?
+        }
         "holpv" => crate::peers::lpv::create(
             ctx,
             scene,

@@ -57,8 +57,14 @@ pub const FILES: &[(&str, &str)] = &[
         "atlas_apply.wgsl",
         include_str!("../shaders/atlas_apply.wgsl"),
     ),
-    ("lpv_common.wgsl", include_str!("../shaders/lpv_common.wgsl")),
-    ("lpv_inject.wgsl", include_str!("../shaders/lpv_inject.wgsl")),
+    (
+        "lpv_common.wgsl",
+        include_str!("../shaders/lpv_common.wgsl"),
+    ),
+    (
+        "lpv_inject.wgsl",
+        include_str!("../shaders/lpv_inject.wgsl"),
+    ),
     (
         "lpv_geometry.wgsl",
         include_str!("../shaders/lpv_geometry.wgsl"),
@@ -67,7 +73,10 @@ pub const FILES: &[(&str, &str)] = &[
         "lpv_propagate.wgsl",
         include_str!("../shaders/lpv_propagate.wgsl"),
     ),
-    ("lpv_lookup.wgsl", include_str!("../shaders/lpv_lookup.wgsl")),
+    (
+        "lpv_lookup.wgsl",
+        include_str!("../shaders/lpv_lookup.wgsl"),
+    ),
 ];
 
 /// Files that are only included by others (no entry points of their own).

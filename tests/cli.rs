@@ -141,29 +141,76 @@ fn sparse_renders_numbered_frames_of_an_animation_with_table2_timings() {
     }
     let dir = common::temp_dir("cli-frames");
     let output = valgi()
-        .args(["render", "--scene", "cornell-moving", "--method", "sparse", "--width", "32", "--height", "32"])
-        .args(["--rsm", "32", "--sparse-points", "300", "--occlusion", "union", "--glossy", "on"])
-        .args(["--max-edge", "0.15", "--indirect-only", "--frames", "3", "--out"])
+        .args([
+            "render",
+            "--scene",
+            "cornell-moving",
+            "--method",
+            "sparse",
+            "--width",
+            "32",
+            "--height",
+            "32",
+        ])
+        .args([
+            "--rsm",
+            "32",
+            "--sparse-points",
+            "300",
+            "--occlusion",
+            "union",
+            "--glossy",
+            "on",
+        ])
+        .args([
+            "--max-edge",
+            "0.15",
+            "--indirect-only",
+            "--frames",
+            "3",
+            "--out",
+        ])
         .arg(&dir)
         .output()
         .expect("run valgi");
-    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let stdout = String::from_utf8_lossy(&output.stdout);
     let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
-    for key in ["rsm", "direct", "gather", "renormalize", "occlusion", "interpolation", "apply", "total"] {
-        assert!(report["table2"][key].as_f64().is_some(), "table2.{key} missing: {report}");
+    for key in [
+        "rsm",
+        "direct",
+        "gather",
+        "renormalize",
+        "occlusion",
+        "interpolation",
+        "apply",
+        "total",
+    ] {
+        assert!(
+            report["table2"][key].as_f64().is_some(),
+            "table2.{key} missing: {report}"
+        );
     }
     assert!(report["vals"].as_u64().unwrap() > 100);
     assert_eq!(report["sparse_points"].as_u64(), Some(300));
     assert_eq!(report["frames"].as_u64(), Some(3));
     let frames: Vec<valgi::image_io::Image> = (0..3)
-        .map(|i| valgi::image_io::Image::read_exr(&dir.join(format!("frame_{i:04}.exr"))).expect("frame"))
+        .map(|i| {
+            valgi::image_io::Image::read_exr(&dir.join(format!("frame_{i:04}.exr"))).expect("frame")
+        })
         .collect();
     // The light sweeps: consecutive frames differ.
     assert_ne!(frames[0].pixels, frames[2].pixels);
 
     // --frames without a single output folder, and an option the method lacks, are errors.
-    let output = valgi().args(["render", "--method", "direct", "--rsm", "64"]).output().unwrap();
+    let output = valgi()
+        .args(["render", "--method", "direct", "--rsm", "64"])
+        .output()
+        .unwrap();
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("has no option(s) rsm"));
 }

@@ -789,7 +789,10 @@ fn brute_force_agrees_with_the_one_bounce_reference_on_a_diffuse_scene() {
     ref_options.set("spp", 256);
     let mut reference =
         valgi::method::create("reference", &ctx, &scene, settings(size), &ref_options).unwrap();
-    let truth = reference.render(&ctx, &scene, &world, &cam).unwrap().indirect;
+    let truth = reference
+        .render(&ctx, &scene, &world, &cam)
+        .unwrap()
+        .indirect;
     // Mean indirect radiance over the floor in front of the wall (away from the corner, where
     // a disc light is least like the surface it stands for).
     let mut sums = (0.0f64, 0.0f64);
@@ -806,8 +809,19 @@ fn brute_force_agrees_with_the_one_bounce_reference_on_a_diffuse_scene() {
     }
     assert!(count > 200, "{count} floor pixels");
     let relative = (sums.0 - sums.1).abs() / sums.1;
-    eprintln!("floor indirect: VALs {:.4e}, reference {:.4e} ({:.2}% apart)", sums.0 / count as f64, sums.1 / count as f64, 100.0 * relative);
-    assert!(relative < 0.05, "brute-force VALs {} vs reference {} ({:.1}%)", sums.0, sums.1, 100.0 * relative);
+    eprintln!(
+        "floor indirect: VALs {:.4e}, reference {:.4e} ({:.2}% apart)",
+        sums.0 / count as f64,
+        sums.1 / count as f64,
+        100.0 * relative
+    );
+    assert!(
+        relative < 0.05,
+        "brute-force VALs {} vs reference {} ({:.1}%)",
+        sums.0,
+        sums.1,
+        100.0 * relative
+    );
 }
 
 #[test]
@@ -818,12 +832,26 @@ fn preprocessing_is_cached_per_mesh_and_points_ride_with_rigid_motion() {
     let first = SparseMethod::new(&ctx, &scene, settings(32), s).unwrap();
     let second = SparseMethod::new(&ctx, &scene, settings(32), s).unwrap();
     assert!(first.meshes_computed > 0);
-    assert_eq!(second.meshes_computed, 0, "the second method recomputed points");
+    assert_eq!(
+        second.meshes_computed, 0,
+        "the second method recomputed points"
+    );
     // Points are placed once in model space: moving the scene moves them rigidly.
     let (t0, t1) = (scene.world_from_node_at(0.0), scene.world_from_node_at(1.0));
-    let (a, b) = (first.sparse.decoded_points(&scene, &t0), first.sparse.decoded_points(&scene, &t1));
-    let moved = a.iter().zip(&b).filter(|(p, q)| (p.position - q.position).length() > 1e-4).count();
-    assert!(moved > 0 && moved < a.len(), "{moved} of {} points moved", a.len());
+    let (a, b) = (
+        first.sparse.decoded_points(&scene, &t0),
+        first.sparse.decoded_points(&scene, &t1),
+    );
+    let moved = a
+        .iter()
+        .zip(&b)
+        .filter(|(p, q)| (p.position - q.position).length() > 1e-4)
+        .count();
+    assert!(
+        moved > 0 && moved < a.len(),
+        "{moved} of {} points moved",
+        a.len()
+    );
     for (p, q) in a.iter().zip(&b) {
         assert_eq!(p.disc_radius, q.disc_radius);
     }

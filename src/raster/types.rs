@@ -173,14 +173,7 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             "LpvParams",
             "lpv_common.wgsl",
             crate::peers::lpv::LpvParams,
-            [
-                origin_cell,
-                dims,
-                face_count,
-                occlusion,
-                surfel_stride,
-                pad
-            ]
+            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
         ),
         layout!(
             "LpvFace",

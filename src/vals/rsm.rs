@@ -119,8 +119,9 @@ impl Rsm {
         }
         let texels = layer_count as u64 * resolution as u64 * resolution as u64;
         let val_bytes = texels.max(1) * std::mem::size_of::<GpuVal>() as u64;
-        let max_binding =
-            limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         if val_bytes > max_binding {
             return Err(RenderError::Settings(format!(
                 "--rsm {resolution} with {layer_count} layers needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm"

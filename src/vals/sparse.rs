@@ -229,8 +229,9 @@ impl SparseGpu {
         }
         let point_count = points_model.len() as u32;
         let vertex_count = vertex_offset;
-        let max_binding =
-            limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
         let vertex_light_size = vertex_count.max(1) as u64 * 48;
         if vertex_light_size > max_binding {
             return Err(RenderError::Settings(format!(

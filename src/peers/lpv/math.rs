@@ -7,6 +7,9 @@
 //! I(ω) (W/sr, light travelling in direction ω) of the light passing through it; a VPL of flux
 //! Φ is the Lambertian lobe I(ω) = Φ/π·max(0, n·ω), whose integral over the sphere is Φ.
 
+// Channel and coefficient loops index several arrays at once, as the shaders do.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{IVec3, UVec3, Vec3};
 use std::f32::consts::PI;
 
@@ -77,7 +80,12 @@ pub fn triangle_solid_angle(a: Vec3, b: Vec3, c: Vec3) -> f32 {
 pub fn face_solid_angle(center: Vec3, axis: usize) -> f32 {
     let t = Vec3::AXES[(axis + 1) % 3] * 0.5;
     let b = Vec3::AXES[(axis + 2) % 3] * 0.5;
-    let p = [center - t - b, center + t - b, center + t + b, center - t + b];
+    let p = [
+        center - t - b,
+        center + t - b,
+        center + t + b,
+        center - t + b,
+    ];
     triangle_solid_angle(p[0], p[1], p[2]) + triangle_solid_angle(p[0], p[2], p[3])
 }
 
@@ -97,7 +105,7 @@ pub struct Face {
 
 /// Unit vector of axis index 0..6 (+x, −x, +y, −y, +z, −z).
 pub fn axis_vector(axis: usize) -> Vec3 {
-    let s = if axis % 2 == 0 { 1.0 } else { -1.0 };
+    let s = if axis.is_multiple_of(2) { 1.0 } else { -1.0 };
     Vec3::AXES[axis / 2] * s
 }
 
@@ -392,7 +400,7 @@ pub fn lookup(grid: &Grid, accum: &Volume, p: Vec3, n: Vec3, rho_d: Vec3) -> Vec
     let base = q.floor().min(hi - Vec3::ONE).max(Vec3::ZERO);
     let t = q - base;
     let b = base.as_ivec3();
-    let mut c = vec![[0.0f32; 9]; 3];
+    let mut c = [[0.0f32; 9]; 3];
     for corner in 0..8 {
         let bit = IVec3::new(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
         let w = (0..3)
@@ -503,11 +511,20 @@ mod tests {
         assert!((s26 - 4.0 * PI).abs() < 1e-5 * 4.0 * PI, "26: {s26}");
         assert!((s6 - 4.0 * PI).abs() < 1e-4 * 4.0 * PI, "6: {s6}");
         // Kaplanyan & Dachsbacher's numbers: far face 0.4006, side face 0.4234 sr.
-        let far = f6.iter().find(|f| f.offset.abs().max_element() == 1 && f.direction.x > 0.99);
+        let far = f6
+            .iter()
+            .find(|f| f.offset.abs().max_element() == 1 && f.direction.x > 0.99);
         let far = far.unwrap().solid_angle;
-        let side = f6.iter().find(|f| f.offset == IVec3::Y && f.axis == 0).unwrap();
+        let side = f6
+            .iter()
+            .find(|f| f.offset == IVec3::Y && f.axis == 0)
+            .unwrap();
         assert!((far - 0.400_6).abs() < 1e-4, "{far}");
-        assert!((side.solid_angle - 0.423_4).abs() < 1e-4, "{}", side.solid_angle);
+        assert!(
+            (side.solid_angle - 0.423_4).abs() < 1e-4,
+            "{}",
+            side.solid_angle
+        );
         // A square seen face-on: 4·atan(ab/(d·√(a²+b²+d²))).
         let exact = 4.0 * (0.25f32 / (1.5 * (0.5f32 + 2.25).sqrt())).atan();
         assert!((far - exact).abs() < 1e-6);
@@ -565,7 +582,10 @@ mod tests {
             )],
         );
         let f = v.total_flux();
-        assert!((f - Vec3::new(1.0, 2.0, 3.0)).abs().max_element() < 1e-5, "{f}");
+        assert!(
+            (f - Vec3::new(1.0, 2.0, 3.0)).abs().max_element() < 1e-5,
+            "{f}"
+        );
     }
 
     /// Seed 004 §5.2: light leaving a cell diagonally; HO-LPV, which reaches edge and corner

@@ -399,7 +399,11 @@ impl LpvMethod {
                 ],
             })
         };
-        let propagate_groups = [group(&params_off, 0, 1), group(later, 1, 0), group(later, 0, 1)];
+        let propagate_groups = [
+            group(&params_off, 0, 1),
+            group(later, 1, 0),
+            group(later, 0, 1),
+        ];
         let propagate_pipeline = pipeline(
             ctx,
             "lpv propagate",
@@ -556,9 +560,13 @@ impl Method for LpvMethod {
             })?;
         }
         let volume_size = self.volumes[0].size();
-        passes
-            .encoder()
-            .copy_buffer_to_buffer(&self.volumes[0], 0, &self.volumes[2], 0, volume_size);
+        passes.encoder().copy_buffer_to_buffer(
+            &self.volumes[0],
+            0,
+            &self.volumes[2],
+            0,
+            volume_size,
+        );
         if self.settings.steps > 0 {
             let groups = self.grid.dims.to_array().map(|n| n.div_ceil(4));
             passes.compute("propagate", |pass| {
