@@ -263,3 +263,56 @@ fn thin_wall_bleeding_report() {
         );
     }
 }
+
+/// `valgi render --method holpv --grid --steps --occlusion` end to end: the JSON report names
+/// the settings, the four passes and the volumes' bytes; a bad option is an error.
+#[test]
+fn cli_reports_lpv_settings_passes_and_bytes() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-lpv");
+    let out = dir.join("holpv.exr");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
+        .args(["render", "--method", "holpv", "--grid", "8", "--steps", "3"])
+        .args([
+            "--occlusion",
+            "union",
+            "--rsm",
+            "16",
+            "--width",
+            "24",
+            "--height",
+            "24",
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "valgi failed: {stderr}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().expect("JSON")).expect("valid JSON");
+    assert_eq!(report["method"], "holpv");
+    assert_eq!(report["grid"], 8);
+    assert_eq!(report["steps"], 3);
+    assert_eq!(report["occlusion"], "on");
+    assert_eq!(report["sh_coefficients"], 9);
+    assert_eq!(report["propagation_faces"], 54);
+    // Three light volumes of 8³ cells × 27 floats and a 9³ × 4 geometry volume.
+    assert_eq!(report["volume_gpu_bytes"], 3 * 512 * 27 * 4 + 729 * 16);
+    assert!(report["gpu_bytes"].as_u64().unwrap() > 3 * 512 * 27 * 4);
+    for pass in ["inject", "geometry", "propagate", "lookup"] {
+        assert!(report["passes"][pass].is_number(), "pass {pass}");
+    }
+    assert!(out.exists());
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
+        .args(["render", "--method", "lpv", "--opt", "occlusion=maybe"])
+        .args(["--width", "8", "--height", "8", "--out"])
+        .arg(dir.join("bad.exr"))
+        .output()
+        .expect("run valgi");
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("occlusion"));
+}
