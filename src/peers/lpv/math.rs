@@ -506,10 +506,15 @@ mod tests {
         assert_eq!(f26.len(), 54);
         let s6: f32 = f6.iter().map(|f| f.solid_angle).sum();
         let s26: f32 = f26.iter().map(|f| f.solid_angle).sum();
-        // The 54 outer faces tile the 3×3×3 block: exact. The 30 faces of the 6-direction
-        // scheme overlap/leave gaps seen from the centre; the sum is 4π to 0.01 %.
+        eprintln!(
+            "Σ Ω: 6-direction {s6}, 26-direction {s26}, 4π = {}",
+            4.0 * PI
+        );
+        // The 54 outer faces tile the 3×3×3 block's surface, so they sum to 4π. The 30 faces
+        // of the 6-direction scheme are no closed surface, yet their sum comes out at 4π to
+        // f32 precision too (12.566372; K&D's rounded 0.4006 + 4·0.4234 gives 4π − 0.01 %).
         assert!((s26 - 4.0 * PI).abs() < 1e-5 * 4.0 * PI, "26: {s26}");
-        assert!((s6 - 4.0 * PI).abs() < 1e-4 * 4.0 * PI, "6: {s6}");
+        assert!((s6 - 4.0 * PI).abs() < 1e-5 * 4.0 * PI, "6: {s6}");
         // Kaplanyan & Dachsbacher's numbers: far face 0.4006, side face 0.4234 sr.
         let far = f6
             .iter()
@@ -564,6 +569,10 @@ mod tests {
             let before = src.total_flux().x;
             let after = propagate(&src, &faces, None).total_flux().x;
             let gain = after / before - 1.0;
+            eprintln!(
+                "{sh} coefficients: a bare lobe gains {:.2} % in one step",
+                100.0 * gain
+            );
             let bound = if sh == 4 { 0.15 } else { 0.05 };
             assert!((0.0..bound).contains(&gain), "sh {sh}: gain {gain}");
         }
@@ -615,6 +624,10 @@ mod tests {
             // Light arriving at the target travelling away from the source.
             delivered.push(cosine_integral(accum.coeffs(t, 0), dir));
         }
+        eprintln!(
+            "diagonal target: LPV {} HO-LPV {}",
+            delivered[0], delivered[1]
+        );
         assert!(
             delivered[1] > 1.2 * delivered[0],
             "HO-LPV {} vs LPV {}",
