@@ -41,11 +41,12 @@ fn add_surfel(p: vec3<f32>, n: vec3<f32>, area: f32) {
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_rsm(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= min(val_count[0], arrayLength(&vals))) {
+fn cs_rsm(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = id.x + id.y * groups.x * 64u;
+    if (i >= min(val_count[0], arrayLength(&vals))) {
         return;
     }
-    let val = vals[id.x];
+    let val = vals[i];
     add_surfel(val.position_area.xyz, val.normal.xyz, val.position_area.w);
 }
 

@@ -20,8 +20,9 @@ fn add_f32(index: u32, value: f32) {
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    // Rows of at most 65535 workgroups, for RSMs with more than 4M texels.
+    let i = id.x + id.y * groups.x * 64u;
     if (i >= min(val_count[0], arrayLength(&vals))) {
         return;
     }

@@ -55,10 +55,11 @@ fn cornell() -> Scene {
 fn gpu_injection_and_propagation_agree_with_cpu_twins() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell();
-    for order in [Order::Lpv, Order::HoLpv] {
+    // 10³ leaves partial 4³ workgroup tiles at the grid's far edges.
+    for (order, grid) in [(Order::Lpv, 8), (Order::HoLpv, 10)] {
         let s = LpvSettings {
             order,
-            grid: 8,
+            grid,
             steps: 1,
             occlusion: true,
             rsm: 32,
@@ -100,7 +101,7 @@ fn gpu_injection_and_propagation_agree_with_cpu_twins() {
         assert!(e < 1e-5, "{order:?} step 2: {e}");
         let open = math::propagate(&step1, &method.faces, None);
         assert!(
-            cpu2.total_flux().x < 0.9 * open.total_flux().x,
+            cpu2.total_flux().x < 0.97 * open.total_flux().x,
             "occlusion removes light: {} vs {}",
             cpu2.total_flux(),
             open.total_flux()

@@ -541,11 +541,13 @@ impl Method for LpvMethod {
         let encoder = passes.encoder();
         encoder.clear_buffer(&self.volumes[0], 0, None);
         encoder.clear_buffer(&self.gv_buffer, 0, None);
-        let val_groups = self.rsm.capacity.div_ceil(64);
+        // One invocation per RSM texel, in rows of at most 65535 workgroups.
+        let groups = self.rsm.capacity.div_ceil(64);
+        let val_groups = (groups.min(65535), groups.div_ceil(65535));
         passes.compute("inject", |pass| {
             pass.set_pipeline(&self.inject_pipeline);
             pass.set_bind_group(0, &self.inject_group, &[]);
-            pass.dispatch_workgroups(val_groups, 1, 1);
+            pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
         })?;
         if self.settings.occlusion && self.settings.steps > 1 {
             let t = &self.raster.targets;
@@ -554,7 +556,7 @@ impl Method for LpvMethod {
             passes.compute("geometry", |pass| {
                 pass.set_bind_group(0, &self.geometry_group, &[]);
                 pass.set_pipeline(&self.geometry_rsm);
-                pass.dispatch_workgroups(val_groups, 1, 1);
+                pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
                 pass.set_pipeline(&self.geometry_camera);
                 pass.dispatch_workgroups(sx.div_ceil(8), sy.div_ceil(8), 1);
             })?;
