@@ -533,7 +533,7 @@ mod tests {
         // A square seen face-on: 4·atan(ab/(d·√(a²+b²+d²))).
         let exact = 4.0 * (0.25f32 / (1.5 * (0.5f32 + 2.25).sqrt())).atan();
         assert!((far - exact).abs() < 1e-6);
-        // Each axis gets the same number of faces, contiguous (the shader's loop relies on it).
+        // Each axis gets the same number of faces.
         for faces in [&f6, &f26] {
             let per = faces.len() / 6;
             for (i, f) in faces.iter().enumerate() {

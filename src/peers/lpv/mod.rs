@@ -276,7 +276,10 @@ impl LpvMethod {
         };
         let params_off = params();
         let params_on = params();
-        let gpu_faces: Vec<LpvFace> = faces.iter().map(LpvFace::from_face).collect();
+        // The shader reads each source once per group of faces with the same offset.
+        let mut by_offset = faces.clone();
+        by_offset.sort_by_key(|f| f.offset.to_array());
+        let gpu_faces: Vec<LpvFace> = by_offset.iter().map(LpvFace::from_face).collect();
         let faces_buffer = bytes.buffer_init(
             device,
             "lpv faces",
