@@ -59,6 +59,14 @@ pub const METHODS: &[(&str, &str)] = &[
         "atlas",
         "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
     ),
+    (
+        "lpv",
+        "direct + one diffuse bounce through a light propagation volume: 2-band SH, 6-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
+    ),
+    (
+        "holpv",
+        "direct + one diffuse bounce through a higher-order LPV: 3-band SH, 26-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
+    ),
 ];
 
 /// Builds a method by name for one scene and output size.
@@ -81,6 +89,16 @@ pub fn create(
         "atlas" => Box::new(crate::atlas::AtlasMethod::new(
             ctx, scene, settings, options,
         )?),
+        "lpv" => {
+            crate::peers::lpv::create(ctx, scene, settings, crate::peers::lpv::Order::Lpv, options)?
+        }
+        "holpv" => crate::peers::lpv::create(
+            ctx,
+            scene,
+            settings,
+            crate::peers::lpv::Order::HoLpv,
+            options,
+        )?,
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

@@ -173,6 +173,18 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             ResolveParams,
             [output_size, ssaa, has_indirect]
         ),
+        layout!(
+            "LpvParams",
+            "lpv_common.wgsl",
+            crate::peers::lpv::LpvParams,
+            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
+        ),
+        layout!(
+            "LpvFace",
+            "lpv_common.wgsl",
+            crate::peers::lpv::LpvFace,
+            [y0, y1, y2, offset, corners_lo, corners_hi]
+        ),
     ];
     layouts.extend(crate::vals::shared_layouts());
     layouts.extend(crate::atlas::shared_layouts());
