@@ -43,9 +43,11 @@ pub struct BenchRequest {
 /// `FmaParams` in `shaders/bench_fma.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct FmaParams {
-    iterations: u32,
-    pad: [u32; 3],
+pub struct FmaParams {
+    pub iterations: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// Fused multiply-adds per second of the trivial kernel (best of three runs).
@@ -84,7 +86,9 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
             0,
             bytemuck::bytes_of(&FmaParams {
                 iterations,
-                pad: [0; 3],
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
             }),
         );
         let mut passes = Passes::new(ctx, 2);
@@ -149,6 +153,34 @@ struct Row {
     bytes_per_point: f64,
 }
 
+impl Row {
+    fn new(
+        config: &'static str,
+        report: &serde_json::Map<String, serde_json::Value>,
+        timings: &crate::gpu::PassTimings,
+        width: u32,
+        height: u32,
+    ) -> Self {
+        let number = |key: &str| report.get(key).and_then(|v| v.as_f64()).unwrap_or(0.0);
+        let (vals, points) = (number("vals") as u32, number("sparse_points") as u32);
+        let gather_ms = timings.get("gather").unwrap_or(0.0).max(1e-6);
+        Self {
+            config,
+            vals,
+            points,
+            width,
+            height,
+            table2: crate::vals::table2(timings),
+            sparse_ms: ["gather", "renormalize", "occlusion", "interpolation"]
+                .iter()
+                .map(|l| timings.get(l).unwrap_or(0.0))
+                .sum(),
+            pairs_per_s: vals as f64 * points as f64 / (gather_ms * 1e-3),
+            bytes_per_point: number("bytes_per_point"),
+        }
+    }
+}
+
 /// Runs the grid; returns the CSV path.
 pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     std::fs::create_dir_all(&request.out).map_err(|e| {
@@ -188,12 +220,6 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         let frame = method.render(&ctx, &scene, &world, &camera)?;
         Ok((method.report(), frame.timings))
     };
-    let sparse_stages = |t: &crate::gpu::PassTimings| {
-        ["gather", "renormalize", "occlusion", "interpolation"]
-            .iter()
-            .map(|l| t.get(l).unwrap_or(0.0))
-            .sum::<f64>()
-    };
     for &target in &request.vals {
         let rsm = rsm_for(&ctx, &scene, target)?;
         for &points in &request.points {
@@ -210,26 +236,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                 settings.options.glossy = glossy;
                 settings.options.occlusion = occlusion;
                 let (report, timings) = render(settings, request.width, request.height)?;
-                let vals = report.get("vals").and_then(|v| v.as_u64()).unwrap_or(0) as u32;
-                let n_points = report
-                    .get("sparse_points")
-                    .and_then(|v| v.as_u64())
-                    .unwrap_or(0) as u32;
-                let gather = timings.get("gather").unwrap_or(0.0).max(1e-6);
-                let row = Row {
-                    config,
-                    vals,
-                    points: n_points,
-                    width: request.width,
-                    height: request.height,
-                    table2: crate::vals::table2(&timings),
-                    sparse_ms: sparse_stages(&timings),
-                    pairs_per_s: vals as f64 * n_points as f64 / (gather * 1e-3),
-                    bytes_per_point: report
-                        .get("bytes_per_point")
-                        .and_then(|v| v.as_f64())
-                        .unwrap_or(0.0),
-                };
+                let row = Row::new(config, &report, &timings, request.width, request.height);
                 print_row(&row, peak);
                 rows.push(row);
             }
@@ -243,26 +250,13 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         ..Default::default()
     };
     let (report, timings) = render(settings, request.small, request.small)?;
-    let vals = report.get("vals").and_then(|v| v.as_u64()).unwrap_or(0) as u32;
-    let n_points = report
-        .get("sparse_points")
-        .and_then(|v| v.as_u64())
-        .unwrap_or(0) as u32;
-    let small_row = Row {
-        config: "+occlusion",
-        vals,
-        points: n_points,
-        width: request.small,
-        height: request.small,
-        table2: crate::vals::table2(&timings),
-        sparse_ms: sparse_stages(&timings),
-        pairs_per_s: vals as f64 * n_points as f64
-            / (timings.get("gather").unwrap_or(0.0).max(1e-6) * 1e-3),
-        bytes_per_point: report
-            .get("bytes_per_point")
-            .and_then(|v| v.as_f64())
-            .unwrap_or(0.0),
-    };
+    let small_row = Row::new(
+        "+occlusion",
+        &report,
+        &timings,
+        request.small,
+        request.small,
+    );
     print_row(&small_row, peak);
     if let Some(big) = rows.iter().find(|r| {
         r.config == "+occlusion" && r.vals == small_row.vals && r.points == small_row.points

@@ -93,12 +93,19 @@ struct RenderArgs {
     /// Glossy indirect light (sparse, brute).
     #[arg(long, value_parser = ["on", "off"])]
     glossy: Option<String>,
-    /// Indirect occlusion from the sparse points' discs (sparse).
-    #[arg(long, value_parser = ["off", "sum", "union"])]
+    /// Indirect occlusion from the sparse points' discs (sparse: off|sum|union), or from the
+    /// geometry volume (lpv, holpv: on|off; sum and union also mean on).
+    #[arg(long, value_parser = ["off", "sum", "union", "on"])]
     occlusion: Option<String>,
     /// Weights of the averaged light positions (sparse).
     #[arg(long, value_parser = ["geometric", "flux"])]
     weights: Option<String>,
+    /// Light propagation volume cells per axis (lpv, holpv; default 32).
+    #[arg(long)]
+    grid: Option<u32>,
+    /// Light propagation steps (lpv, holpv; default = --grid).
+    #[arg(long)]
+    steps: Option<u32>,
     /// Render F frames of the scene's animation (from --time, at --fps) as numbered EXRs into
     /// the folder given by --out.
     #[arg(long)]
@@ -311,6 +318,8 @@ fn main() -> ExitCode {
                 ("glossy", args.glossy.clone()),
                 ("occlusion", args.occlusion.clone()),
                 ("weights", args.weights.clone()),
+                ("grid", args.grid.map(|v| v.to_string())),
+                ("steps", args.steps.map(|v| v.to_string())),
             ];
             for (key, value) in shorthands {
                 if let Some(value) = value {

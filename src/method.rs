@@ -60,6 +60,14 @@ pub const METHODS: &[(&str, &str)] = &[
         "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
     ),
     (
+        "lpv",
+        "direct + one diffuse bounce through a light propagation volume: 2-band SH, 6-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
+    ),
+    (
+        "holpv",
+        "direct + one diffuse bounce through a higher-order LPV: 3-band SH, 26-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
+    ),
+    (
         "sparse+atlas",
         "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2 (--atlas FILE)",
     ),
@@ -86,6 +94,16 @@ pub fn create(
             ctx, scene, settings, options,
         )?),
         "sparse+atlas" => crate::atlas::create_sparse_atlas(ctx, scene, settings, options)?,
+        "lpv" => {
+            crate::peers::lpv::create(ctx, scene, settings, crate::peers::lpv::Order::Lpv, options)?
+        }
+        "holpv" => crate::peers::lpv::create(
+            ctx,
+            scene,
+            settings,
+            crate::peers::lpv::Order::HoLpv,
+            options,
+        )?,
         other => {
             return Err(RenderError::Settings(format!(
                 "unknown method '{other}' (available: {})",

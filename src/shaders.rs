@@ -57,10 +57,30 @@ pub const FILES: &[(&str, &str)] = &[
         "atlas_apply.wgsl",
         include_str!("../shaders/atlas_apply.wgsl"),
     ),
+    (
+        "lpv_common.wgsl",
+        include_str!("../shaders/lpv_common.wgsl"),
+    ),
+    (
+        "lpv_inject.wgsl",
+        include_str!("../shaders/lpv_inject.wgsl"),
+    ),
+    (
+        "lpv_geometry.wgsl",
+        include_str!("../shaders/lpv_geometry.wgsl"),
+    ),
+    (
+        "lpv_propagate.wgsl",
+        include_str!("../shaders/lpv_propagate.wgsl"),
+    ),
+    (
+        "lpv_lookup.wgsl",
+        include_str!("../shaders/lpv_lookup.wgsl"),
+    ),
 ];
 
 /// Files that are only included by others (no entry points of their own).
-pub const INCLUDES: &[&str] = &["common.wgsl", "vals_common.wgsl"];
+pub const INCLUDES: &[&str] = &["common.wgsl", "vals_common.wgsl", "lpv_common.wgsl"];
 
 fn raw(name: &str) -> &'static str {
     FILES

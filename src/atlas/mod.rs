@@ -609,9 +609,7 @@ impl Method for AtlasMethod {
         self.raster.prepare(ctx, scene, world_from_node, camera);
         self.layer.prepare(ctx, world_from_node, camera);
         let mut passes = Passes::new(ctx, 6 * scene.lights.len() as u32 + 10);
-        self.raster.record_shadows(&mut passes)?;
-        self.raster.record_gbuffer(&mut passes)?;
-        self.raster.record_direct(&mut passes)?;
+        self.raster.record_base(&mut passes)?;
         self.layer.record(&mut passes)?;
         self.raster.record_resolve(ctx, &mut passes, true)?;
         let timings = passes.finish()?;

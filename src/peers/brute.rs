@@ -128,9 +128,7 @@ impl Method for BruteMethod {
         ctx.queue
             .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let mut passes = Passes::new(ctx, self.rsm.layer_count + 16);
-        self.raster.record_shadows(&mut passes)?;
-        self.raster.record_gbuffer(&mut passes)?;
-        self.raster.record_direct(&mut passes)?;
+        self.raster.record_base(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
         let (w, h) = (
             self.raster.targets.render_width,

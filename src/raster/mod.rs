@@ -373,32 +373,21 @@ impl Rasterizer {
                 shader_location: 0,
             }],
         };
-        let shadow_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("shadow"),
-            layout: Some(&shadow_layout),
-            vertex: wgpu::VertexState {
-                module: &shadow_module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(position_only)],
+        let shadow_pipeline = ScenePipeline {
+            label: "shadow",
+            module: &shadow_module,
+            layout: &shadow_layout,
+            vertex: position_only,
+            depth_write: true,
+            depth_compare: wgpu::CompareFunction::Less,
+            depth_bias: wgpu::DepthBiasState {
+                constant: 2,
+                slope_scale: 1.5,
+                clamp: 0.0,
             },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState {
-                    constant: 2,
-                    slope_scale: 1.5,
-                    clamp: 0.0,
-                },
-            }),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
+            targets: &[],
+        }
+        .build(device);
 
         // G-buffer pipeline.
         let gbuffer_module = ctx.shader("gbuffer.wgsl");
@@ -428,47 +417,22 @@ impl Rasterizer {
             bind_group_layouts: &[Some(&frame_bgl), Some(&scene_gpu.material_layout)],
             immediate_size: 0,
         });
-        let color_target = |format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        };
-        let gbuffer_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("gbuffer"),
-            layout: Some(&gbuffer_layout),
-            vertex: wgpu::VertexState {
-                module: &gbuffer_module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(Vertex::layout())],
-            },
-            // No culling: open and single-sided geometry shade its back faces with a flipped
-            // normal rather than showing holes.
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &gbuffer_module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[
-                    color_target(GBUFFER_NORMAL_FORMAT),
-                    color_target(GBUFFER_MATERIAL_FORMAT),
-                    color_target(GBUFFER_MATERIAL_FORMAT),
-                    color_target(GBUFFER_MATERIAL_FORMAT),
-                ],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let gbuffer_pipeline = ScenePipeline {
+            label: "gbuffer",
+            module: &gbuffer_module,
+            layout: &gbuffer_layout,
+            vertex: Vertex::layout(),
+            depth_write: true,
+            depth_compare: wgpu::CompareFunction::Less,
+            depth_bias: wgpu::DepthBiasState::default(),
+            targets: &[
+                GBUFFER_NORMAL_FORMAT,
+                GBUFFER_MATERIAL_FORMAT,
+                GBUFFER_MATERIAL_FORMAT,
+                GBUFFER_MATERIAL_FORMAT,
+            ],
+        }
+        .build(device);
 
         // Direct lighting.
         let direct_module = ctx.shader("direct_light.wgsl");
@@ -694,25 +658,14 @@ impl Rasterizer {
 
     /// Normals and materials of the visible surfaces (pass "gbuffer").
     pub fn record_gbuffer(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        let clear = |view| {
-            Some(wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })
-        };
         let t = &self.targets;
         passes.render(
             "gbuffer",
             &[
-                clear(&t.normal),
-                clear(&t.diffuse),
-                clear(&t.specular),
-                clear(&t.emissive),
+                cleared(&t.normal),
+                cleared(&t.diffuse),
+                cleared(&t.specular),
+                cleared(&t.emissive),
             ],
             Some(wgpu::RenderPassDepthStencilAttachment {
                 view: &t.depth,
@@ -728,6 +681,13 @@ impl Rasterizer {
                 self.scene_gpu.draw(pass, Some(1));
             },
         )
+    }
+
+    /// What every method draws first: shadow maps, the G-buffer and direct light.
+    pub fn record_base(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        self.record_shadows(passes)?;
+        self.record_gbuffer(passes)?;
+        self.record_direct(passes)
     }
 
     /// Direct light and emission per pixel (pass "direct").
@@ -793,9 +753,7 @@ impl Rasterizer {
     ) -> Result<FrameOutput, RenderError> {
         self.prepare(ctx, scene, world_from_node, camera);
         let mut passes = Passes::new(ctx, self.shadow_layer_views.len() as u32 + 8);
-        self.record_shadows(&mut passes)?;
-        self.record_gbuffer(&mut passes)?;
-        self.record_direct(&mut passes)?;
+        self.record_base(&mut passes)?;
         self.record_resolve(ctx, &mut passes, false)?;
         let timings = passes.finish()?;
         let (direct, indirect) = self.read_outputs(ctx, false)?;
@@ -806,6 +764,76 @@ impl Rasterizer {
             gpu_bytes: self.gpu_bytes(),
         })
     }
+}
+
+/// A render pipeline that draws the scene's meshes. No culling: open and single-sided geometry
+/// shades its back faces with a flipped normal rather than showing holes.
+pub struct ScenePipeline<'a> {
+    pub label: &'a str,
+    pub module: &'a wgpu::ShaderModule,
+    pub layout: &'a wgpu::PipelineLayout,
+    pub vertex: wgpu::VertexBufferLayout<'a>,
+    pub depth_write: bool,
+    pub depth_compare: wgpu::CompareFunction,
+    pub depth_bias: wgpu::DepthBiasState,
+    /// Colour target formats; empty for a depth-only pipeline (no fragment stage).
+    pub targets: &'a [wgpu::TextureFormat],
+}
+
+impl ScenePipeline<'_> {
+    pub fn build(self, device: &wgpu::Device) -> wgpu::RenderPipeline {
+        let targets: Vec<Option<wgpu::ColorTargetState>> = self
+            .targets
+            .iter()
+            .map(|&format| {
+                Some(wgpu::ColorTargetState {
+                    format,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })
+            })
+            .collect();
+        device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some(self.label),
+            layout: Some(self.layout),
+            vertex: wgpu::VertexState {
+                module: self.module,
+                entry_point: Some("vs_main"),
+                compilation_options: Default::default(),
+                buffers: &[Some(self.vertex)],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(self.depth_write),
+                depth_compare: Some(self.depth_compare),
+                stencil: wgpu::StencilState::default(),
+                bias: self.depth_bias,
+            }),
+            multisample: wgpu::MultisampleState::default(),
+            fragment: (!targets.is_empty()).then(|| wgpu::FragmentState {
+                module: self.module,
+                entry_point: Some("fs_main"),
+                compilation_options: Default::default(),
+                targets: &targets,
+            }),
+            multiview_mask: None,
+            cache: None,
+        })
+    }
+}
+
+/// A colour attachment cleared to transparent black and stored.
+pub fn cleared(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachment<'_>> {
+    Some(wgpu::RenderPassColorAttachment {
+        view,
+        depth_slice: None,
+        resolve_target: None,
+        ops: wgpu::Operations {
+            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+            store: wgpu::StoreOp::Store,
+        },
+    })
 }
 
 pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {

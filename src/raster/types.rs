@@ -97,20 +97,24 @@ pub struct SharedLayout {
     pub fields: Vec<(&'static str, usize)>,
 }
 
-/// Every struct shared between Rust and WGSL.
+/// `SharedLayout` of a `#[repr(C)]` struct: `shared_layout!("WgslName", "file.wgsl", RustType,
+/// [fields in declaration order])`.
+macro_rules! shared_layout {
+    ($wgsl:literal, $file:literal, $ty:ty, [$($field:ident),*]) => {
+        $crate::raster::types::SharedLayout {
+            wgsl_name: $wgsl,
+            file: $file,
+            size: std::mem::size_of::<$ty>(),
+            fields: vec![$((stringify!($field), std::mem::offset_of!($ty, $field))),*],
+        }
+    };
+}
+pub(crate) use shared_layout;
+
+/// Every struct shared between Rust and WGSL, across all techniques.
 pub fn shared_layouts() -> Vec<SharedLayout> {
-    use std::mem::{offset_of, size_of};
-    macro_rules! layout {
-        ($wgsl:literal, $file:literal, $ty:ty, [$($field:ident),*]) => {
-            SharedLayout {
-                wgsl_name: $wgsl,
-                file: $file,
-                size: size_of::<$ty>(),
-                fields: vec![$((stringify!($field), offset_of!($ty, $field))),*],
-            }
-        };
-    }
-    vec![
+    use shared_layout as layout;
+    let mut layouts = vec![
         layout!(
             "Frame",
             "common.wgsl",
@@ -169,5 +173,20 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             ResolveParams,
             [output_size, ssaa, has_indirect]
         ),
-    ]
+        layout!(
+            "LpvParams",
+            "lpv_common.wgsl",
+            crate::peers::lpv::LpvParams,
+            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
+        ),
+        layout!(
+            "LpvFace",
+            "lpv_common.wgsl",
+            crate::peers::lpv::LpvFace,
+            [y0, y1, y2, offset, corners_lo, corners_hi]
+        ),
+    ];
+    layouts.extend(crate::vals::shared_layouts());
+    layouts.extend(crate::atlas::shared_layouts());
+    layouts
 }

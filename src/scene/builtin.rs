@@ -64,6 +64,10 @@ const BASIC: &[(&str, &str)] = &[
         "box-point",
         "closed 2 m cube of albedo 0.5 (inward-facing) with a 1 W/sr point light at its centre",
     ),
+    (
+        "lpv-diagonal",
+        "seed 004's diagonal-propagation test: a spot-lit panel in one corner of a 4 m plane facing its centre",
+    ),
 ];
 
 /// Builds the built-in scene `name`.
@@ -86,6 +90,7 @@ pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
         "plane-blocker" => Ok(plane(name, PlaneLight::Point, true, max_edge)),
         "plane-directional" => Ok(plane(name, PlaneLight::Directional, true, max_edge)),
         "box-point" => Ok(closed_box(name, max_edge)),
+        "lpv-diagonal" => Ok(lpv_diagonal(name, max_edge)),
         _ => procedural::load(name, max_edge)
             .unwrap_or_else(|| Err(SceneError::UnknownBuiltin { name: name.into() })),
     }
@@ -424,6 +429,65 @@ fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
             2.0,
         ),
     }
+    b.scene
+}
+
+/// Seed 004 §5.2's diagonal-propagation scene: a 4 m × 4 m grey (ρ = 0.8) plane at y = 0 and
+/// a 0.6 m square white panel (ρ = 0.8) standing in the (−x, −z) corner, facing the plane's
+/// centre, lit by a narrow spot (10 W/sr, outer cone 18°) whose whole cone lands on the panel.
+/// The plane receives no direct light: all of its light is the panel's bounce, leaving
+/// diagonally across an axis-aligned grid. Seen from straight above.
+fn lpv_diagonal(name: &str, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let grey = b.material(Material::lambert("grey", Vec3::splat(0.8)));
+    let mut mb = MeshBuilder::new("plane", grey);
+    mb.add_quad(
+        Vec3::new(-2.0, 0.0, -2.0),
+        Vec3::new(2.0, 0.0, -2.0),
+        Vec3::new(2.0, 0.0, 2.0),
+        Vec3::new(-2.0, 0.0, 2.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        max_edge,
+    );
+    b.object("plane", mb.build(), Trs::default());
+    let normal = Vec3::new(1.0, 0.0, 1.0).normalize();
+    let center = Vec3::new(-1.4, 0.0, -1.4);
+    let side = Vec3::new(1.0, 0.0, -1.0).normalize() * 0.3;
+    let mut mb = MeshBuilder::new("panel", grey);
+    mb.add_quad(
+        center - side,
+        center + side,
+        center + side + Vec3::Y * 0.6,
+        center - side + Vec3::Y * 0.6,
+        center + normal,
+        max_edge,
+    );
+    b.object("panel", mb.build(), Trs::default());
+    b.camera(
+        Camera {
+            name: "camera".into(),
+            node: 0,
+            yfov: 60f32.to_radians(),
+            aspect: None,
+            znear: 0.05,
+            zfar: Some(10.0),
+        },
+        Trs {
+            translation: Vec3::new(0.0, 4.0, 0.0001),
+            rotation: looking_down(),
+            ..Trs::default()
+        },
+    );
+    b.light_along(
+        "spot",
+        center + Vec3::Y * 0.3 + normal * 0.8,
+        -normal,
+        LightKind::Spot {
+            inner_cone_angle: 12f32.to_radians(),
+            outer_cone_angle: 18f32.to_radians(),
+        },
+        10.0,
+    );
     b.scene
 }
 

@@ -92,6 +92,65 @@ impl SparseSettings {
     }
 }
 
+/// The sparse method's structs shared with WGSL, for the layout test.
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::shared_layout;
+    vec![
+        shared_layout!(
+            "Val",
+            "vals_common.wgsl",
+            rsm::GpuVal,
+            [position_area, normal, flux]
+        ),
+        shared_layout!(
+            "SparseParams",
+            "vals_common.wgsl",
+            sparse::SparseParams,
+            [
+                eye,
+                point_count,
+                instance_count,
+                flags,
+                occlusion_mode,
+                tile,
+                vertex_count,
+                pad0,
+                pad1
+            ]
+        ),
+        shared_layout!(
+            "InstanceRange",
+            "vals_common.wgsl",
+            sparse::InstanceRange,
+            [vertex_offset, vertex_count, point_offset, link_offset]
+        ),
+        shared_layout!(
+            "RsmView",
+            "vals_rsm.wgsl",
+            rsm::RsmView,
+            [
+                clip_from_world,
+                light_index,
+                resolution,
+                tan_half_fov,
+                texel_area
+            ]
+        ),
+        shared_layout!(
+            "RsmSize",
+            "vals_from_rsm.wgsl",
+            rsm::RsmSize,
+            [resolution, layers, capacity, pad]
+        ),
+        shared_layout!(
+            "FmaParams",
+            "bench_fma.wgsl",
+            crate::bench::FmaParams,
+            [iterations, pad0, pad1, pad2]
+        ),
+    ]
+}
+
 /// Table 2 of the paper: per-pass milliseconds grouped as its rows.
 pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
     let get = |l: &str| timings.get(l).unwrap_or(0.0);
@@ -207,9 +266,7 @@ impl Method for SparseMethod {
             layer.prepare(ctx, world_from_node, camera);
         }
         let mut passes = Passes::new(ctx, self.rsm.layer_count + 36);
-        self.raster.record_shadows(&mut passes)?;
-        self.raster.record_gbuffer(&mut passes)?;
-        self.raster.record_direct(&mut passes)?;
+        self.raster.record_base(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
         let has_indirect = self.last_stage == Stage::Apply;
         match self.layer.as_ref().filter(|_| has_indirect) {

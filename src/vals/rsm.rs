@@ -13,8 +13,8 @@ use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::shadows::setup_lights;
 use crate::raster::types::{GpuLight, Vertex};
 use crate::raster::{
-    buffer_binding, compute_pipeline, storage_entry, uniform_entry, view_binding, RenderError,
-    DEPTH_FORMAT,
+    buffer_binding, cleared, compute_pipeline, storage_entry, uniform_entry, view_binding,
+    RenderError, ScenePipeline, DEPTH_FORMAT,
 };
 use crate::scene::{Aabb, LightKind, Scene};
 
@@ -264,48 +264,21 @@ impl Rsm {
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
-        let target = |format| {
-            Some(wgpu::ColorTargetState {
-                format,
-                blend: None,
-                write_mask: wgpu::ColorWrites::ALL,
-            })
-        };
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("rsm"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &attributes,
-                })],
+        let pipeline = ScenePipeline {
+            label: "rsm",
+            module: &module,
+            layout: &layout,
+            vertex: wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &attributes,
             },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[
-                    target(POSITION_FORMAT),
-                    target(NORMAL_FORMAT),
-                    target(FLUX_FORMAT),
-                ],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+            depth_write: true,
+            depth_compare: wgpu::CompareFunction::Less,
+            depth_bias: wgpu::DepthBiasState::default(),
+            targets: &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT],
+        }
+        .build(device);
 
         let cs = wgpu::ShaderStages::COMPUTE;
         let array_entry = |binding| wgpu::BindGroupLayoutEntry {
@@ -427,21 +400,10 @@ impl Rsm {
         passes
             .encoder()
             .clear_buffer(&self.val_count_buffer, 0, None);
-        let clear = |view| {
-            Some(wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })
-        };
         for (views, group) in self.layer_views.iter().zip(&self.layer_groups) {
             passes.render(
                 "rsm",
-                &[clear(&views[0]), clear(&views[1]), clear(&views[2])],
+                &[cleared(&views[0]), cleared(&views[1]), cleared(&views[2])],
                 Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &self.depth_view,
                     depth_ops: Some(wgpu::Operations {

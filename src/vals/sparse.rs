@@ -20,8 +20,8 @@ use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::types::Vertex;
 use crate::raster::{
-    buffer_binding, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
-    uniform_entry, view_binding, FrameTargets, RenderError, DEPTH_FORMAT, RADIANCE_FORMAT,
+    buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
+    uniform_entry, view_binding, FrameTargets, RenderError, ScenePipeline, RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
@@ -423,45 +423,27 @@ impl SparseGpu {
             bind_group_layouts: &[Some(&apply_bgl)],
             immediate_size: 0,
         });
-        let apply_pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("apply"),
-            layout: Some(&apply_layout),
-            vertex: wgpu::VertexState {
-                module: &apply_module,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<Vertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &[wgpu::VertexAttribute {
-                        format: wgpu::VertexFormat::Float32x3,
-                        offset: 0,
-                        shader_location: 0,
-                    }],
-                })],
+        let apply_pipeline = ScenePipeline {
+            label: "apply",
+            module: &apply_module,
+            layout: &apply_layout,
+            vertex: wgpu::VertexBufferLayout {
+                array_stride: std::mem::size_of::<Vertex>() as u64,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &[wgpu::VertexAttribute {
+                    format: wgpu::VertexFormat::Float32x3,
+                    offset: 0,
+                    shader_location: 0,
+                }],
             },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(false),
-                depth_compare: Some(wgpu::CompareFunction::Equal),
-                stencil: wgpu::StencilState::default(),
-                bias: wgpu::DepthBiasState::default(),
-            }),
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &apply_module,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: RADIANCE_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+            // Equal against the G-buffer's depth (both vertex stages are @invariant): each
+            // pixel is shaded once, by the surface the G-buffer holds.
+            depth_write: false,
+            depth_compare: wgpu::CompareFunction::Equal,
+            depth_bias: wgpu::DepthBiasState::default(),
+            targets: &[RADIANCE_FORMAT],
+        }
+        .build(device);
 
         Ok(Self {
             point_count,
@@ -575,15 +557,7 @@ impl SparseGpu {
         if last >= Stage::Apply {
             passes.render(
                 "apply",
-                &[Some(wgpu::RenderPassColorAttachment {
-                    view: indirect,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
+                &[cleared(indirect)],
                 Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &targets.depth,
                     depth_ops: Some(wgpu::Operations {

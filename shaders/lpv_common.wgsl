@@ -1,0 +1,79 @@
+// Light propagation volumes (seed 004, DESIGN §6): the grid parameters, the propagation face
+// table and the spherical harmonics shared by the lpv_* passes. `src/peers/lpv/math.rs` is
+// the CPU twin of every function here.
+#include "vals_common.wgsl"
+
+// SH coefficients per colour channel: 4 (LPV, two bands) or 9 (HO-LPV, three bands), set
+// per pipeline. A cell holds 3·SH_COUNT floats: [channel][coefficient].
+override SH_COUNT: u32 = 4u;
+
+struct LpvParams {
+    // xyz: the grid's min corner (world, m); w: cell size h (m).
+    origin_cell: vec4<f32>,
+    // xyz: cells per axis; w: cells in all.
+    dims: vec4<u32>,
+    face_count: u32,
+    // 1: attenuate the propagated flux by the geometry volume in this step.
+    occlusion: u32,
+    // Camera surfels for the geometry volume: one per stride×stride render pixels.
+    surfel_stride: u32,
+    pad: u32,
+}
+
+// One face of one destination cell as seen from the source cell's centre.
+struct LpvFace {
+    // The SH basis at ω_f (source centre → face centre): Y00, Y1-1, Y10, Y11.
+    y0: vec4<f32>,
+    // Y2-2, Y2-1, Y20, Y21.
+    y1: vec4<f32>,
+    // x: Y22; y: the face's solid angle Ω_f (sr).
+    y2: vec4<f32>,
+    // xyz: destination − source (cells); w: the face normal's axis 0..6 (+x −x +y −y +z −z).
+    offset: vec4<i32>,
+    // Weights of the destination's 8 geometry-volume corners (corner i at offset
+    // (i & 1, i >> 1 & 1, i >> 2 & 1)) that interpolate the GV at the midpoint between source
+    // and destination: corners 0..3, 4..7.
+    corners_lo: vec4<f32>,
+    corners_hi: vec4<f32>,
+}
+
+// Real SH up to band 2, the order of math::sh9.
+fn sh9(d: vec3<f32>) -> array<f32, 9> {
+    return array<f32, 9>(
+        0.2820948,
+        0.4886025 * d.y,
+        0.4886025 * d.z,
+        0.4886025 * d.x,
+        1.0925484 * d.x * d.y,
+        1.0925484 * d.y * d.z,
+        0.31539157 * (3.0 * d.z * d.z - 1.0),
+        1.0925484 * d.x * d.z,
+        0.5462742 * (d.x * d.x - d.y * d.y),
+    );
+}
+
+// Zonal factor of the clamped cosine for coefficient k: π, 2π/3, π/4 per band.
+fn clamped_cosine_factor(k: u32) -> f32 {
+    if (k == 0u) {
+        return PI;
+    }
+    if (k < 4u) {
+        return 2.0 * PI / 3.0;
+    }
+    return PI / 4.0;
+}
+
+fn axis_vector(a: u32) -> vec3<f32> {
+    var v = vec3<f32>(0.0);
+    v[a / 2u] = select(1.0, -1.0, (a & 1u) == 1u);
+    return v;
+}
+
+fn lpv_cell_index(c: vec3<i32>, dims: vec3<u32>) -> u32 {
+    let n = vec3<i32>(dims);
+    return u32(c.x + n.x * (c.y + n.y * c.z));
+}
+
+fn lpv_inside(c: vec3<i32>, dims: vec3<u32>) -> bool {
+    return all(c >= vec3<i32>(0)) && all(c < vec3<i32>(dims));
+}

@@ -1,0 +1,640 @@
+//! Light propagation volumes (`--method lpv`) and higher-order LPVs (`--method holpv`), seed
+//! 004 / DESIGN §6. The RSM VALs of [`crate::vals::rsm::Rsm`] are injected as clamped-cosine
+//! lobes into an N³ grid fitted to the scene (`lpv_inject.wgsl`); a geometry volume of blocker
+//! potentials from the RSM and the camera's G-buffer sits half a cell off (`lpv_geometry.wgsl`);
+//! S gather steps propagate the light to 6 (LPV, 2-band SH) or 26 (HO-LPV, 3-band SH)
+//! neighbours with ping-pong and accumulation volumes (`lpv_propagate.wgsl`); every pixel
+//! reads the accumulated volume (`lpv_lookup.wgsl`). Equations, units and choices: README.md
+//! in this folder; CPU twins: [`math`].
+
+pub mod math;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, UVec3};
+
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::method::{Method, MethodOptions};
+use crate::raster::{
+    buffer_binding, storage_entry, storage_entry_rw, storage_texture_entry, texture_entry,
+    uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError, RenderSettings,
+};
+use crate::scene::{CameraView, Scene};
+use crate::vals::rsm::Rsm;
+
+use math::{Face, Grid, Volume};
+
+/// `LpvParams` in `shaders/lpv_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct LpvParams {
+    pub origin_cell: [f32; 4],
+    pub dims: [u32; 4],
+    pub face_count: u32,
+    pub occlusion: u32,
+    pub surfel_stride: u32,
+    pub pad: u32,
+}
+
+/// `LpvFace` in `shaders/lpv_common.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct LpvFace {
+    pub y0: [f32; 4],
+    pub y1: [f32; 4],
+    pub y2: [f32; 4],
+    pub offset: [i32; 4],
+    pub corners_lo: [f32; 4],
+    pub corners_hi: [f32; 4],
+}
+
+impl LpvFace {
+    pub fn from_face(f: &Face) -> Self {
+        let y = math::sh9(f.direction);
+        let w = math::corner_weights(f.offset);
+        Self {
+            y0: [y[0], y[1], y[2], y[3]],
+            y1: [y[4], y[5], y[6], y[7]],
+            y2: [y[8], f.solid_angle, 0.0, 0.0],
+            offset: [f.offset.x, f.offset.y, f.offset.z, f.axis as i32],
+            corners_lo: [w[0], w[1], w[2], w[3]],
+            corners_hi: [w[4], w[5], w[6], w[7]],
+        }
+    }
+}
+
+/// LPV (2 bands, 6 directions) or HO-LPV (3 bands, 26 directions).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    Lpv,
+    HoLpv,
+}
+
+impl Order {
+    pub fn sh_count(self) -> usize {
+        match self {
+            Order::Lpv => 4,
+            Order::HoLpv => 9,
+        }
+    }
+
+    pub fn faces(self) -> Vec<Face> {
+        match self {
+            Order::Lpv => math::faces6(),
+            Order::HoLpv => math::faces26(),
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Order::Lpv => "lpv",
+            Order::HoLpv => "holpv",
+        }
+    }
+}
+
+/// The knobs of both methods.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LpvSettings {
+    pub order: Order,
+    /// Cells per axis (N³ grid).
+    pub grid: u32,
+    /// Propagation steps S.
+    pub steps: u32,
+    /// Geometry-volume occlusion from the second step on.
+    pub occlusion: bool,
+    /// RSM resolution per light layer.
+    pub rsm: u32,
+}
+
+impl LpvSettings {
+    /// From method options: `grid` (32), `steps` (= grid), `occlusion` (on|off; the sparse
+    /// method's sum|union mean on), `rsm` (128).
+    pub fn from_options(order: Order, options: &MethodOptions) -> Result<Self, RenderError> {
+        let grid: u32 = options.get("grid", 32)?;
+        if !(3..=256).contains(&grid) {
+            return Err(RenderError::Settings(format!(
+                "--grid {grid}: must be 3..=256"
+            )));
+        }
+        let steps: u32 = options.get("steps", grid)?;
+        let occlusion = options.choice("occlusion", &["on", "off", "sum", "union"])? != "off";
+        let rsm: u32 = options.get("rsm", 128)?;
+        Ok(Self {
+            order,
+            grid,
+            steps,
+            occlusion,
+            rsm,
+        })
+    }
+}
+
+/// Which of the method's volumes to read back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VolumeId {
+    /// Injection target and odd-step source ("b").
+    Injected,
+    /// Target of odd steps ("a"); step 2 writes back into `Injected`.
+    Ping,
+    Accum,
+}
+
+pub struct LpvMethod {
+    pub raster: Rasterizer,
+    pub rsm: Rsm,
+    pub settings: LpvSettings,
+    pub grid: Grid,
+    pub faces: Vec<Face>,
+    params_off: wgpu::Buffer,
+    params_on: wgpu::Buffer,
+    /// [b (injected), a, accum].
+    volumes: [wgpu::Buffer; 3],
+    gv_buffer: wgpu::Buffer,
+    bytes: GpuBytes,
+    volume_bytes: u64,
+    inject_pipeline: wgpu::ComputePipeline,
+    inject_group: wgpu::BindGroup,
+    geometry_rsm: wgpu::ComputePipeline,
+    geometry_camera: wgpu::ComputePipeline,
+    geometry_group: wgpu::BindGroup,
+    propagate_pipeline: wgpu::ComputePipeline,
+    /// b→a without occlusion (step 1), a→b, b→a (with occlusion when on).
+    propagate_groups: [wgpu::BindGroup; 3],
+    lookup_pipeline: wgpu::ComputePipeline,
+    lookup_group: wgpu::BindGroup,
+    surfel_stride: u32,
+    vals: u32,
+}
+
+fn pipeline(
+    ctx: &GpuContext,
+    label: &str,
+    shader: &str,
+    entry: &str,
+    layout: &wgpu::BindGroupLayout,
+    sh_count: usize,
+) -> wgpu::ComputePipeline {
+    let pipeline_layout = ctx
+        .device
+        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(layout)],
+            immediate_size: 0,
+        });
+    ctx.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: Some(&pipeline_layout),
+            module: &ctx.shader(shader),
+            entry_point: Some(entry),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("SH_COUNT", sh_count as f64)],
+                // Every workgroup writes its whole block before reading it.
+                zero_initialize_workgroup_memory: false,
+            },
+            cache: None,
+        })
+}
+
+impl LpvMethod {
+    pub fn new(
+        ctx: &GpuContext,
+        scene: &Scene,
+        render: RenderSettings,
+        settings: LpvSettings,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        let needed_shared = 216 * 27 * 4;
+        if device.limits().max_compute_workgroup_storage_size < needed_shared {
+            return Err(RenderError::Settings(format!(
+                "LPV propagation needs {needed_shared} bytes of workgroup memory; the device has {}",
+                device.limits().max_compute_workgroup_storage_size
+            )));
+        }
+        let raster = Rasterizer::new(ctx, scene, render)?;
+        let rsm = Rsm::new(ctx, scene, &raster.scene_gpu, settings.rsm)?;
+        // Fitted once to the rest pose, so that animation does not move the grid (no flicker).
+        let bounds = scene.world_bounds(&scene.world_from_node());
+        let (lo, hi) = if bounds.is_empty() {
+            (glam::Vec3::ZERO, glam::Vec3::ONE)
+        } else {
+            (bounds.min, bounds.max)
+        };
+        let grid = Grid::fit(lo, hi, settings.grid);
+        let order = settings.order;
+        let sh = order.sh_count();
+        let faces = order.faces();
+        let cells = (grid.dims.x * grid.dims.y * grid.dims.z) as u64;
+        let volume_size = cells * 3 * sh as u64 * 4;
+        let gv_cells = (grid.dims + UVec3::ONE).as_u64vec3();
+        let gv_size = gv_cells.x * gv_cells.y * gv_cells.z * 16;
+        let max_binding = device
+            .limits()
+            .max_storage_buffer_binding_size
+            .min(device.limits().max_buffer_size);
+        if volume_size > max_binding {
+            return Err(RenderError::Settings(format!(
+                "--grid {}: a volume needs {volume_size} bytes; the device binds at most {max_binding}",
+                settings.grid
+            )));
+        }
+
+        let mut bytes = GpuBytes::default();
+        let storage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC;
+        let mut volume = |label: &str, size: u64| {
+            bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage: storage,
+                    mapped_at_creation: false,
+                },
+            )
+        };
+        let volumes = [
+            volume("lpv injected", volume_size),
+            volume("lpv ping", volume_size),
+            volume("lpv accum", volume_size),
+        ];
+        let gv_buffer = volume("lpv geometry", gv_size);
+        let volume_bytes = 3 * volume_size + gv_size;
+        let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+        let params_size = std::mem::size_of::<LpvParams>() as u64;
+        let mut params = || {
+            bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some("lpv params"),
+                    size: params_size,
+                    usage: uniform,
+                    mapped_at_creation: false,
+                },
+            )
+        };
+        let params_off = params();
+        let params_on = params();
+        // The shader reads each source once per group of faces with the same offset.
+        let mut by_offset = faces.clone();
+        by_offset.sort_by_key(|f| f.offset.to_array());
+        let gpu_faces: Vec<LpvFace> = by_offset.iter().map(LpvFace::from_face).collect();
+        let faces_buffer = bytes.buffer_init(
+            device,
+            "lpv faces",
+            bytemuck::cast_slice(&gpu_faces),
+            wgpu::BufferUsages::STORAGE,
+        );
+
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let t = &raster.targets;
+        // Injection.
+        let inject_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lpv inject"),
+            entries: &[
+                uniform_entry(0, cs),
+                storage_entry(1, cs),
+                storage_entry(2, cs),
+                storage_entry_rw(3, cs),
+            ],
+        });
+        let inject_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lpv inject"),
+            layout: &inject_layout,
+            entries: &[
+                buffer_binding(0, &params_off),
+                buffer_binding(1, &rsm.vals_buffer),
+                buffer_binding(2, &rsm.val_count_buffer),
+                buffer_binding(3, &volumes[0]),
+            ],
+        });
+        let inject_pipeline = pipeline(
+            ctx,
+            "lpv inject",
+            "lpv_inject.wgsl",
+            "cs_main",
+            &inject_layout,
+            sh,
+        );
+        // Geometry volume.
+        let depth_entry = |binding| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: cs,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Depth,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let geometry_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lpv geometry"),
+            entries: &[
+                uniform_entry(0, cs),
+                storage_entry(1, cs),
+                storage_entry(2, cs),
+                storage_entry_rw(3, cs),
+                uniform_entry(4, cs),
+                depth_entry(5),
+                texture_entry(6, cs),
+                texture_entry(7, cs),
+            ],
+        });
+        let geometry_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lpv geometry"),
+            layout: &geometry_layout,
+            entries: &[
+                buffer_binding(0, &params_off),
+                buffer_binding(1, &rsm.vals_buffer),
+                buffer_binding(2, &rsm.val_count_buffer),
+                buffer_binding(3, &gv_buffer),
+                buffer_binding(4, &raster.frame_buffer),
+                view_binding(5, &t.depth),
+                view_binding(6, &t.normal),
+                view_binding(7, &t.specular),
+            ],
+        });
+        let geometry_rsm = pipeline(
+            ctx,
+            "lpv geometry rsm",
+            "lpv_geometry.wgsl",
+            "cs_rsm",
+            &geometry_layout,
+            sh,
+        );
+        let geometry_camera = pipeline(
+            ctx,
+            "lpv geometry camera",
+            "lpv_geometry.wgsl",
+            "cs_camera",
+            &geometry_layout,
+            sh,
+        );
+        // Propagation.
+        let propagate_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lpv propagate"),
+            entries: &[
+                uniform_entry(0, cs),
+                storage_entry(1, cs),
+                storage_entry(2, cs),
+                storage_entry_rw(3, cs),
+                storage_entry_rw(4, cs),
+                storage_entry(5, cs),
+            ],
+        });
+        let later = if settings.occlusion {
+            &params_on
+        } else {
+            &params_off
+        };
+        let group = |params: &wgpu::Buffer, src: usize, dst: usize| {
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lpv propagate"),
+                layout: &propagate_layout,
+                entries: &[
+                    buffer_binding(0, params),
+                    buffer_binding(1, &faces_buffer),
+                    buffer_binding(2, &volumes[src]),
+                    buffer_binding(3, &volumes[dst]),
+                    buffer_binding(4, &volumes[2]),
+                    buffer_binding(5, &gv_buffer),
+                ],
+            })
+        };
+        let propagate_groups = [
+            group(&params_off, 0, 1),
+            group(later, 1, 0),
+            group(later, 0, 1),
+        ];
+        let propagate_pipeline = pipeline(
+            ctx,
+            "lpv propagate",
+            "lpv_propagate.wgsl",
+            "cs_main",
+            &propagate_layout,
+            sh,
+        );
+        // Lookup.
+        let lookup_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("lpv lookup"),
+            entries: &[
+                uniform_entry(0, cs),
+                uniform_entry(1, cs),
+                storage_entry(2, cs),
+                depth_entry(3),
+                texture_entry(4, cs),
+                texture_entry(5, cs),
+                texture_entry(6, cs),
+                storage_texture_entry(7, cs),
+            ],
+        });
+        let lookup_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lpv lookup"),
+            layout: &lookup_layout,
+            entries: &[
+                buffer_binding(0, &raster.frame_buffer),
+                buffer_binding(1, &params_off),
+                buffer_binding(2, &volumes[2]),
+                view_binding(3, &t.depth),
+                view_binding(4, &t.normal),
+                view_binding(5, &t.diffuse),
+                view_binding(6, &t.specular),
+                view_binding(7, &t.radiance_indirect),
+            ],
+        });
+        let lookup_pipeline = pipeline(
+            ctx,
+            "lpv lookup",
+            "lpv_lookup.wgsl",
+            "cs_main",
+            &lookup_layout,
+            sh,
+        );
+        // About 128² camera surfels whatever the resolution.
+        let surfel_stride = t.render_width.max(t.render_height).div_ceil(128).max(1);
+        Ok(Self {
+            raster,
+            rsm,
+            settings,
+            grid,
+            faces,
+            params_off,
+            params_on,
+            volumes,
+            gv_buffer,
+            bytes,
+            volume_bytes,
+            inject_pipeline,
+            inject_group,
+            geometry_rsm,
+            geometry_camera,
+            geometry_group,
+            propagate_pipeline,
+            propagate_groups,
+            lookup_pipeline,
+            lookup_group,
+            surfel_stride,
+            vals: 0,
+        })
+    }
+
+    /// Bytes of the three light volumes and the geometry volume.
+    pub fn volume_bytes(&self) -> u64 {
+        self.volume_bytes
+    }
+
+    /// One of the light volumes of the last frame, in [`Volume`]'s layout.
+    pub fn read_volume(&self, ctx: &GpuContext, which: VolumeId) -> Result<Volume, GpuError> {
+        let buffer = match which {
+            VolumeId::Injected => &self.volumes[0],
+            VolumeId::Ping => &self.volumes[1],
+            VolumeId::Accum => &self.volumes[2],
+        };
+        Ok(Volume {
+            dims: self.grid.dims,
+            sh: self.settings.order.sh_count(),
+            data: crate::gpu::read_buffer(ctx, buffer)?,
+        })
+    }
+
+    /// The geometry volume of the last frame ((N+1)³ × 4 floats).
+    pub fn read_geometry(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
+        crate::gpu::read_buffer(ctx, &self.gv_buffer)
+    }
+
+    fn write_params(&self, ctx: &GpuContext) {
+        let g = &self.grid;
+        let mut p = LpvParams {
+            origin_cell: g.origin.extend(g.cell).to_array(),
+            dims: [g.dims.x, g.dims.y, g.dims.z, g.dims.x * g.dims.y * g.dims.z],
+            face_count: self.faces.len() as u32,
+            occlusion: 0,
+            surfel_stride: self.surfel_stride,
+            pad: 0,
+        };
+        ctx.queue
+            .write_buffer(&self.params_off, 0, bytemuck::bytes_of(&p));
+        p.occlusion = 1;
+        ctx.queue
+            .write_buffer(&self.params_on, 0, bytemuck::bytes_of(&p));
+    }
+}
+
+impl Method for LpvMethod {
+    fn name(&self) -> &'static str {
+        self.settings.order.name()
+    }
+
+    fn render(
+        &mut self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: &CameraView,
+    ) -> Result<FrameOutput, RenderError> {
+        self.raster.prepare(ctx, scene, world_from_node, camera);
+        self.rsm.prepare(ctx, scene, world_from_node);
+        self.write_params(ctx);
+        let mut passes = Passes::new(ctx, 2 * self.rsm.layer_count + 16);
+        self.raster.record_shadows(&mut passes)?;
+        self.raster.record_gbuffer(&mut passes)?;
+        self.raster.record_direct(&mut passes)?;
+        self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
+        let encoder = passes.encoder();
+        encoder.clear_buffer(&self.volumes[0], 0, None);
+        encoder.clear_buffer(&self.gv_buffer, 0, None);
+        // One invocation per RSM texel, in rows of at most 65535 workgroups.
+        let groups = self.rsm.capacity.div_ceil(64);
+        let val_groups = (groups.min(65535), groups.div_ceil(65535));
+        passes.compute("inject", |pass| {
+            pass.set_pipeline(&self.inject_pipeline);
+            pass.set_bind_group(0, &self.inject_group, &[]);
+            pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
+        })?;
+        if self.settings.occlusion && self.settings.steps > 1 {
+            let t = &self.raster.targets;
+            let s = self.surfel_stride;
+            let (sx, sy) = (t.render_width.div_ceil(s), t.render_height.div_ceil(s));
+            passes.compute("geometry", |pass| {
+                pass.set_bind_group(0, &self.geometry_group, &[]);
+                pass.set_pipeline(&self.geometry_rsm);
+                pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
+                pass.set_pipeline(&self.geometry_camera);
+                pass.dispatch_workgroups(sx.div_ceil(8), sy.div_ceil(8), 1);
+            })?;
+        }
+        let volume_size = self.volumes[0].size();
+        passes.encoder().copy_buffer_to_buffer(
+            &self.volumes[0],
+            0,
+            &self.volumes[2],
+            0,
+            volume_size,
+        );
+        if self.settings.steps > 0 {
+            let groups = self.grid.dims.to_array().map(|n| n.div_ceil(4));
+            passes.compute("propagate", |pass| {
+                pass.set_pipeline(&self.propagate_pipeline);
+                for step in 0..self.settings.steps {
+                    let group = match step {
+                        0 => &self.propagate_groups[0],
+                        s if s % 2 == 1 => &self.propagate_groups[1],
+                        _ => &self.propagate_groups[2],
+                    };
+                    pass.set_bind_group(0, group, &[]);
+                    pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+                }
+            })?;
+        }
+        let (w, h) = (
+            self.raster.targets.render_width,
+            self.raster.targets.render_height,
+        );
+        passes.compute("lookup", |pass| {
+            pass.set_pipeline(&self.lookup_pipeline);
+            pass.set_bind_group(0, &self.lookup_group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        })?;
+        self.raster.record_resolve(ctx, &mut passes, true)?;
+        let timings = passes.finish()?;
+        let (direct, indirect) = self.raster.read_outputs(ctx, true)?;
+        self.vals = self.rsm.read_count(ctx)?;
+        Ok(FrameOutput {
+            direct,
+            indirect,
+            timings,
+            gpu_bytes: self.raster.gpu_bytes() + self.rsm.bytes.0 + self.bytes.0,
+        })
+    }
+
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        let mut map = serde_json::Map::new();
+        let s = &self.settings;
+        map.insert("grid".into(), s.grid.into());
+        map.insert("steps".into(), s.steps.into());
+        map.insert(
+            "occlusion".into(),
+            if s.occlusion { "on" } else { "off" }.into(),
+        );
+        map.insert("sh_coefficients".into(), s.order.sh_count().into());
+        map.insert("propagation_faces".into(), self.faces.len().into());
+        map.insert("cell_size_m".into(), self.grid.cell.into());
+        map.insert("volume_gpu_bytes".into(), self.volume_bytes.into());
+        map.insert("vals".into(), self.vals.into());
+        map.insert("rsm".into(), self.rsm.resolution.into());
+        map
+    }
+}
+
+/// `method::create` for "lpv" and "holpv".
+pub fn create(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    order: Order,
+    options: &MethodOptions,
+) -> Result<Box<dyn Method>, RenderError> {
+    let settings = LpvSettings::from_options(order, options)?;
+    Ok(Box::new(LpvMethod::new(ctx, scene, render, settings)?))
+}
