@@ -769,6 +769,7 @@ impl Bake {
             "atlas_res": self.settings.atlas_res,
             "texels": self.texel_count(),
             "uv_source": self.layout.source,
+            "sheet_faces": self.layout.meshes.iter().filter(|m| m.sheet_face).count(),
             "shots": self.shots,
             "stages_ms": stages,
             "total_ms": (self.stage_ms.iter().map(|(_, v)| v).sum::<f64>() * 1000.0).round() / 1000.0,
