@@ -19,6 +19,29 @@ const TILE_MAX: u32 = 256u;
 var<workgroup> tile_vals: array<Val, TILE_MAX>;
 var<workgroup> shared_count: u32;
 
+// The material and view at one pixel.
+struct Pixel {
+    p: vec3<f32>,
+    n: vec3<f32>,
+    r: vec3<f32>,
+    rho_d: vec3<f32>,
+    specular_scale: vec3<f32>,
+    k: f32,
+}
+
+// One VAL's reflected radiance at the pixel.
+fn val_radiance(px: Pixel, val: Val, glossy_on: bool) -> vec3<f32> {
+    let gw = disc_geometry(px.p, px.n, val);
+    if (gw.x <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    var f = px.rho_d / PI;
+    if (glossy_on) {
+        f += px.specular_scale * lobe(px.r, gw.yzw, px.k);
+    }
+    return f * val.flux.rgb * (gw.x / PI);
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     if (lid == 0u) {
@@ -42,7 +65,7 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocati
     let wo = normalize(frame.camera_position.xyz - p);
     let r = reflect(-wo, n);
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
-    let specular_scale = rho_s * ((k + 2.0) / (2.0 * PI));
+    let px = Pixel(p, n, r, rho_d, rho_s * ((k + 2.0) / (2.0 * PI)), k);
 
     var radiance = vec3<f32>(0.0);
     for (var base = 0u; base < count; base += tile) {
@@ -52,17 +75,32 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocati
         }
         workgroupBarrier();
         if (is_active) {
-            for (var j = 0u; j < m; j++) {
-                let val = tile_vals[j];
-                let gw = disc_geometry(p, n, val);
-                if (gw.x <= 0.0) {
-                    continue;
-                }
-                var f = rho_d / PI;
-                if (glossy_on) {
-                    f += specular_scale * lobe(r, gw.yzw, k);
-                }
-                radiance += f * val.flux.rgb * (gw.x / PI);
+            // Written out 16 at a time: Mesa's llvmpipe ends any loop after 65535 iterations
+            // per invocation (see vals_gather.wgsl).
+            var j = 0u;
+            let full = m - m % 16u;
+            while (j < full) {
+                radiance += val_radiance(px, tile_vals[j + 0u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 1u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 2u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 3u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 4u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 5u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 6u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 7u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 8u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 9u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 10u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 11u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 12u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 13u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 14u], glossy_on);
+                radiance += val_radiance(px, tile_vals[j + 15u], glossy_on);
+                j += 16u;
+            }
+            while (j < m) {
+                radiance += val_radiance(px, tile_vals[j], glossy_on);
+                j += 1u;
             }
         }
         workgroupBarrier();

@@ -44,6 +44,39 @@ fn moments_mean_sphere(m: Moments) -> vec4<f32> {
     return vec4<f32>(mean, 2.0 * sqrt(max(variance.x, max(variance.y, variance.z))));
 }
 
+// The running sums of one point.
+struct Sums {
+    diffuse: vec3<f32>,
+    glossy: vec3<f32>,
+    md: Moments,
+    ms: Moments,
+}
+
+// Adds one VAL's contribution at the point (x, n, k) with mirror direction r.
+fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: Val, glossy_on: bool, flux_weights: bool) {
+    let gw = disc_geometry(point.position, point.normal, val);
+    let g = gw.x;
+    let e = val.flux.rgb * (g / PI);
+    var strength = val.position_area.w * g;
+    if (flux_weights) {
+        strength = (val.flux.r + val.flux.g + val.flux.b) / 3.0 * g;
+    }
+    (*sums).diffuse += e;
+    var md = (*sums).md;
+    moments_add(&md, POSITION_EPSILON + strength, val.position_area.xyz);
+    (*sums).md = md;
+    if (glossy_on) {
+        var lobe_j = 0.0;
+        if (g > 0.0) {
+            lobe_j = lobe(r, gw.yzw, point.k);
+        }
+        (*sums).glossy += e * lobe_j;
+        var ms = (*sums).ms;
+        moments_add(&ms, POSITION_EPSILON + strength * lobe_j, val.position_area.xyz);
+        (*sums).ms = ms;
+    }
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     if (lid == 0u) {
@@ -64,10 +97,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         let wo = normalize(params.eye.xyz - point.position);
         r = reflect(-wo, point.normal);
     }
-    var diffuse = vec3<f32>(0.0);
-    var glossy = vec3<f32>(0.0);
-    var md: Moments;
-    var ms: Moments;
+    var sums: Sums;
 
     for (var base = 0u; base < count; base += tile) {
         let m = min(tile, count - base);
@@ -76,25 +106,34 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         }
         workgroupBarrier();
         if (is_active) {
-            for (var j = 0u; j < m; j++) {
-                let val = tile_vals[j];
-                let gw = disc_geometry(point.position, point.normal, val);
-                let g = gw.x;
-                let e = val.flux.rgb * (g / PI);
-                var strength = val.position_area.w * g;
-                if (flux_weights) {
-                    strength = (val.flux.r + val.flux.g + val.flux.b) / 3.0 * g;
-                }
-                diffuse += e;
-                moments_add(&md, POSITION_EPSILON + strength, val.position_area.xyz);
-                if (glossy_on) {
-                    var lobe_j = 0.0;
-                    if (g > 0.0) {
-                        lobe_j = lobe(r, gw.yzw, point.k);
-                    }
-                    glossy += e * lobe_j;
-                    moments_add(&ms, POSITION_EPSILON + strength * lobe_j, val.position_area.xyz);
-                }
+            // Unrolled by 16 not only for speed: Mesa's llvmpipe ends any loop after 65535
+            // iterations per invocation (counted across re-entries), so a plain loop over
+            // every VAL would silently stop at 65535 VALs there. Written out, not a nested
+            // loop, which would count the same. This way it reaches 1M VALs.
+            var j = 0u;
+            let full = m - m % 16u;
+            while (j < full) {
+                accumulate(&sums, point, r, tile_vals[j + 0u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 1u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 2u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 3u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 4u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 5u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 6u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 7u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 8u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 9u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 10u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 11u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 12u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 13u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 14u], glossy_on, flux_weights);
+                accumulate(&sums, point, r, tile_vals[j + 15u], glossy_on, flux_weights);
+                j += 16u;
+            }
+            while (j < m) {
+                accumulate(&sums, point, r, tile_vals[j], glossy_on, flux_weights);
+                j += 1u;
             }
         }
         workgroupBarrier();
@@ -102,10 +141,10 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
     if (!is_active) {
         return;
     }
-    let d = moments_mean_sphere(md);
+    let d = moments_mean_sphere(sums.md);
     var s = vec4<f32>(point.position, 0.0);
     if (glossy_on) {
-        s = moments_mean_sphere(ms);
+        s = moments_mean_sphere(sums.ms);
     }
     // With no VAL at all the means are undefined: keep the lights on the point, dark.
     var off_d = d.xyz - point.position;
@@ -114,7 +153,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         off_d = vec3<f32>(0.0);
         off_s = vec3<f32>(0.0);
     }
-    point_diffuse[index] = vec4<u32>(rgb_bits(diffuse), pack2x16float(off_d.xy));
-    point_glossy[index] = vec4<u32>(rgb_bits(glossy), pack2x16float(off_s.xy));
+    point_diffuse[index] = vec4<u32>(rgb_bits(sums.diffuse), pack2x16float(off_d.xy));
+    point_glossy[index] = vec4<u32>(rgb_bits(sums.glossy), pack2x16float(off_s.xy));
     point_extra[index] = vec2<u32>(pack2x16float(vec2<f32>(off_d.z, off_s.z)), pack2x16float(vec2<f32>(d.w, s.w)));
 }

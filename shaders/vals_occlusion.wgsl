@@ -53,6 +53,32 @@ fn occluder_share(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, light:
     return min(overlap / sphere_area, 1.0) * ramp;
 }
 
+// Running occlusion of one point's two lights: Σo and Π(1 − o) per channel.
+struct Shares {
+    sum_d: f32,
+    visible_d: f32,
+    sum_s: f32,
+    visible_s: f32,
+}
+
+struct Receiver {
+    x: vec3<f32>,
+    n: vec3<f32>,
+    t: vec3<f32>,
+    b: vec3<f32>,
+}
+
+fn add_occluder(shares: ptr<function, Shares>, rcv: Receiver, lights: PointLights, disc: Disc, glossy_on: bool) {
+    let od = occluder_share(rcv.x, rcv.n, rcv.t, rcv.b, lights.diffuse_position, lights.diffuse_sphere, disc);
+    (*shares).sum_d += od;
+    (*shares).visible_d *= 1.0 - od;
+    if (glossy_on) {
+        let os = occluder_share(rcv.x, rcv.n, rcv.t, rcv.b, lights.glossy_position, lights.glossy_sphere, disc);
+        (*shares).sum_s += os;
+        (*shares).visible_s *= 1.0 - os;
+    }
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let tile = clamp(params.tile, 1u, TILE_MAX);
@@ -74,10 +100,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         t = tangent_frame_t(point.normal);
         b = tangent_frame_b(point.normal);
     }
-    var sum_d = 0.0;
-    var visible_d = 1.0;
-    var sum_s = 0.0;
-    var visible_s = 1.0;
+    var shares = Shares(0.0, 1.0, 0.0, 1.0);
     for (var base = 0u; base < params.point_count; base += tile) {
         let m = min(tile, params.point_count - base);
         for (var i = lid; i < m; i += GROUP) {
@@ -87,19 +110,22 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         }
         workgroupBarrier();
         if (is_active) {
-            for (var j = 0u; j < m; j++) {
-                if (base + j == index) {
-                    continue;
-                }
-                let disc = tile_discs[j];
-                let od = occluder_share(point.position, point.normal, t, b, lights.diffuse_position, lights.diffuse_sphere, disc);
-                sum_d += od;
-                visible_d *= 1.0 - od;
-                if (glossy_on) {
-                    let os = occluder_share(point.position, point.normal, t, b, lights.glossy_position, lights.glossy_sphere, disc);
-                    sum_s += os;
-                    visible_s *= 1.0 - os;
-                }
+            // The point's own disc is in the list: at distance 0 from the point,
+            // occluder_share gives it exactly 0, so it needs no test. Written out 4 at a time for llvmpipe's
+            // loop limit (see vals_gather.wgsl).
+            let rcv = Receiver(point.position, point.normal, t, b);
+            var j = 0u;
+            let full = m - m % 4u;
+            while (j < full) {
+                add_occluder(&shares, rcv, lights, tile_discs[j + 0u], glossy_on);
+                add_occluder(&shares, rcv, lights, tile_discs[j + 1u], glossy_on);
+                add_occluder(&shares, rcv, lights, tile_discs[j + 2u], glossy_on);
+                add_occluder(&shares, rcv, lights, tile_discs[j + 3u], glossy_on);
+                j += 4u;
+            }
+            while (j < m) {
+                add_occluder(&shares, rcv, lights, tile_discs[j], glossy_on);
+                j += 1u;
             }
         }
         workgroupBarrier();
@@ -107,11 +133,11 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
     if (!is_active) {
         return;
     }
-    var od = min(sum_d, 1.0);
-    var os = min(sum_s, 1.0);
+    var od = min(shares.sum_d, 1.0);
+    var os = min(shares.sum_s, 1.0);
     if (params.occlusion_mode == 2u) {
-        od = 1.0 - visible_d;
-        os = 1.0 - visible_s;
+        od = 1.0 - shares.visible_d;
+        os = 1.0 - shares.visible_s;
     }
     point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse * (1.0 - od)), d.w);
     point_glossy[index] = vec4<u32>(rgb_bits(lights.glossy * (1.0 - os)), s.w);
