@@ -28,12 +28,6 @@ struct Moments {
     sum_squares: vec3<f32>,
 }
 
-fn moments_add(m: ptr<function, Moments>, w: f32, l: vec3<f32>) {
-    (*m).weight += w;
-    (*m).sum += w * l;
-    (*m).sum_squares += w * l * l;
-}
-
 // Mean position (xyz) and sphere radius 2·max σ (w).
 fn moments_mean_sphere(m: Moments) -> vec4<f32> {
     if (m.weight <= 0.0) {
@@ -61,19 +55,22 @@ fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: V
     if (flux_weights) {
         strength = (val.flux.r + val.flux.g + val.flux.b) / 3.0 * g;
     }
+    let l = val.position_area.xyz;
+    let wd = POSITION_EPSILON + strength;
     (*sums).diffuse += e;
-    var md = (*sums).md;
-    moments_add(&md, POSITION_EPSILON + strength, val.position_area.xyz);
-    (*sums).md = md;
+    (*sums).md.weight += wd;
+    (*sums).md.sum += wd * l;
+    (*sums).md.sum_squares += wd * l * l;
     if (glossy_on) {
         var lobe_j = 0.0;
         if (g > 0.0) {
             lobe_j = lobe(r, gw.yzw, point.k);
         }
+        let ws = POSITION_EPSILON + strength * lobe_j;
         (*sums).glossy += e * lobe_j;
-        var ms = (*sums).ms;
-        moments_add(&ms, POSITION_EPSILON + strength * lobe_j, val.position_area.xyz);
-        (*sums).ms = ms;
+        (*sums).ms.weight += ws;
+        (*sums).ms.sum += ws * l;
+        (*sums).ms.sum_squares += ws * l * l;
     }
 }
 
