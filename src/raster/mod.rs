@@ -928,6 +928,17 @@ pub fn compute_pipeline(
     module: &wgpu::ShaderModule,
     layout: &wgpu::BindGroupLayout,
 ) -> wgpu::ComputePipeline {
+    compute_pipeline_at(device, label, module, layout, "cs_main")
+}
+
+/// A compute pipeline for the entry point `entry` of a module with several.
+pub fn compute_pipeline_at(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::BindGroupLayout,
+    entry: &str,
+) -> wgpu::ComputePipeline {
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
         bind_group_layouts: &[Some(layout)],
@@ -937,7 +948,7 @@ pub fn compute_pipeline(
         label: Some(label),
         layout: Some(&pipeline_layout),
         module,
-        entry_point: Some("cs_main"),
+        entry_point: Some(entry),
         compilation_options: Default::default(),
         cache: None,
     })

@@ -1,7 +1,8 @@
 //! Reflective shadow maps → virtual area lights (DESIGN §4). Every light renders an R×R RSM
 //! (a spot light one perspective layer, a point light six cube faces that tile the sphere
 //! exactly, a directional light an orthographic layer fitted to the scene); a compute pass then
-//! compacts every lit texel of every layer into one storage buffer of [`GpuVal`] records.
+//! compacts every lit texel of every layer, in texel order, into one storage buffer of
+//! [`GpuVal`] records (deterministic: the same VAL list every run).
 //! Later passes (the sparse gather, brute force, LPV injection) read `vals_buffer` and the
 //! count in `val_count_buffer`.
 
@@ -13,8 +14,8 @@ use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::shadows::setup_lights;
 use crate::raster::types::{GpuLight, Vertex};
 use crate::raster::{
-    buffer_binding, cleared, compute_pipeline, storage_entry, uniform_entry, view_binding,
-    RenderError, ScenePipeline, DEPTH_FORMAT,
+    buffer_binding, cleared, storage_entry, uniform_entry, view_binding, RenderError,
+    ScenePipeline, DEPTH_FORMAT,
 };
 use crate::scene::{Aabb, LightKind, Scene};
 
@@ -86,7 +87,8 @@ pub struct Rsm {
     layer_views: Vec<[wgpu::TextureView; 3]>,
     depth_view: wgpu::TextureView,
     pipeline: wgpu::RenderPipeline,
-    compact_pipeline: wgpu::ComputePipeline,
+    /// count_rows, scan_rows, write_rows of `vals_from_rsm.wgsl`.
+    compact_pipelines: [wgpu::ComputePipeline; 3],
     compact_group: wgpu::BindGroup,
     mesh_bounds: Vec<Aabb>,
 }
@@ -300,6 +302,7 @@ impl Rsm {
                 array_entry(3),
                 crate::raster::storage_entry_rw(4, cs),
                 crate::raster::storage_entry_rw(5, cs),
+                crate::raster::storage_entry_rw(6, cs),
             ],
         });
         let capacity = texels.min(u32::MAX as u64) as u32;
@@ -314,6 +317,15 @@ impl Rsm {
             }),
             wgpu::BufferUsages::UNIFORM,
         );
+        let row_offsets = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("rsm row offsets"),
+                size: layers as u64 * resolution as u64 * 4,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            },
+        );
         let compact_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("vals from rsm"),
             layout: &compact_bgl,
@@ -324,14 +336,13 @@ impl Rsm {
                 view_binding(3, &array_views[2]),
                 buffer_binding(4, &vals_buffer),
                 buffer_binding(5, &val_count_buffer),
+                buffer_binding(6, &row_offsets),
             ],
         });
-        let compact_pipeline = compute_pipeline(
-            device,
-            "vals from rsm",
-            &ctx.shader("vals_from_rsm.wgsl"),
-            &compact_bgl,
-        );
+        let module = ctx.shader("vals_from_rsm.wgsl");
+        let compact_pipelines = ["count_rows", "scan_rows", "write_rows"].map(|entry| {
+            crate::raster::compute_pipeline_at(device, entry, &module, &compact_bgl, entry)
+        });
         Ok(Self {
             resolution,
             layer_count,
@@ -345,7 +356,7 @@ impl Rsm {
             layer_views,
             depth_view,
             pipeline,
-            compact_pipeline,
+            compact_pipelines,
             compact_group,
             mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
         })
@@ -397,9 +408,6 @@ impl Rsm {
 
     /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm").
     pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
-        passes
-            .encoder()
-            .clear_buffer(&self.val_count_buffer, 0, None);
         for (views, group) in self.layer_views.iter().zip(&self.layer_groups) {
             passes.render(
                 "rsm",
@@ -420,12 +428,25 @@ impl Rsm {
             )?;
         }
         if self.layer_count > 0 {
-            let r = self.resolution;
-            passes.compute("rsm", |pass| {
-                pass.set_pipeline(&self.compact_pipeline);
-                pass.set_bind_group(0, &self.compact_group, &[]);
-                pass.dispatch_workgroups(r.div_ceil(8), r.div_ceil(8), self.layer_count);
-            })?;
+            // One thread per row; rows past 65535 workgroups wrap into a second dimension.
+            let groups = (self.resolution * self.layer_count).div_ceil(64);
+            let (gx, gy) = if groups <= 65535 {
+                (groups, 1)
+            } else {
+                (65535, groups.div_ceil(65535))
+            };
+            let [count, scan, write] = &self.compact_pipelines;
+            for (pipeline, (x, y)) in [(count, (gx, gy)), (scan, (1, 1)), (write, (gx, gy))] {
+                passes.compute("rsm", |pass| {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(0, &self.compact_group, &[]);
+                    pass.dispatch_workgroups(x, y, 1);
+                })?;
+            }
+        } else {
+            passes
+                .encoder()
+                .clear_buffer(&self.val_count_buffer, 0, None);
         }
         Ok(())
     }
