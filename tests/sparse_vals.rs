@@ -906,7 +906,10 @@ fn the_same_frame_renders_bit_identically() {
     let s = sparse_settings(48, 300, OcclusionMode::Union, true);
     let (a_method, a, _) = run_sparse(&ctx, &scene, 32, s, Stage::Apply);
     let (b_method, b, _) = run_sparse(&ctx, &scene, 32, s, Stage::Apply);
-    assert_eq!(a_method.rsm.read_vals(&ctx).unwrap(), b_method.rsm.read_vals(&ctx).unwrap());
+    assert_eq!(
+        a_method.rsm.read_vals(&ctx).unwrap(),
+        b_method.rsm.read_vals(&ctx).unwrap()
+    );
     assert_eq!(a.indirect.pixels, b.indirect.pixels);
     assert!(a.indirect.pixels.iter().any(|p| p[0] > 0.0));
 }
