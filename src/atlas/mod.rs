@@ -611,15 +611,8 @@ impl Method for AtlasMethod {
         let mut passes = Passes::new(ctx, 6 * scene.lights.len() as u32 + 10);
         self.raster.record_base(&mut passes)?;
         self.layer.record(&mut passes)?;
-        self.raster.record_resolve(ctx, &mut passes, true)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.raster.read_outputs(ctx, true)?;
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes: self.raster.gpu_bytes() + self.layer.bytes.0,
-        })
+        self.raster
+            .finish_frame(ctx, passes, true, self.layer.bytes.0)
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

@@ -130,25 +130,13 @@ impl Method for BruteMethod {
         let mut passes = Passes::new(ctx, self.rsm.layer_count + 16);
         self.raster.record_base(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
-        let (w, h) = (
-            self.raster.targets.render_width,
-            self.raster.targets.render_height,
-        );
-        passes.compute("brute", |pass| {
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })?;
-        self.raster.record_resolve(ctx, &mut passes, true)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.raster.read_outputs(ctx, true)?;
+        self.raster
+            .record_per_pixel(&mut passes, "brute", &self.pipeline, &self.group)?;
+        let frame = self
+            .raster
+            .finish_frame(ctx, passes, true, self.rsm.bytes.0)?;
         self.vals = self.rsm.read_count(ctx)?;
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes: self.raster.gpu_bytes() + self.rsm.bytes.0,
-        })
+        Ok(frame)
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

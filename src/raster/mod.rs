@@ -722,6 +722,42 @@ impl Rasterizer {
         })
     }
 
+    /// A compute pass with one 8×8 workgroup per render-target tile (per-pixel methods).
+    pub fn record_per_pixel(
+        &self,
+        passes: &mut Passes,
+        label: &str,
+        pipeline: &wgpu::ComputePipeline,
+        group: &wgpu::BindGroup,
+    ) -> Result<(), GpuError> {
+        let (w, h) = (self.targets.render_width, self.targets.render_height);
+        passes.compute(label, |pass| {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+        })
+    }
+
+    /// The end of every frame: resolve, submit, read back. `method_bytes` are the GPU bytes
+    /// the method owns besides the rasterizer's.
+    pub fn finish_frame(
+        &self,
+        ctx: &GpuContext,
+        mut passes: Passes,
+        has_indirect: bool,
+        method_bytes: u64,
+    ) -> Result<FrameOutput, RenderError> {
+        self.record_resolve(ctx, &mut passes, has_indirect)?;
+        let timings = passes.finish()?;
+        let (direct, indirect) = self.read_outputs(ctx, has_indirect)?;
+        Ok(FrameOutput {
+            direct,
+            indirect,
+            timings,
+            gpu_bytes: self.gpu_bytes() + method_bytes,
+        })
+    }
+
     /// Reads the resolved direct and indirect images back (the indirect one only when a
     /// method wrote it; otherwise it is black).
     pub fn read_outputs(
@@ -754,15 +790,7 @@ impl Rasterizer {
         self.prepare(ctx, scene, world_from_node, camera);
         let mut passes = Passes::new(ctx, self.shadow_layer_views.len() as u32 + 8);
         self.record_base(&mut passes)?;
-        self.record_resolve(ctx, &mut passes, false)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.read_outputs(ctx, false)?;
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes: self.gpu_bytes(),
-        })
+        self.finish_frame(ctx, passes, false, 0)
     }
 }
 

@@ -289,17 +289,21 @@ impl Method for SparseMethod {
                 layer.record(&mut passes)?;
             }
         }
-        self.raster.record_resolve(ctx, &mut passes, has_indirect)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.raster.read_outputs(ctx, has_indirect)?;
+        let solution = self.solution_bytes();
+        let layer_bytes = self.layer.as_ref().map_or(0, |l| l.gpu_bytes());
+        let frame = self.raster.finish_frame(
+            ctx,
+            passes,
+            has_indirect,
+            self.rsm.bytes.0 + solution + layer_bytes,
+        )?;
         let vals = self.rsm.read_count(ctx)?;
         let (clamped_d, clamped_s) = self.sparse.read_clamps(ctx)?;
         let points = self.sparse.point_count.max(1) as f64;
-        let solution = self.solution_bytes();
         let per_point = (self.sparse.point_bytes as f64) / points;
         let vertices = self.sparse.vertex_count.max(1) as f64;
         self.report = serde_json::json!({
-            "table2": table2(&timings),
+            "table2": table2(&frame.timings),
             "vals": vals,
             "rsm": self.settings.rsm,
             "sparse_points": self.sparse.point_count,
@@ -319,17 +323,10 @@ impl Method for SparseMethod {
         .as_object()
         .cloned()
         .unwrap_or_default();
-        let mut gpu_bytes = self.raster.gpu_bytes() + self.rsm.bytes.0 + solution;
         if let Some(layer) = &self.layer {
             self.report.extend(layer.report());
-            gpu_bytes += layer.gpu_bytes();
         }
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes,
-        })
+        Ok(frame)
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

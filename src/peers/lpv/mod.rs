@@ -587,25 +587,17 @@ impl Method for LpvMethod {
                 }
             })?;
         }
-        let (w, h) = (
-            self.raster.targets.render_width,
-            self.raster.targets.render_height,
-        );
-        passes.compute("lookup", |pass| {
-            pass.set_pipeline(&self.lookup_pipeline);
-            pass.set_bind_group(0, &self.lookup_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })?;
-        self.raster.record_resolve(ctx, &mut passes, true)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.raster.read_outputs(ctx, true)?;
+        self.raster.record_per_pixel(
+            &mut passes,
+            "lookup",
+            &self.lookup_pipeline,
+            &self.lookup_group,
+        )?;
+        let frame = self
+            .raster
+            .finish_frame(ctx, passes, true, self.rsm.bytes.0 + self.bytes.0)?;
         self.vals = self.rsm.read_count(ctx)?;
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes: self.raster.gpu_bytes() + self.rsm.bytes.0 + self.bytes.0,
-        })
+        Ok(frame)
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

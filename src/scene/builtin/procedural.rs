@@ -199,6 +199,22 @@ fn channel(node: usize, property: Property, values: Vec<Vec4>) -> Channel {
     }
 }
 
+/// Animates the scene's first light to swing from `at` to `at + reach`, back, to `at − reach`
+/// and back over one loop.
+fn swing_first_light(scene: &mut Scene, at: Vec3, reach: Vec3) {
+    let node = scene.lights[0].node;
+    let offsets = [Vec3::ZERO, reach, Vec3::ZERO, -reach, Vec3::ZERO];
+    add_animation(
+        scene,
+        "light moves",
+        vec![channel(
+            node,
+            Property::Translation,
+            translations(at, &offsets),
+        )],
+    );
+}
+
 fn translations(base: Vec3, offsets: &[Vec3]) -> Vec<Vec4> {
     offsets.iter().map(|o| (base + *o).extend(0.0)).collect()
 }
@@ -554,25 +570,7 @@ fn thin_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
     );
     let mut scene = b.scene;
     if moving {
-        let node = scene.lights[0].node;
-        add_animation(
-            &mut scene,
-            "light moves",
-            vec![channel(
-                node,
-                Property::Translation,
-                translations(
-                    light_at,
-                    &[
-                        Vec3::ZERO,
-                        Vec3::new(0.0, 0.0, 0.7),
-                        Vec3::ZERO,
-                        Vec3::new(0.0, 0.0, -0.7),
-                        Vec3::ZERO,
-                    ],
-                ),
-            )],
-        );
+        swing_first_light(&mut scene, light_at, Vec3::new(0.0, 0.0, 0.7));
     }
     scene
 }
@@ -631,25 +629,7 @@ fn glossy_row(name: &str, moving: bool, max_edge: f32) -> Scene {
     );
     let mut scene = b.scene;
     if moving {
-        let node = scene.lights[0].node;
-        add_animation(
-            &mut scene,
-            "light moves",
-            vec![channel(
-                node,
-                Property::Translation,
-                translations(
-                    light_at,
-                    &[
-                        Vec3::ZERO,
-                        Vec3::new(1.2, 0.0, 0.0),
-                        Vec3::ZERO,
-                        Vec3::new(-1.2, 0.0, 0.0),
-                        Vec3::ZERO,
-                    ],
-                ),
-            )],
-        );
+        swing_first_light(&mut scene, light_at, Vec3::new(1.2, 0.0, 0.0));
     }
     scene
 }
