@@ -11,7 +11,7 @@ use valgi::atlas::{bake, AtlasMethod, BakeSettings};
 use valgi::eval::metrics;
 use valgi::gpu::GpuContext;
 use valgi::image_io::Image;
-use valgi::method::{self, Method, MethodOptions};
+use valgi::method::{self, MethodOptions};
 use valgi::raster::RenderSettings;
 use valgi::reference::{self, Bounces, ReferenceSettings};
 use valgi::scene::{self, builtin::BuiltinParams, Scene};
@@ -269,28 +269,7 @@ fn no_black_texels_in_view_on_corridor() {
         &options,
     )
     .unwrap();
-    let wfn = scene.world_from_node();
-    let camera = scene.camera_view(None, 1.0, &wfn).unwrap();
-    let frame = m.render(&ctx, &scene, &wfn, &camera).unwrap();
-    let e = m.layer().read_irradiance(&ctx).unwrap();
-    let surface = e.pixels.iter().filter(|p| p[3] > 0.0).count();
-    let black = e
-        .pixels
-        .iter()
-        .filter(|p| p[3] > 0.0 && p[0] + p[1] + p[2] <= 0.0)
-        .count();
-    eprintln!("{surface} surface pixels, {black} black");
-    assert!(surface > (size * size) as usize / 2);
-    assert_eq!(black, 0, "black atlas texels in view");
-    let indirect_black = frame
-        .indirect
-        .pixels
-        .iter()
-        .zip(&e.pixels)
-        .filter(|(l, p)| p[3] > 0.0 && l[0] + l[1] + l[2] <= 0.0)
-        .count();
-    assert_eq!(indirect_black, 0, "indirect radiance black on a surface");
-    assert!(m.report()["atlas_missing_texels"] == 0);
+    common::assert_no_black_texels_in_view(&ctx, &scene, &mut m, size);
 }
 
 /// Zero-thickness sheets get charts for both faces: on `corridor` the partition and the door

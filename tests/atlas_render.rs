@@ -144,31 +144,7 @@ fn no_black_texels_in_view_on_cornell() {
     let (_, path) = bake_to(&scene, &settings, "cornell");
     let size = 128;
     let mut m = method(&ctx, &scene, size, &path).unwrap();
-    let wfn = scene.world_from_node();
-    let camera = scene.camera_view(None, 1.0, &wfn).unwrap();
-    let frame = m.render(&ctx, &scene, &wfn, &camera).unwrap();
-    let e = m.layer().read_irradiance(&ctx).unwrap();
-    let surface = e.pixels.iter().filter(|p| p[3] > 0.0).count();
-    let black = e
-        .pixels
-        .iter()
-        .filter(|p| p[3] > 0.0 && p[0] + p[1] + p[2] <= 0.0)
-        .count();
-    eprintln!("{surface} surface pixels, {black} black");
-    assert!(surface > (size * size) as usize / 2);
-    assert_eq!(black, 0, "black atlas texels in view");
-    let indirect_black = frame
-        .indirect
-        .pixels
-        .iter()
-        .zip(&e.pixels)
-        .filter(|(l, p)| p[3] > 0.0 && l[0] + l[1] + l[2] <= 0.0)
-        .count();
-    assert_eq!(
-        indirect_black, 0,
-        "indirect radiance black on a lit surface"
-    );
-    assert!(m.report()["atlas_missing_texels"] == 0);
+    let frame = common::assert_no_black_texels_in_view(&ctx, &scene, &mut m, size);
     // Regression guard on the whole pipeline (bake + lookup), tone-mapped at +2 stops.
     common::assert_matches_reference("atlas_cornell_indirect", &frame.indirect, 2.0, 0.05);
 }

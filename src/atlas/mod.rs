@@ -261,25 +261,8 @@ impl AtlasLayer {
                 sheet_face: m.sheet_face,
             });
         }
-        let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
-        let frame_buffer = bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("atlas frame"),
-                size: std::mem::size_of::<AtlasFrame>() as u64,
-                usage: uniform,
-                mapped_at_creation: false,
-            },
-        );
-        let apply_buffer = bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("atlas apply"),
-                size: std::mem::size_of::<ApplyParams>() as u64,
-                usage: uniform,
-                mapped_at_creation: false,
-            },
-        );
+        let frame_buffer = bytes.uniform::<AtlasFrame>(device, "atlas frame");
+        let apply_buffer = bytes.uniform::<ApplyParams>(device, "atlas apply");
         let transforms = bytes.buffer(
             device,
             &wgpu::BufferDescriptor {

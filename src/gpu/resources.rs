@@ -45,6 +45,19 @@ impl GpuBytes {
         device.create_texture(desc)
     }
 
+    /// A uniform buffer sized for one `T`, written each frame with `queue.write_buffer`.
+    pub fn uniform<T>(&mut self, device: &wgpu::Device, label: &str) -> wgpu::Buffer {
+        self.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some(label),
+                size: std::mem::size_of::<T>() as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            },
+        )
+    }
+
     pub fn add(&mut self, other: GpuBytes) {
         self.0 += other.0;
     }

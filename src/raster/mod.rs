@@ -253,17 +253,8 @@ impl Rasterizer {
         let targets = FrameTargets::new(device, &settings);
         let mut shadow_bytes = GpuBytes::default();
 
-        let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let frame_buffer = shadow_bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("frame uniforms"),
-                size: std::mem::size_of::<FrameUniforms>() as u64,
-                usage: uniform,
-                mapped_at_creation: false,
-            },
-        );
+        let frame_buffer = shadow_bytes.uniform::<FrameUniforms>(device, "frame uniforms");
         let lights_buffer = shadow_bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -318,17 +309,7 @@ impl Rasterizer {
             })
             .collect();
         let shadow_layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
-            .map(|_| {
-                shadow_bytes.buffer(
-                    device,
-                    &wgpu::BufferDescriptor {
-                        label: Some("shadow layer view"),
-                        size: std::mem::size_of::<ShadowView>() as u64,
-                        usage: uniform,
-                        mapped_at_creation: false,
-                    },
-                )
-            })
+            .map(|_| shadow_bytes.uniform::<ShadowView>(device, "shadow layer view"))
             .collect();
 
         // Shadow pipeline: depth only, slope-scaled bias against acne on sloped receivers.
@@ -519,15 +500,7 @@ impl Rasterizer {
                 storage_texture_entry(4, cs),
             ],
         });
-        let resolve_params_buffer = shadow_bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("resolve params"),
-                size: std::mem::size_of::<ResolveParams>() as u64,
-                usage: uniform,
-                mapped_at_creation: false,
-            },
-        );
+        let resolve_params_buffer = shadow_bytes.uniform::<ResolveParams>(device, "resolve params");
         let out_direct_view = targets
             .output_direct
             .create_view(&wgpu::TextureViewDescriptor::default());

@@ -233,17 +233,7 @@ impl Rsm {
             ],
         });
         let layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
-            .map(|_| {
-                bytes.buffer(
-                    device,
-                    &wgpu::BufferDescriptor {
-                        label: Some("rsm view"),
-                        size: std::mem::size_of::<RsmView>() as u64,
-                        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                        mapped_at_creation: false,
-                    },
-                )
-            })
+            .map(|_| bytes.uniform::<RsmView>(device, "rsm view"))
             .collect();
         let layer_groups = layer_buffers
             .iter()

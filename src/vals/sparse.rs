@@ -283,15 +283,7 @@ impl SparseGpu {
         let link_bytes = (links.len() * 16) as u64;
         let vertex_lights = empty(&mut bytes, "vertex lights", vertex_light_size);
         let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
-        let params_buffer = bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("sparse params"),
-                size: std::mem::size_of::<SparseParams>() as u64,
-                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            },
-        );
+        let params_buffer = bytes.uniform::<SparseParams>(device, "sparse params");
 
         let cs = wgpu::ShaderStages::COMPUTE;
         // (binding, buffer, writable) lists per pass, in the shaders' binding order.

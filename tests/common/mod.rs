@@ -83,3 +83,38 @@ pub fn assert_matches_reference(
         );
     }
 }
+
+/// Renders `method` (an `atlas` method) from the scene's camera and asserts that no surface in
+/// view samples a black atlas texel and that no surface pixel's indirect light is black.
+/// Returns the frame.
+pub fn assert_no_black_texels_in_view(
+    ctx: &GpuContext,
+    scene: &valgi::scene::Scene,
+    method: &mut valgi::atlas::AtlasMethod,
+    size: u32,
+) -> valgi::raster::FrameOutput {
+    use valgi::method::Method;
+    let wfn = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &wfn).unwrap();
+    let frame = method.render(ctx, scene, &wfn, &camera).unwrap();
+    let e = method.layer().read_irradiance(ctx).unwrap();
+    let surface = e.pixels.iter().filter(|p| p[3] > 0.0).count();
+    let black = e
+        .pixels
+        .iter()
+        .filter(|p| p[3] > 0.0 && p[0] + p[1] + p[2] <= 0.0)
+        .count();
+    eprintln!("{surface} surface pixels, {black} black");
+    assert!(surface > (size * size) as usize / 2);
+    assert_eq!(black, 0, "black atlas texels in view");
+    let indirect_black = frame
+        .indirect
+        .pixels
+        .iter()
+        .zip(&e.pixels)
+        .filter(|(l, p)| p[3] > 0.0 && l[0] + l[1] + l[2] <= 0.0)
+        .count();
+    assert_eq!(indirect_black, 0, "indirect radiance black on a surface");
+    assert!(method.report()["atlas_missing_texels"] == 0);
+    frame
+}
