@@ -8,6 +8,20 @@ use valgi::scene::{self, builtin::BuiltinParams};
 
 fn no_progress(_: &str, _: usize, _: usize) {}
 
+/// Bakes the scene at rest, without progress output or cancellation.
+fn bake_now(
+    scene: &valgi::scene::Scene,
+    settings: &BakeSettings,
+) -> Result<valgi::atlas::Bake, valgi::atlas::BakeError> {
+    bake(
+        scene,
+        &scene.world_from_node(),
+        settings,
+        &no_progress,
+        &AtomicBool::new(false),
+    )
+}
+
 fn box_scene() -> valgi::scene::Scene {
     scene::load("box-point", &BuiltinParams { max_edge: 0.25 }).unwrap()
 }
@@ -26,14 +40,7 @@ fn closed_box_matches_the_geometric_series() {
         atlas_res: 128,
         ..Default::default()
     };
-    let result = bake(
-        &scene,
-        &scene.world_from_node(),
-        &settings,
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let result = bake_now(&scene, &settings).unwrap();
     let rho = 0.5f64;
     let phi_over_a = 4.0 * std::f64::consts::PI / 24.0;
     let centre: Vec<u32> = result
@@ -265,14 +272,7 @@ fn irradiance_is_continuous_across_chart_seams() {
         atlas_res: 128,
         ..Default::default()
     };
-    let result = bake(
-        &scene,
-        &scene.world_from_node(),
-        &settings,
-        &no_progress,
-        &AtomicBool::new(false),
-    )
-    .unwrap();
+    let result = bake_now(&scene, &settings).unwrap();
     let image = result.atlas(1, 3);
     let texels = &result.layout.texels;
     let res = settings.atlas_res;

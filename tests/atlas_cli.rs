@@ -180,11 +180,7 @@ fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
         .arg(&atlas)
         .output()
         .expect("run valgi");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    common::assert_success(&output);
     let output = valgi()
         .args(["render", "--scene", "box-point", "--max-edge", "0.25"])
         .args([
@@ -201,11 +197,7 @@ fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
         .arg(dir.join("render.exr"))
         .output()
         .expect("run valgi");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    common::assert_success(&output);
     let report = json_line(&output.stdout);
     assert_eq!(report["method"], "sparse+atlas");
     assert_eq!(report["atlas_missing_texels"], 0);
@@ -224,11 +216,7 @@ fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
         .arg(&eval)
         .output()
         .expect("run valgi");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    common::assert_success(&output);
     let csv = std::fs::read_to_string(eval.join("results.csv")).unwrap();
     assert!(csv.contains("\nbox-point,sparse+atlas,"), "{csv}");
 
@@ -241,11 +229,7 @@ fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
         .arg(&bench)
         .output()
         .expect("run valgi");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    common::assert_success(&output);
     let csv = std::fs::read_to_string(bench.join("bake.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3, "{csv}");
     assert!(csv.starts_with("scene,vpls,"));

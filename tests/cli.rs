@@ -173,11 +173,7 @@ fn sparse_renders_numbered_frames_of_an_animation_with_table2_timings() {
         .arg(&dir)
         .output()
         .expect("run valgi");
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    common::assert_success(&output);
     let stdout = String::from_utf8_lossy(&output.stdout);
     let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
     for key in [

@@ -273,23 +273,7 @@ impl AtlasLayer {
             },
         );
         let texture = |bytes: &mut GpuBytes, label, w, h, format, usage| {
-            bytes.texture(
-                device,
-                &wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: w,
-                        height: h,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                },
-            )
+            bytes.texture_2d(device, label, (w, h), format, usage)
         };
         let atlas_texture = texture(
             &mut bytes,

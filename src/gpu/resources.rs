@@ -45,6 +45,34 @@ impl GpuBytes {
         device.create_texture(desc)
     }
 
+    /// A single-layer 2D texture without mips.
+    pub fn texture_2d(
+        &mut self,
+        device: &wgpu::Device,
+        label: &str,
+        (width, height): (u32, u32),
+        format: wgpu::TextureFormat,
+        usage: wgpu::TextureUsages,
+    ) -> wgpu::Texture {
+        self.texture(
+            device,
+            &wgpu::TextureDescriptor {
+                label: Some(label),
+                size: wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format,
+                usage,
+                view_formats: &[],
+            },
+        )
+    }
+
     /// A uniform buffer sized for one `T`, written each frame with `queue.write_buffer`.
     pub fn uniform<T>(&mut self, device: &wgpu::Device, label: &str) -> wgpu::Buffer {
         self.buffer(

@@ -79,23 +79,7 @@ impl FrameTargets {
             settings.height * settings.ssaa,
         );
         let mut target = |label: &str, w: u32, h: u32, format, usage| {
-            bytes.texture(
-                device,
-                &wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: w,
-                        height: h,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage,
-                    view_formats: &[],
-                },
-            )
+            bytes.texture_2d(device, label, (w, h), format, usage)
         };
         let attachment =
             wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;

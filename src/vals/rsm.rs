@@ -184,22 +184,12 @@ impl Rsm {
             array("rsm normal", NORMAL_FORMAT),
             array("rsm flux", FLUX_FORMAT),
         ];
-        let depth = bytes.texture(
+        let depth = bytes.texture_2d(
             device,
-            &wgpu::TextureDescriptor {
-                label: Some("rsm depth"),
-                size: wgpu::Extent3d {
-                    width: resolution,
-                    height: resolution,
-                    depth_or_array_layers: 1,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                view_formats: &[],
-            },
+            "rsm depth",
+            (resolution, resolution),
+            DEPTH_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
         );
         let depth_view = depth.create_view(&Default::default());
         let layer_views: Vec<[wgpu::TextureView; 3]> = (0..layer_count)

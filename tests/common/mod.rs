@@ -118,3 +118,12 @@ pub fn assert_no_black_texels_in_view(
     assert!(method.report()["atlas_missing_texels"] == 0);
     frame
 }
+
+/// Runs a command and asserts it succeeded, showing its stderr otherwise.
+pub fn assert_success(output: &std::process::Output) {
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}

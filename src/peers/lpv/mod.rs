@@ -537,9 +537,7 @@ impl Method for LpvMethod {
         self.rsm.prepare(ctx, scene, world_from_node);
         self.write_params(ctx);
         let mut passes = Passes::new(ctx, 2 * self.rsm.layer_count + 16);
-        self.raster.record_shadows(&mut passes)?;
-        self.raster.record_gbuffer(&mut passes)?;
-        self.raster.record_direct(&mut passes)?;
+        self.raster.record_base(&mut passes)?;
         self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
         let encoder = passes.encoder();
         encoder.clear_buffer(&self.volumes[0], 0, None);
