@@ -207,6 +207,10 @@ struct BakeArgs {
     /// Write bounces K..B only (2 leaves bounce 1 to a dynamic method).
     #[arg(long, default_value_t = 1)]
     from_bounce: u32,
+    /// Near-field gather rays per texel (stratified, a square number; 0 = off, every sample a
+    /// disc: faster, darker corners and contacts).
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_rays)]
+    near_rays: u32,
     /// Tessellation of built-in scenes (render with the same value).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -239,6 +243,13 @@ struct BakeBenchArgs {
     /// FLIP at which the path tracer's time is reported.
     #[arg(long, default_value_t = 0.05)]
     flip_target: f64,
+    /// N×N supersampling of the atlas renders, so their pixels cover what the reference's
+    /// jittered paths do (a box filter over the pixel).
+    #[arg(long, default_value_t = 4)]
+    ssaa: u32,
+    /// Near-field gather rays per texel of every bake (0 = off).
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_rays)]
+    near_rays: u32,
     /// Tessellation of built-in scenes (metres).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -257,6 +268,8 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
         ref_spp: args.ref_spp,
         pt_spp: args.pt_spp,
         flip_target: args.flip_target,
+        ssaa: args.ssaa,
+        near_rays: args.near_rays,
         max_edge: args.max_edge,
         out: args.out,
         ..Default::default()
@@ -468,6 +481,7 @@ fn bake(args: BakeArgs) -> ExitCode {
             vpls: args.vpls,
             bounces: args.bounces,
             atlas_res: args.atlas_res,
+            near_rays: args.near_rays,
             ..Default::default()
         },
         from_bounce: args.from_bounce,

@@ -148,8 +148,10 @@ fn sparse_plus_atlas_is_the_sum_of_its_layers() {
 /// and its mean does not exceed the reference's. The negative control adds the full atlas
 /// (bounces 1..4) to the VAL bounce, counting bounce 1 twice; that mean clearly exceeds the
 /// reference, so the mean check does catch double counting. Measured (64×64, 256 spp): mean
-/// luminance reference 0.165, sparse 0.093, sparse+atlas 0.164, double-counted 0.252; RMSE
-/// sparse 0.117, sparse+atlas 0.036.
+/// luminance reference 0.1653, sparse 0.0926, sparse+atlas 0.1685 (+1.9 %), double-counted
+/// 0.2596; RMSE sparse 0.117, sparse+atlas 0.033. The +1.9 % is the two layers' own small
+/// biases, not a bounce counted twice: against the 1-bounce reference (0.0906) `sparse` is
+/// +2.2 %, and the atlas's bounces 2..4 (≈0.076) are ≈+1.7 % against the reference's (0.0747).
 #[test]
 fn sparse_plus_atlas_approaches_the_b_bounce_reference_without_double_counting() {
     let Some(ctx) = common::gpu() else { return };
@@ -190,12 +192,13 @@ fn sparse_plus_atlas_approaches_the_b_bounce_reference_without_double_counting()
 /// reference's indirect image (512 spp), by mean FLIP at the reference's automatic exposure,
 /// 64×64 pixels.
 ///
-/// Measured (lavapipe, this commit): atlas 0.117; noise floor (a second 512-spp reference with
-/// another seed) 0.054; the same atlas scaled ×1.25 0.257 and ×0.8 0.287; one bounce where
-/// four are expected 0.52. The threshold 0.15 leaves the atlas ~30 % headroom (VPL and seed
-/// changes move it by a few hundredths) and sits well below a ±20 % error in the level of
-/// indirect light, the smallest plainly wrong answer here; the controls are asserted too, so
-/// the threshold keeps meaning something if the metric or the sizes change.
+/// Measured (lavapipe, this commit): atlas 0.079 (0.117 before the near-field gather and the
+/// ray-confirmed visibility); noise floor (a second 512-spp reference with another seed)
+/// 0.054; the same atlas scaled ×1.25 0.292 and ×0.8 0.247; one bounce where four are expected
+/// 0.52. The threshold 0.10 leaves the atlas ~30 % headroom (VPL and seed changes move it by a
+/// few hundredths) and sits well below a ±20 % error in the level of indirect light, the
+/// smallest plainly wrong answer here; the controls are asserted too, so the threshold keeps
+/// meaning something if the metric or the sizes change.
 #[test]
 fn cornell_atlas_matches_the_b_bounce_reference_within_flip() {
     let Some(ctx) = common::gpu() else { return };
@@ -236,7 +239,7 @@ fn cornell_atlas_matches_the_b_bounce_reference_within_flip() {
 }
 
 /// See `cornell_atlas_matches_the_b_bounce_reference_within_flip`.
-const FLIP_THRESHOLD: f64 = 0.15;
+const FLIP_THRESHOLD: f64 = 0.10;
 
 /// The atlas-only view of `corridor` (two rooms, the second lit only by bounces) has no black
 /// surface pixel.

@@ -38,6 +38,10 @@ pub struct BakeBenchRequest {
     pub pt_spp: Vec<u32>,
     /// The FLIP at which the path tracer's time is reported (`pt_ms_at_target`).
     pub flip_target: f64,
+    /// N×N supersampling of the atlas renders (the reference box-filters its pixels).
+    pub ssaa: u32,
+    /// Near-field gather rays per texel of every bake.
+    pub near_rays: u32,
     pub max_edge: f32,
     pub out: PathBuf,
     pub progress: bool,
@@ -56,6 +60,8 @@ impl Default for BakeBenchRequest {
             ref_seed: 0x5EED,
             pt_spp: vec![1, 4, 16, 64, 256, 1024],
             flip_target: 0.05,
+            ssaa: 4,
+            near_rays: BakeSettings::default().near_rays,
             max_edge: BuiltinParams::default().max_edge,
             out: PathBuf::from("out/bake-bench"),
             progress: true,
@@ -202,6 +208,12 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             )
         })?;
         let ref_indirect = &reference.indirect;
+        let ref_exr = request
+            .out
+            .join(format!("{}_reference.indirect.exr", slug(&scene.name)));
+        ref_indirect
+            .write_exr(&ref_exr)
+            .map_err(|e| output_error(&ref_exr, e))?;
         let exposure = metrics::auto_exposure(ref_indirect);
         let ref_mean = metrics::mean_luminance(ref_indirect);
 
@@ -238,6 +250,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 vpls,
                 bounces: request.bounces,
                 atlas_res: request.atlas_res,
+                near_rays: request.near_rays,
                 ..Default::default()
             };
             let started = Instant::now();
@@ -254,6 +267,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             let render = RenderSettings {
                 width: request.width,
                 height: request.height,
+                ssaa: request.ssaa.max(1),
                 ..RenderSettings::default()
             };
             let raster = Rasterizer::new(&ctx, &scene, render)?;
@@ -262,7 +276,16 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             let frame = method.render(&ctx, &scene, &world, &camera)?;
             let mut indirect: Image = frame.indirect;
             indirect.sanitize();
-            let flip = metrics::flip(&indirect, ref_indirect, exposure);
+            let (flip, flip_map) = metrics::flip_with_map(&indirect, ref_indirect, exposure);
+            let stem = request
+                .out
+                .join(format!("{}_{vpls}vpls", slug(&scene.name)));
+            let exr = stem.with_extension("indirect.exr");
+            indirect
+                .write_exr(&exr)
+                .map_err(|e| output_error(&exr, e))?;
+            let png = stem.with_extension("flip.png");
+            flip_map.save(&png).map_err(|e| output_error(&png, e))?;
             let row = BakeRow {
                 scene: scene.name.clone(),
                 vpls,

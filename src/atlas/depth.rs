@@ -1,7 +1,8 @@
 //! CPU depth maps for the bake's visibility: a depth cube around a point (a point or spot light,
 //! or a shooting VPL) and an orthographic map for directional lights. Faces store the depth
-//! along the face axis; lookups compare a point's depth with a slope-scaled bias and average a
-//! (2r+1)² neighbourhood (PCF) for soft visibility.
+//! along the face axis; lookups compare a point's depth with a slope-scaled bias and report
+//! whether the 3×3 taps around it agree, so the baker can leave the cases near a depth edge to
+//! a ray ([`ShadowTest::settled`]).
 
 use glam::{Vec2, Vec3};
 
@@ -168,37 +169,89 @@ impl DepthCube {
         }
     }
 
-    /// `n` is the receiver's normal: the point is pushed off its surface by about one texel
-    /// footprint (normal-offset shadow mapping) so grazing receivers do not shadow themselves.
-    pub fn visibility(&self, p: Vec3, n: Vec3, radius: i64) -> f32 {
+    /// The centre tap's answer for `p`, whether its 3×3 neighbourhood agrees, and how far in
+    /// front of the receiver the centre tap's surface lies (see [`ShadowTest`]). `n` is the
+    /// receiver's normal: the point is pushed off its surface by about one texel footprint
+    /// (normal-offset shadow mapping) so grazing receivers do not shadow themselves.
+    pub fn shadow_test(&self, p: Vec3, n: Vec3) -> ShadowTest {
         let dist = (p - self.origin).length();
         let p = p + n * (dist * 2.0 / self.res as f32);
         let d = p - self.origin;
         let face = major_face(d);
         let l = face_local(face, d);
         if l.z <= self.near {
-            return 1.0;
+            return ShadowTest::LIT;
         }
-        let res = self.res as i64;
         let half = self.res as f32 * 0.5;
         let x = ((l.x / l.z + 1.0) * half).floor() as i64;
         let y = ((l.y / l.z + 1.0) * half).floor() as i64;
         let bias = l.z * (1.0 / self.res as f32) + 1e-5;
         let base = face * self.res * self.res;
-        let mut lit = 0u32;
-        let mut count = 0u32;
-        for dy in -radius..=radius {
-            for dx in -radius..=radius {
-                let xx = (x + dx).clamp(0, res - 1) as usize;
-                let yy = (y + dy).clamp(0, res - 1) as usize;
-                let stored = self.depth[base + yy * self.res + xx];
-                count += 1;
-                if l.z <= stored + bias {
-                    lit += 1;
-                }
+        let at = |dx: i64, dy: i64| {
+            let xx = (x + dx).clamp(0, self.res as i64 - 1) as usize;
+            let yy = (y + dy).clamp(0, self.res as i64 - 1) as usize;
+            self.depth[base + yy * self.res + xx]
+        };
+        ShadowTest::from_taps(l.z, bias, l.z * 2.0 / self.res as f32, at)
+    }
+}
+
+/// A depth map's answer for one receiver: its centre tap, and whether the taps around it
+/// agree. Point-sampled depth is only trustworthy away from depth edges: within a texel of
+/// one, the receiver may be on either side (a doorway's shadow edge cast three metres away
+/// is ~20 cm wide with a 32² cube), and next to a concave edge the tap often holds the other
+/// surface, just in front of the receiver.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShadowTest {
+    /// The centre tap sees the receiver.
+    pub lit: bool,
+    /// All 3×3 taps give the centre's answer.
+    pub agreed: bool,
+    /// Distance from the centre tap's surface to the receiver along the map's depth axis, in
+    /// texel footprints at the receiver (0 when lit).
+    pub gap: f32,
+}
+
+impl ShadowTest {
+    pub const LIT: Self = Self {
+        lit: true,
+        agreed: true,
+        gap: 0.0,
+    };
+
+    /// `depth_at(dx, dy)`: the stored depth `dx`, `dy` taps from the centre.
+    fn from_taps(z: f32, bias: f32, footprint: f32, depth_at: impl Fn(i64, i64) -> f32) -> Self {
+        let centre = depth_at(0, 0);
+        let lit = z <= centre + bias;
+        let mut agreed = true;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                agreed &= (z <= depth_at(dx, dy) + bias) == lit;
             }
         }
-        lit as f32 / count as f32
+        Self {
+            lit,
+            agreed,
+            gap: ((z - bias - centre) / footprint).max(0.0),
+        }
+    }
+
+    /// 1 or 0 where the map is sure; `None` where a ray must decide.
+    pub fn settled(&self, confirm_gap: f32) -> Option<f32> {
+        match (self.lit, self.agreed) {
+            (true, true) => Some(1.0),
+            (false, true) if self.gap > confirm_gap => Some(0.0),
+            _ => None,
+        }
+    }
+
+    /// The map's own answer (no ray): 1 lit, 0 shadowed.
+    pub fn visibility(&self) -> f32 {
+        if self.lit {
+            1.0
+        } else {
+            0.0
+        }
     }
 }
 
@@ -250,25 +303,18 @@ impl DepthOrtho {
         )
     }
 
-    pub fn visibility(&self, p: Vec3, n: Vec3, radius: i64) -> f32 {
+    /// See [`DepthCube::shadow_test`]; the footprint is the same everywhere.
+    pub fn shadow_test(&self, p: Vec3, n: Vec3) -> ShadowTest {
         let p = p + n * (2.0 * self.radius / self.res as f32);
         let s = self.project(p);
-        let res = self.res as i64;
         let (x, y) = (s.x.floor() as i64, s.y.floor() as i64);
         let bias = 2.0 * self.radius / self.res as f32 + 1e-5;
-        let mut lit = 0u32;
-        let mut count = 0u32;
-        for dy in -radius..=radius {
-            for dx in -radius..=radius {
-                let xx = (x + dx).clamp(0, res - 1) as usize;
-                let yy = (y + dy).clamp(0, res - 1) as usize;
-                count += 1;
-                if s.z <= self.depth[yy * self.res + xx] + bias {
-                    lit += 1;
-                }
-            }
-        }
-        lit as f32 / count as f32
+        let at = |dx: i64, dy: i64| {
+            let xx = (x + dx).clamp(0, self.res as i64 - 1) as usize;
+            let yy = (y + dy).clamp(0, self.res as i64 - 1) as usize;
+            self.depth[yy * self.res + xx]
+        };
+        ShadowTest::from_taps(s.z, bias, 2.0 * self.radius / self.res as f32, at)
     }
 }
 
@@ -291,10 +337,44 @@ mod tests {
         let mut tris = quad(-0.5, 0.1);
         tris.extend(quad(-1.0, 5.0));
         let cube = DepthCube::new(Vec3::ZERO, 64, 1e-3, &tris);
-        assert_eq!(cube.visibility(Vec3::new(0.0, -1.0, 0.0), Vec3::Y, 0), 0.0);
-        assert_eq!(cube.visibility(Vec3::new(2.0, -1.0, 0.5), Vec3::Y, 0), 1.0);
-        assert_eq!(cube.visibility(Vec3::new(0.0, -0.5, 0.0), Vec3::Y, 0), 1.0);
+        assert_eq!(
+            cube.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y)
+                .visibility(),
+            0.0
+        );
+        assert_eq!(
+            cube.shadow_test(Vec3::new(2.0, -1.0, 0.5), Vec3::Y)
+                .visibility(),
+            1.0
+        );
+        assert_eq!(
+            cube.shadow_test(Vec3::new(0.0, -0.5, 0.0), Vec3::Y)
+                .visibility(),
+            1.0
+        );
     }
+
+    #[test]
+    fn depth_edges_are_left_to_a_ray() {
+        // A 0.1 m blocker 0.25 below the origin shadows a 0.4 m square of the floor at y = -1.
+        let mut tris = quad(-0.25, 0.05);
+        tris.extend(quad(-1.0, 5.0));
+        let cube = DepthCube::new(Vec3::ZERO, 32, 1e-3, &tris);
+        let at = |x: f32| cube.shadow_test(Vec3::new(x, -1.0, 0.0), Vec3::Y);
+        // Well inside the shadow, well outside it: the map is sure.
+        assert_eq!(at(0.0).settled(CONFIRM_GAP_FOR_TESTS), Some(0.0));
+        assert_eq!(at(1.5).settled(CONFIRM_GAP_FOR_TESTS), Some(1.0));
+        // On the shadow's edge (x = 0.2) the taps disagree: a ray decides.
+        assert_eq!(at(0.2).settled(CONFIRM_GAP_FOR_TESTS), None);
+        assert!(!at(0.2).agreed);
+        // A shadow cast from just in front of the receiver is never settled by the map.
+        let close = DepthCube::new(Vec3::new(0.0, 0.0, 0.0), 32, 1e-3, &quad(-0.95, 3.0));
+        let t = close.shadow_test(Vec3::new(0.3, -1.0, 0.0), Vec3::NEG_Y);
+        assert!(!t.lit && t.gap < CONFIRM_GAP_FOR_TESTS);
+        assert_eq!(t.settled(CONFIRM_GAP_FOR_TESTS), None);
+    }
+
+    const CONFIRM_GAP_FOR_TESTS: f32 = 8.0;
 
     #[test]
     fn hemisphere_coverage_above_a_floor() {
@@ -312,7 +392,15 @@ mod tests {
         let mut tris = quad(0.5, 0.2);
         tris.extend(quad(-1.0, 3.0));
         let map = DepthOrtho::new(Vec3::NEG_Y, Vec3::ZERO, 4.0, 256, &tris);
-        assert_eq!(map.visibility(Vec3::new(0.0, -1.0, 0.0), Vec3::Y, 0), 0.0);
-        assert_eq!(map.visibility(Vec3::new(1.0, -1.0, 1.0), Vec3::Y, 0), 1.0);
+        assert_eq!(
+            map.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y)
+                .visibility(),
+            0.0
+        );
+        assert_eq!(
+            map.shadow_test(Vec3::new(1.0, -1.0, 1.0), Vec3::Y)
+                .visibility(),
+            1.0
+        );
     }
 }

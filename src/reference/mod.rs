@@ -373,20 +373,7 @@ pub fn irradiance_at(
             let origin = x + n * tracer.epsilon;
             let mut e = Vec3::ZERO;
             if settings.direct {
-                for light in &tracer.lights {
-                    let (wi, irradiance) = light.incident(x);
-                    let cos = n.dot(wi);
-                    if cos <= 0.0 {
-                        continue;
-                    }
-                    let t_max = match light.kind {
-                        crate::scene::LightKind::Directional => f32::INFINITY,
-                        _ => (light.position - origin).length() - tracer.epsilon,
-                    };
-                    if tracer.unoccluded(origin, wi, t_max) {
-                        e += irradiance * cos;
-                    }
-                }
+                e += tracer.direct_irradiance(x, n);
             }
             let gather_emission = settings.direct;
             let gather_indirect = settings.bounces != Bounces::Limited(0);

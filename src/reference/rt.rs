@@ -160,6 +160,28 @@ impl<'a> Tracer<'a> {
         })
     }
 
+    /// Irradiance from the punctual lights at `x` on the side of the unit normal `n`, with
+    /// ray-traced visibility (the shadow ray starts `epsilon` off the surface).
+    pub fn direct_irradiance(&self, x: Vec3, n: Vec3) -> Vec3 {
+        let origin = x + n * self.epsilon;
+        let mut e = Vec3::ZERO;
+        for light in &self.lights {
+            let (wi, irradiance) = light.incident(x);
+            let cos = n.dot(wi);
+            if cos <= 0.0 || irradiance == Vec3::ZERO {
+                continue;
+            }
+            let t_max = match light.kind {
+                crate::scene::LightKind::Directional => f32::INFINITY,
+                _ => (light.position - origin).length() - self.epsilon,
+            };
+            if self.unoccluded(origin, wi, t_max) {
+                e += irradiance * cos;
+            }
+        }
+        e
+    }
+
     /// Origin for a ray leaving `hit` toward `dir`: pushed off the surface on `dir`'s side.
     pub fn spawn(&self, hit: &Hit, dir: Vec3) -> Vec3 {
         let side = if hit.geometric_normal.dot(dir) >= 0.0 {
