@@ -10,18 +10,11 @@ use valgi::gpu::GpuContext;
 use valgi::method::{Method, MethodOptions};
 use valgi::peers::lpv::math::{self, Volume};
 use valgi::peers::lpv::{LpvMethod, LpvSettings, Order, VolumeId};
-use valgi::raster::{FrameOutput, RenderSettings};
+use valgi::raster::FrameOutput;
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::Scene;
 
-fn settings(size: u32) -> RenderSettings {
-    RenderSettings {
-        width: size,
-        height: size,
-        shadow_resolution: 256,
-        ..RenderSettings::default()
-    }
-}
+use common::small_render_settings as settings;
 
 fn render(ctx: &GpuContext, scene: &Scene, size: u32, s: LpvSettings) -> (LpvMethod, FrameOutput) {
     let mut method = LpvMethod::new(ctx, scene, settings(size), s).expect("lpv");

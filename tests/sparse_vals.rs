@@ -9,7 +9,7 @@ use glam::{Quat, Vec3, Vec4};
 use valgi::gpu::GpuContext;
 use valgi::method::{Method, MethodOptions};
 use valgi::peers::brute::BruteMethod;
-use valgi::raster::{FrameOutput, RenderSettings};
+use valgi::raster::FrameOutput;
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::mesh::MeshBuilder;
 use valgi::scene::{Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs};
@@ -17,14 +17,7 @@ use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
 use valgi::vals::sparse::{PointsReadback, SparseOptions};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
 
-fn settings(size: u32) -> RenderSettings {
-    RenderSettings {
-        width: size,
-        height: size,
-        shadow_resolution: 256,
-        ..RenderSettings::default()
-    }
-}
+use common::small_render_settings as settings;
 
 fn sparse_settings(
     rsm: u32,

@@ -934,13 +934,12 @@ pub fn bake(
                         + first.iter().map(|e| e.x + e.y + e.z).sum::<f32>();
                     // Texels whose gather is noisier than NEAR_NOISE of their irradiance get
                     // 4× more rays, the two estimates weighted by ray count.
+                    more.fill(Vec3::ZERO);
                     let w_first = if variance.sqrt() > NEAR_NOISE * total {
                         regathered.fetch_add(1, Ordering::Relaxed);
-                        more.fill(Vec3::ZERO);
                         gather(settings.near_rays * 4, 1, &mut more);
                         0.2
                     } else {
-                        more.fill(Vec3::ZERO);
                         1.0
                     };
                     for (b, e) in o.iter_mut().enumerate() {

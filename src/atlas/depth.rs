@@ -244,15 +244,6 @@ impl ShadowTest {
             _ => None,
         }
     }
-
-    /// The map's own answer (no ray): 1 lit, 0 shadowed.
-    pub fn visibility(&self) -> f32 {
-        if self.lit {
-            1.0
-        } else {
-            0.0
-        }
-    }
 }
 
 /// An orthographic depth map looking along `direction` over a bounding sphere.
@@ -321,6 +312,7 @@ impl DepthOrtho {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::atlas::bake::CONFIRM_GAP;
 
     fn quad(y: f32, half: f32) -> Vec<[Vec3; 3]> {
         let a = Vec3::new(-half, y, -half);
@@ -337,21 +329,9 @@ mod tests {
         let mut tris = quad(-0.5, 0.1);
         tris.extend(quad(-1.0, 5.0));
         let cube = DepthCube::new(Vec3::ZERO, 64, 1e-3, &tris);
-        assert_eq!(
-            cube.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y)
-                .visibility(),
-            0.0
-        );
-        assert_eq!(
-            cube.shadow_test(Vec3::new(2.0, -1.0, 0.5), Vec3::Y)
-                .visibility(),
-            1.0
-        );
-        assert_eq!(
-            cube.shadow_test(Vec3::new(0.0, -0.5, 0.0), Vec3::Y)
-                .visibility(),
-            1.0
-        );
+        assert!(!cube.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y).lit);
+        assert!(cube.shadow_test(Vec3::new(2.0, -1.0, 0.5), Vec3::Y).lit);
+        assert!(cube.shadow_test(Vec3::new(0.0, -0.5, 0.0), Vec3::Y).lit);
     }
 
     #[test]
@@ -362,19 +342,17 @@ mod tests {
         let cube = DepthCube::new(Vec3::ZERO, 32, 1e-3, &tris);
         let at = |x: f32| cube.shadow_test(Vec3::new(x, -1.0, 0.0), Vec3::Y);
         // Well inside the shadow, well outside it: the map is sure.
-        assert_eq!(at(0.0).settled(CONFIRM_GAP_FOR_TESTS), Some(0.0));
-        assert_eq!(at(1.5).settled(CONFIRM_GAP_FOR_TESTS), Some(1.0));
+        assert_eq!(at(0.0).settled(CONFIRM_GAP), Some(0.0));
+        assert_eq!(at(1.5).settled(CONFIRM_GAP), Some(1.0));
         // On the shadow's edge (x = 0.2) the taps disagree: a ray decides.
-        assert_eq!(at(0.2).settled(CONFIRM_GAP_FOR_TESTS), None);
+        assert_eq!(at(0.2).settled(CONFIRM_GAP), None);
         assert!(!at(0.2).agreed);
         // A shadow cast from just in front of the receiver is never settled by the map.
         let close = DepthCube::new(Vec3::new(0.0, 0.0, 0.0), 32, 1e-3, &quad(-0.95, 3.0));
         let t = close.shadow_test(Vec3::new(0.3, -1.0, 0.0), Vec3::NEG_Y);
-        assert!(!t.lit && t.gap < CONFIRM_GAP_FOR_TESTS);
-        assert_eq!(t.settled(CONFIRM_GAP_FOR_TESTS), None);
+        assert!(!t.lit && t.gap < CONFIRM_GAP);
+        assert_eq!(t.settled(CONFIRM_GAP), None);
     }
-
-    const CONFIRM_GAP_FOR_TESTS: f32 = 8.0;
 
     #[test]
     fn hemisphere_coverage_above_a_floor() {
@@ -392,15 +370,7 @@ mod tests {
         let mut tris = quad(0.5, 0.2);
         tris.extend(quad(-1.0, 3.0));
         let map = DepthOrtho::new(Vec3::NEG_Y, Vec3::ZERO, 4.0, 256, &tris);
-        assert_eq!(
-            map.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y)
-                .visibility(),
-            0.0
-        );
-        assert_eq!(
-            map.shadow_test(Vec3::new(1.0, -1.0, 1.0), Vec3::Y)
-                .visibility(),
-            1.0
-        );
+        assert!(!map.shadow_test(Vec3::new(0.0, -1.0, 0.0), Vec3::Y).lit);
+        assert!(map.shadow_test(Vec3::new(1.0, -1.0, 1.0), Vec3::Y).lit);
     }
 }

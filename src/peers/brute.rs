@@ -9,8 +9,9 @@ use glam::Mat4;
 use crate::gpu::{GpuContext, Passes};
 use crate::method::{Method, MethodOptions};
 use crate::raster::{
-    buffer_binding, compute_pipeline, storage_entry, storage_texture_entry, texture_entry,
-    uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError, RenderSettings,
+    buffer_binding, compute_pipeline, depth_texture_entry, storage_entry, storage_texture_entry,
+    texture_entry, uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError,
+    RenderSettings,
 };
 use crate::scene::{CameraView, Scene};
 use crate::vals::rsm::Rsm;
@@ -59,16 +60,7 @@ impl BruteMethod {
                 uniform_entry(1, cs),
                 storage_entry(2, cs),
                 storage_entry(3, cs),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                depth_texture_entry(4, cs),
                 texture_entry(5, cs),
                 texture_entry(6, cs),
                 texture_entry(7, cs),

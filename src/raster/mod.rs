@@ -329,20 +329,11 @@ impl Rasterizer {
             bind_group_layouts: &[Some(&shadow_bgl)],
             immediate_size: 0,
         });
-        let position_only = wgpu::VertexBufferLayout {
-            array_stride: std::mem::size_of::<Vertex>() as u64,
-            step_mode: wgpu::VertexStepMode::Vertex,
-            attributes: &[wgpu::VertexAttribute {
-                format: wgpu::VertexFormat::Float32x3,
-                offset: 0,
-                shader_location: 0,
-            }],
-        };
         let shadow_pipeline = ScenePipeline {
             label: "shadow",
             module: &shadow_module,
             layout: &shadow_layout,
-            vertex: position_only,
+            vertex: POSITION_ONLY,
             depth_write: true,
             depth_compare: wgpu::CompareFunction::Less,
             depth_bias: wgpu::DepthBiasState {
@@ -424,16 +415,7 @@ impl Rasterizer {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
                     count: None,
                 },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 5,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                depth_texture_entry(5, cs),
                 texture_entry(6, cs),
                 texture_entry(7, cs),
                 texture_entry(8, cs),
@@ -862,6 +844,35 @@ fn storage_buffer_entry(
         count: None,
     }
 }
+
+/// A 2D depth texture read with `textureLoad` (the G-buffer's depth).
+pub fn depth_texture_entry(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility,
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Depth,
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        count: None,
+    }
+}
+
+/// Vertex buffers of [`Vertex`] read for their position only (shadow maps, depth-equal
+/// passes).
+pub const POSITION_ONLY: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
+    array_stride: std::mem::size_of::<Vertex>() as u64,
+    step_mode: wgpu::VertexStepMode::Vertex,
+    attributes: &[wgpu::VertexAttribute {
+        format: wgpu::VertexFormat::Float32x3,
+        offset: 0,
+        shader_location: 0,
+    }],
+};
 
 /// A float texture read with `textureLoad` (no filtering needed).
 pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {

@@ -353,9 +353,9 @@ enum PlaneLight {
     Directional,
 }
 
-/// A 4 m × 4 m grey (ρ = 0.8) Lambertian plane at y = 0 under a light 1 m above its centre,
-/// seen from straight above. Direct irradiance has the closed form E = I·h/(h² + r²)^{3/2}.
-fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
+/// A scene holding a 4 m × 4 m grey (ρ = 0.8) Lambertian plane at y = 0; returns the builder
+/// and the grey material for more objects.
+fn grey_ground(name: &str, max_edge: f32) -> (SceneBuilder, usize) {
     let mut b = SceneBuilder::new(name);
     let grey = b.material(Material::lambert("grey", Vec3::splat(0.8)));
     let mut mb = MeshBuilder::new("plane", grey);
@@ -368,6 +368,13 @@ fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
         max_edge,
     );
     b.object("plane", mb.build(), Trs::default());
+    (b, grey)
+}
+
+/// A 4 m × 4 m grey (ρ = 0.8) Lambertian plane at y = 0 under a light 1 m above its centre,
+/// seen from straight above. Direct irradiance has the closed form E = I·h/(h² + r²)^{3/2}.
+fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
+    let (mut b, grey) = grey_ground(name, max_edge);
 
     if blocker {
         // A thin closed slab: the top shadows the plane, the bottom receives the plane's
@@ -438,18 +445,7 @@ fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
 /// The plane receives no direct light: all of its light is the panel's bounce, leaving
 /// diagonally across an axis-aligned grid. Seen from straight above.
 fn lpv_diagonal(name: &str, max_edge: f32) -> Scene {
-    let mut b = SceneBuilder::new(name);
-    let grey = b.material(Material::lambert("grey", Vec3::splat(0.8)));
-    let mut mb = MeshBuilder::new("plane", grey);
-    mb.add_quad(
-        Vec3::new(-2.0, 0.0, -2.0),
-        Vec3::new(2.0, 0.0, -2.0),
-        Vec3::new(2.0, 0.0, 2.0),
-        Vec3::new(-2.0, 0.0, 2.0),
-        Vec3::new(0.0, 1.0, 0.0),
-        max_edge,
-    );
-    b.object("plane", mb.build(), Trs::default());
+    let (mut b, grey) = grey_ground(name, max_edge);
     let normal = Vec3::new(1.0, 0.0, 1.0).normalize();
     let center = Vec3::new(-1.4, 0.0, -1.4);
     let side = Vec3::new(1.0, 0.0, -1.0).normalize() * 0.3;

@@ -18,10 +18,10 @@ use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::raster::scene_gpu::SceneGpu;
-use crate::raster::types::Vertex;
 use crate::raster::{
     buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
-    uniform_entry, view_binding, FrameTargets, RenderError, ScenePipeline, RADIANCE_FORMAT,
+    uniform_entry, view_binding, FrameTargets, RenderError, ScenePipeline, POSITION_ONLY,
+    RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
@@ -419,15 +419,7 @@ impl SparseGpu {
             label: "apply",
             module: &apply_module,
             layout: &apply_layout,
-            vertex: wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &[wgpu::VertexAttribute {
-                    format: wgpu::VertexFormat::Float32x3,
-                    offset: 0,
-                    shader_location: 0,
-                }],
-            },
+            vertex: POSITION_ONLY,
             // Equal against the G-buffer's depth (both vertex stages are @invariant): each
             // pixel is shaded once, by the surface the G-buffer holds.
             depth_write: false,

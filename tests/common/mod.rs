@@ -2,6 +2,17 @@
 #![allow(dead_code)]
 
 use valgi::gpu::GpuContext;
+use valgi::raster::RenderSettings;
+
+/// A square image of `size` pixels with 256² shadow maps: small enough for tests.
+pub fn small_render_settings(size: u32) -> RenderSettings {
+    RenderSettings {
+        width: size,
+        height: size,
+        shadow_resolution: 256,
+        ..RenderSettings::default()
+    }
+}
 
 /// The GPU device, or `None` (with a loud message) when there is none. Under CI
 /// (`CI=true`) a missing adapter fails the test: CI must never pass while testing nothing.

@@ -15,8 +15,9 @@ use glam::{Mat4, UVec3};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::method::{Method, MethodOptions};
 use crate::raster::{
-    buffer_binding, storage_entry, storage_entry_rw, storage_texture_entry, texture_entry,
-    uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError, RenderSettings,
+    buffer_binding, depth_texture_entry, storage_entry, storage_entry_rw, storage_texture_entry,
+    texture_entry, uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError,
+    RenderSettings,
 };
 use crate::scene::{CameraView, Scene};
 use crate::vals::rsm::Rsm;
@@ -318,16 +319,6 @@ impl LpvMethod {
             sh,
         );
         // Geometry volume.
-        let depth_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: cs,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Depth,
-                view_dimension: wgpu::TextureViewDimension::D2,
-                multisampled: false,
-            },
-            count: None,
-        };
         let geometry_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("lpv geometry"),
             entries: &[
@@ -336,7 +327,7 @@ impl LpvMethod {
                 storage_entry(2, cs),
                 storage_entry_rw(3, cs),
                 uniform_entry(4, cs),
-                depth_entry(5),
+                depth_texture_entry(5, cs),
                 texture_entry(6, cs),
                 texture_entry(7, cs),
             ],
@@ -422,7 +413,7 @@ impl LpvMethod {
                 uniform_entry(0, cs),
                 uniform_entry(1, cs),
                 storage_entry(2, cs),
-                depth_entry(3),
+                depth_texture_entry(3, cs),
                 texture_entry(4, cs),
                 texture_entry(5, cs),
                 texture_entry(6, cs),
