@@ -492,3 +492,63 @@ fn bounce_one_reaches_into_contacts_and_corners() {
     assert!((0.9..1.1).contains(&at_corner), "{at_corner}");
     assert!(without_gather < 0.8, "negative control: {without_gather}");
 }
+
+/// The corridor's partition stands on the floor and meets the side walls and the ceiling; only
+/// the first room is lit. The row of texels next to it behind it (within 8 cm, one texel of
+/// this 128² atlas; second room, away from the doorway) must get what the path tracer gets
+/// there, and the row just in front of it too. A depth
+/// cube's bias took the partition's foot for the receiver itself, so light leaked under the
+/// wall: 5–10× the path tracer's irradiance behind it.
+#[test]
+fn no_light_leaks_under_the_partition() {
+    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
+    let scene = scene::load("corridor", &BuiltinParams { max_edge: 0.1 }).unwrap();
+    let settings = BakeSettings {
+        vpls: 400,
+        bounces: 2,
+        atlas_res: 128,
+        ..Default::default()
+    };
+    let baked = bake_now(&scene, &settings).unwrap();
+    // Within 8 cm of the partition (x = 2.1), off the doorway's floor and ceiling strip.
+    let near_wall = |t: &valgi::atlas::layout::Texel, side: f32| {
+        let p = t.position;
+        let dx = (p.x - 2.1) * side;
+        let in_doorway = p.z > 0.45 && p.z < 1.55 && p.y < 2.0;
+        dx > 0.0 && dx < 0.08 && t.normal.x.abs() < 0.1 && !in_doorway
+    };
+    let ratio = |side: f32| {
+        let texels: Vec<_> = baked
+            .layout
+            .texels
+            .iter()
+            .filter(|t| near_wall(t, side))
+            .collect();
+        assert!(texels.len() >= 40, "{} texels", texels.len());
+        let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
+        let reference = irradiance_at(
+            &scene,
+            &scene.world_from_node(),
+            &points,
+            &IrradianceSettings {
+                direct: false,
+                bounces: Bounces::Limited(2),
+                samples: 512,
+                seed: 9,
+            },
+        );
+        let atlas: f32 = texels
+            .iter()
+            .map(|t| {
+                (0..2)
+                    .map(|b| baked.irradiance[b][t.index as usize].iter().sum::<f32>())
+                    .sum::<f32>()
+            })
+            .sum();
+        atlas / reference.iter().map(|e| e.x + e.y + e.z).sum::<f32>()
+    };
+    let (lit_side, dark_side) = (ratio(-1.0), ratio(1.0));
+    eprintln!("atlas / path tracer within 8 cm of the partition: lit room {lit_side:.3}, dark room {dark_side:.3}");
+    assert!((0.85..1.15).contains(&lit_side), "{lit_side}");
+    assert!((0.7..1.4).contains(&dark_side), "{dark_side}");
+}

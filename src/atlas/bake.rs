@@ -11,7 +11,7 @@ use std::time::Instant;
 
 use std::num::NonZero;
 
-use glam::{Mat4, Vec2, Vec3};
+use glam::{Mat4, Vec3};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
@@ -1130,28 +1130,4 @@ pub fn write_atlas_exr(image: &Image, path: &std::path::Path) -> Result<(), Imag
         let _ = std::fs::remove_file(&tmp);
     }
     result
-}
-
-/// Bilinear lookup of an atlas image at `uv` (texel centres at (i+0.5)/R), the CPU twin of
-/// the lookup in `shaders/atlas_render.wgsl`.
-pub fn sample_bilinear(image: &Image, uv: Vec2) -> [f32; 3] {
-    let (w, h) = (image.width as i64, image.height as i64);
-    let p = uv * Vec2::new(w as f32, h as f32) - Vec2::splat(0.5);
-    let base = p.floor();
-    let f = p - base;
-    let mut out = [0.0f32; 3];
-    for (dx, dy, wgt) in [
-        (0, 0, (1.0 - f.x) * (1.0 - f.y)),
-        (1, 0, f.x * (1.0 - f.y)),
-        (0, 1, (1.0 - f.x) * f.y),
-        (1, 1, f.x * f.y),
-    ] {
-        let x = (base.x as i64 + dx).clamp(0, w - 1) as u32;
-        let y = (base.y as i64 + dy).clamp(0, h - 1) as u32;
-        let v = image.get(x, y);
-        for c in 0..3 {
-            out[c] += v[c] * wgt;
-        }
-    }
-    out
 }

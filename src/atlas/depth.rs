@@ -17,6 +17,17 @@ fn face_local(face: usize, d: Vec3) -> Vec3 {
     Vec3::new(d[(a + 1) % 3], d[(a + 2) % 3], s * d[a])
 }
 
+/// Inverse of [`face_local`].
+fn face_world(face: usize, l: Vec3) -> Vec3 {
+    let a = face / 2;
+    let s = if face.is_multiple_of(2) { 1.0 } else { -1.0 };
+    let mut d = Vec3::ZERO;
+    d[a] = s * l.z;
+    d[(a + 1) % 3] = l.x;
+    d[(a + 2) % 3] = l.y;
+    d
+}
+
 fn major_face(d: Vec3) -> usize {
     let a = d.abs();
     let axis = if a.x >= a.y && a.x >= a.z {
@@ -61,6 +72,10 @@ fn raster_triangle(depth: &mut [f32], res: usize, t: [Vec3; 3], perspective: boo
         }
     }
 }
+
+/// How close to the receiver's tangent plane (in texel footprints) the centre tap's surface
+/// must lie to be taken for the receiver itself.
+const ON_RECEIVER: f32 = 0.1;
 
 /// Six perspective faces (90° each) around `origin`.
 pub struct DepthCube {
@@ -173,9 +188,9 @@ impl DepthCube {
     /// front of the receiver the centre tap's surface lies (see [`ShadowTest`]). `n` is the
     /// receiver's normal: the point is pushed off its surface by about one texel footprint
     /// (normal-offset shadow mapping) so grazing receivers do not shadow themselves.
-    pub fn shadow_test(&self, p: Vec3, n: Vec3) -> ShadowTest {
-        let dist = (p - self.origin).length();
-        let p = p + n * (dist * 2.0 / self.res as f32);
+    pub fn shadow_test(&self, receiver: Vec3, n: Vec3) -> ShadowTest {
+        let dist = (receiver - self.origin).length();
+        let p = receiver + n * (dist * 2.0 / self.res as f32);
         let d = p - self.origin;
         let face = major_face(d);
         let l = face_local(face, d);
@@ -192,7 +207,21 @@ impl DepthCube {
             let yy = (y + dy).clamp(0, self.res as i64 - 1) as usize;
             self.depth[base + yy * self.res + xx]
         };
-        ShadowTest::from_taps(l.z, bias, l.z * 2.0 / self.res as f32, at)
+        let footprint = l.z * 2.0 / self.res as f32;
+        // The surface the centre tap stores, at the tap's own direction.
+        let centre = at(0, 0);
+        let stored = self.origin
+            + face_world(
+                face,
+                Vec3::new(
+                    ((x as f32 + 0.5) / half - 1.0) * centre,
+                    ((y as f32 + 0.5) / half - 1.0) * centre,
+                    centre,
+                ),
+            );
+        let on_receiver =
+            centre.is_finite() && n.dot(stored - receiver).abs() <= ON_RECEIVER * footprint;
+        ShadowTest::from_taps(l.z, bias, footprint, on_receiver, at)
     }
 }
 
@@ -220,9 +249,21 @@ impl ShadowTest {
     };
 
     /// `depth_at(dx, dy)`: the stored depth `dx`, `dy` taps from the centre.
-    fn from_taps(z: f32, bias: f32, footprint: f32, depth_at: impl Fn(i64, i64) -> f32) -> Self {
+    /// `centre_on_receiver`: the centre tap's surface point lies in the receiver's tangent
+    /// plane. A surface stored less than the bias in front of the (normal-offset) receiver is
+    /// the receiver itself only then; otherwise it is something standing just in front of it
+    /// (the receiver is a hand's width behind a partition that stands on it), which the bias
+    /// alone would call lit: light leaking under the wall. Such taps are not lit, and with no
+    /// gap to speak of they are left to a ray.
+    fn from_taps(
+        z: f32,
+        bias: f32,
+        footprint: f32,
+        centre_on_receiver: bool,
+        depth_at: impl Fn(i64, i64) -> f32,
+    ) -> Self {
         let centre = depth_at(0, 0);
-        let lit = z <= centre + bias;
+        let lit = z <= centre || (z <= centre + bias && centre_on_receiver);
         let mut agreed = true;
         for dy in -1..=1 {
             for dx in -1..=1 {
@@ -295,8 +336,8 @@ impl DepthOrtho {
     }
 
     /// See [`DepthCube::shadow_test`]; the footprint is the same everywhere.
-    pub fn shadow_test(&self, p: Vec3, n: Vec3) -> ShadowTest {
-        let p = p + n * (2.0 * self.radius / self.res as f32);
+    pub fn shadow_test(&self, receiver: Vec3, n: Vec3) -> ShadowTest {
+        let p = receiver + n * (2.0 * self.radius / self.res as f32);
         let s = self.project(p);
         let (x, y) = (s.x.floor() as i64, s.y.floor() as i64);
         let bias = 2.0 * self.radius / self.res as f32 + 1e-5;
@@ -305,7 +346,16 @@ impl DepthOrtho {
             let yy = (y + dy).clamp(0, self.res as i64 - 1) as usize;
             self.depth[yy * self.res + xx]
         };
-        ShadowTest::from_taps(s.z, bias, 2.0 * self.radius / self.res as f32, at)
+        let footprint = 2.0 * self.radius / self.res as f32;
+        let centre = at(0, 0);
+        let half = self.res as f32 * 0.5;
+        let stored = self.center
+            + self.u * (((x as f32 + 0.5) / half - 1.0) * self.radius)
+            + self.v * (((y as f32 + 0.5) / half - 1.0) * self.radius)
+            + self.direction * (centre - self.radius);
+        let on_receiver =
+            centre.is_finite() && n.dot(stored - receiver).abs() <= ON_RECEIVER * footprint;
+        ShadowTest::from_taps(s.z, bias, footprint, on_receiver, at)
     }
 }
 
@@ -352,6 +402,57 @@ mod tests {
         let t = close.shadow_test(Vec3::new(0.3, -1.0, 0.0), Vec3::NEG_Y);
         assert!(!t.lit && t.gap < CONFIRM_GAP);
         assert_eq!(t.settled(CONFIRM_GAP), None);
+    }
+
+    /// A wall standing on the floor at x = 0, the map's centre 0.6 m up on the −x side:
+    /// floor points a few centimetres behind the wall see the wall's foot stored less than
+    /// the depth bias in front of them, which the bias alone took for the floor itself (lit:
+    /// light under the wall, 10× the path tracer's bounce light behind the corridor's
+    /// partition). The map no longer settles any of them lit; the floor on the near side, stored
+    /// where the receiver is, stays settled lit.
+    #[test]
+    fn a_wall_standing_on_the_receiver_is_not_taken_for_it() {
+        let (a, b) = (Vec3::new(0.0, 0.0, -3.0), Vec3::new(0.0, 0.0, 3.0));
+        let (c, d) = (Vec3::new(0.0, 2.0, 3.0), Vec3::new(0.0, 2.0, -3.0));
+        let mut tris = quad(0.0, 3.0);
+        tris.extend([[a, b, c], [a, c, d]]);
+        let cube = DepthCube::new(Vec3::new(-0.65, 0.6, 0.8), 32, 1e-3, &tris);
+        let (mut bias_alone, mut settled_lit, mut total) = (0, 0, 0);
+        for i in 0..10 {
+            for k in 0..40 {
+                let behind = Vec3::new(0.005 + 0.01 * i as f32, 0.0, -1.0 + 0.05 * k as f32);
+                total += 1;
+                if cube.shadow_test(behind, Vec3::Y).settled(CONFIRM_GAP) == Some(1.0) {
+                    settled_lit += 1;
+                }
+                // The same taps under the bias-only rule (every stored surface within the
+                // bias counted as the receiver).
+                let d =
+                    behind + Vec3::Y * ((behind - cube.origin).length() * 2.0 / 32.0) - cube.origin;
+                let face = major_face(d);
+                let l = face_local(face, d);
+                let x = ((l.x / l.z + 1.0) * 16.0).floor() as i64;
+                let y = ((l.y / l.z + 1.0) * 16.0).floor() as i64;
+                let at = |dx: i64, dy: i64| {
+                    let (xx, yy) = ((x + dx).clamp(0, 31), (y + dy).clamp(0, 31));
+                    cube.depth[face * 32 * 32 + yy as usize * 32 + xx as usize]
+                };
+                let old = ShadowTest::from_taps(l.z, l.z / 32.0 + 1e-5, l.z / 16.0, true, at);
+                if old.settled(CONFIRM_GAP) == Some(1.0) {
+                    bias_alone += 1;
+                }
+            }
+        }
+        eprintln!(
+            "{total} floor points behind the wall: {bias_alone} settled lit by the bias alone, \
+             {settled_lit} now"
+        );
+        assert!(bias_alone >= 20, "not exercised: {bias_alone} of {total}");
+        assert_eq!(settled_lit, 0);
+        for x in [-0.3f32, -0.8, -1.5] {
+            let t = cube.shadow_test(Vec3::new(x, 0.0, 0.2), Vec3::Y);
+            assert_eq!(t.settled(CONFIRM_GAP), Some(1.0), "{x}: {t:?}");
+        }
     }
 
     #[test]

@@ -51,6 +51,8 @@ pub struct AtlasLayout {
     pub source: &'static str,
     pub meshes: Vec<ChartMesh>,
     pub texels: Vec<Texel>,
+    /// Lines where other geometry touches a surface; the lookup does not filter across them.
+    pub cuts: super::cuts::ContactCuts,
 }
 
 /// World transform's normal matrix (inverse transpose).
@@ -188,11 +190,13 @@ fn build_layout(
         "generated"
     };
     let texels = find_texels(&meshes, resolution);
+    let cuts = super::cuts::contact_cuts(&meshes, resolution);
     Ok(AtlasLayout {
         resolution,
         source,
         meshes,
         texels,
+        cuts,
     })
 }
 

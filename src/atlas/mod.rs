@@ -5,6 +5,7 @@
 pub mod bake;
 pub mod bench;
 pub mod compose;
+pub mod cuts;
 pub mod depth;
 pub mod layout;
 
@@ -283,26 +284,30 @@ impl AtlasLayer {
             wgpu::TextureFormat::Rgba32Float,
             wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         );
-        ctx.queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &atlas_texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
+        ctx.write_texture_2d(
+            &atlas_texture,
+            0,
             bytemuck::cast_slice(&atlas.pixels),
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(res * 16),
-                rows_per_image: Some(res),
-            },
-            wgpu::Extent3d {
-                width: res,
-                height: res,
-                depth_or_array_layers: 1,
-            },
+            (res, res),
+            16,
         );
         let atlas_view = atlas_texture.create_view(&Default::default());
+        let cuts_texture = texture(
+            &mut bytes,
+            "atlas contact cuts",
+            res,
+            res,
+            wgpu::TextureFormat::Rg32Uint,
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        );
+        ctx.write_texture_2d(
+            &cuts_texture,
+            0,
+            bytemuck::cast_slice(&layout.cuts.dense(res)),
+            (res, res),
+            8,
+        );
+        let cuts_view = cuts_texture.create_view(&Default::default());
         let (rw, rh) = (raster.targets.render_width, raster.targets.render_height);
         let irradiance_texture = texture(
             &mut bytes,
@@ -332,6 +337,16 @@ impl AtlasLayer {
                 uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT),
                 crate::raster::storage_entry(1, wgpu::ShaderStages::VERTEX),
                 texture_entry(2, wgpu::ShaderStages::FRAGMENT),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 3,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Uint,
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
             ],
         });
         let render_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -341,6 +356,7 @@ impl AtlasLayer {
                 buffer_binding(0, &frame_buffer),
                 buffer_binding(1, &transforms),
                 view_binding(2, &atlas_view),
+                view_binding(3, &cuts_view),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {

@@ -41,6 +41,37 @@ pub struct GpuContext {
 }
 
 impl GpuContext {
+    /// Uploads one mip level of a 2D texture: `data` is `width × height` texels of
+    /// `bytes_per_texel` bytes, rows packed.
+    pub fn write_texture_2d(
+        &self,
+        texture: &wgpu::Texture,
+        mip_level: u32,
+        data: &[u8],
+        (width, height): (u32, u32),
+        bytes_per_texel: u32,
+    ) {
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture,
+                mip_level,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            data,
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(bytes_per_texel * width),
+                rows_per_image: Some(height),
+            },
+            wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+        );
+    }
+
     /// Opens a headless device. Honours `WGPU_BACKEND` (e.g. `vulkan`, `gl`) and
     /// `WGPU_ADAPTER_NAME` (case-insensitive substring of the adapter's name); otherwise takes
     /// the high-performance adapter, falling back to any (software drivers included).

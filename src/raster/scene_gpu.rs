@@ -348,24 +348,12 @@ fn upload_texture(
         },
     );
     for mip in 0..mip_count {
-        ctx.queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &gpu_texture,
-                mip_level: mip,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
+        ctx.write_texture_2d(
+            &gpu_texture,
+            mip,
             &level.rgba8,
-            wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(4 * level.width),
-                rows_per_image: Some(level.height),
-            },
-            wgpu::Extent3d {
-                width: level.width,
-                height: level.height,
-                depth_or_array_layers: 1,
-            },
+            (level.width, level.height),
+            4,
         );
         if mip + 1 < mip_count {
             level = level.half(srgb);
