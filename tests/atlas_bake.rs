@@ -426,6 +426,37 @@ fn depth_map_shadows_are_confirmed_by_a_ray() {
     );
 }
 
+/// Summed atlas irradiance of bounces 1..=`bounces` over `texels`, over the path tracer's at
+/// the same points (indirect, `bounces` bounces, `samples` paths per point).
+fn atlas_over_path_tracer(
+    scene: &valgi::scene::Scene,
+    baked: &valgi::atlas::Bake,
+    texels: &[&valgi::atlas::layout::Texel],
+    bounces: u32,
+    samples: u32,
+    seed: u64,
+) -> f32 {
+    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
+    let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
+    let reference = irradiance_at(
+        scene,
+        &scene.world_from_node(),
+        &points,
+        &IrradianceSettings {
+            direct: false,
+            bounces: Bounces::Limited(bounces),
+            samples,
+            seed,
+        },
+    );
+    let atlas: f32 = texels
+        .iter()
+        .flat_map(|t| (0..bounces as usize).map(|b| baked.irradiance[b][t.index as usize]))
+        .map(|e| e.iter().sum::<f32>())
+        .sum();
+    atlas / reference.iter().map(|e| e.x + e.y + e.z).sum::<f32>()
+}
+
 /// Bounce 1 where most of it comes from within a centimetre or two: the foot of Cornell's tall
 /// box (its front face up to 2 cm above the floor, lit by the bright floor right under the
 /// light) and the floor within 1 cm of the red wall. Each group's summed atlas irradiance is
@@ -434,7 +465,6 @@ fn depth_map_shadows_are_confirmed_by_a_ray() {
 /// every sample a disc) the foot of the box gets well under 80 % of its light.
 #[test]
 fn bounce_one_reaches_into_contacts_and_corners() {
-    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
     let scene = scene::load("cornell", &BuiltinParams::default()).unwrap();
     let settings = BakeSettings {
         vpls: 400,
@@ -455,24 +485,7 @@ fn bounce_one_reaches_into_contacts_and_corners() {
                  pick: &dyn Fn(&&valgi::atlas::layout::Texel) -> bool| {
         let texels: Vec<_> = baked.layout.texels.iter().filter(pick).collect();
         assert!(texels.len() >= 8, "{} texels", texels.len());
-        let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
-        let reference = irradiance_at(
-            &scene,
-            &scene.world_from_node(),
-            &points,
-            &IrradianceSettings {
-                direct: false,
-                bounces: Bounces::Limited(1),
-                samples: 2048,
-                seed: 5,
-            },
-        );
-        let atlas: f32 = texels
-            .iter()
-            .map(|t| baked.irradiance[0][t.index as usize].iter().sum::<f32>())
-            .sum();
-        let reference: f32 = reference.iter().map(|e| e.x + e.y + e.z).sum();
-        atlas / reference
+        atlas_over_path_tracer(&scene, baked, &texels, 1, 2048, 5)
     };
     let (at_contact, at_corner) = (ratio(&baked, &contact), ratio(&baked, &corner));
     let without = bake_now(
@@ -501,7 +514,6 @@ fn bounce_one_reaches_into_contacts_and_corners() {
 /// wall: 5–10× the path tracer's irradiance behind it.
 #[test]
 fn no_light_leaks_under_the_partition() {
-    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
     let scene = scene::load("corridor", &BuiltinParams { max_edge: 0.1 }).unwrap();
     let settings = BakeSettings {
         vpls: 400,
@@ -525,27 +537,7 @@ fn no_light_leaks_under_the_partition() {
             .filter(|t| near_wall(t, side))
             .collect();
         assert!(texels.len() >= 40, "{} texels", texels.len());
-        let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
-        let reference = irradiance_at(
-            &scene,
-            &scene.world_from_node(),
-            &points,
-            &IrradianceSettings {
-                direct: false,
-                bounces: Bounces::Limited(2),
-                samples: 512,
-                seed: 9,
-            },
-        );
-        let atlas: f32 = texels
-            .iter()
-            .map(|t| {
-                (0..2)
-                    .map(|b| baked.irradiance[b][t.index as usize].iter().sum::<f32>())
-                    .sum::<f32>()
-            })
-            .sum();
-        atlas / reference.iter().map(|e| e.x + e.y + e.z).sum::<f32>()
+        atlas_over_path_tracer(&scene, &baked, &texels, 2, 512, 9)
     };
     let (lit_side, dark_side) = (ratio(-1.0), ratio(1.0));
     eprintln!("atlas / path tracer within 8 cm of the partition: lit room {lit_side:.3}, dark room {dark_side:.3}");

@@ -276,38 +276,31 @@ impl AtlasLayer {
         let texture = |bytes: &mut GpuBytes, label, w, h, format, usage| {
             bytes.texture_2d(device, label, (w, h), format, usage)
         };
-        let atlas_texture = texture(
-            &mut bytes,
+        // The atlas and its contact cuts: R × R, uploaded once.
+        let mut upload = |label, format, data: &[u8], bytes_per_texel| {
+            let t = texture(
+                &mut bytes,
+                label,
+                res,
+                res,
+                format,
+                wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            );
+            ctx.write_texture_2d(&t, 0, data, (res, res), bytes_per_texel);
+            t.create_view(&Default::default())
+        };
+        let atlas_view = upload(
             "light atlas",
-            res,
-            res,
             wgpu::TextureFormat::Rgba32Float,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        ctx.write_texture_2d(
-            &atlas_texture,
-            0,
             bytemuck::cast_slice(&atlas.pixels),
-            (res, res),
             16,
         );
-        let atlas_view = atlas_texture.create_view(&Default::default());
-        let cuts_texture = texture(
-            &mut bytes,
+        let cuts_view = upload(
             "atlas contact cuts",
-            res,
-            res,
             wgpu::TextureFormat::Rg32Uint,
-            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        );
-        ctx.write_texture_2d(
-            &cuts_texture,
-            0,
             bytemuck::cast_slice(&layout.cuts.dense(res)),
-            (res, res),
             8,
         );
-        let cuts_view = cuts_texture.create_view(&Default::default());
         let (rw, rh) = (raster.targets.render_width, raster.targets.render_height);
         let irradiance_texture = texture(
             &mut bytes,
