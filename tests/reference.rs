@@ -151,6 +151,55 @@ fn bounce_zero_is_direct_only_and_direct_does_not_depend_on_bounces() {
     assert_ne!(other.indirect, b2.indirect);
 }
 
+/// The convergence curve of `valgi bake-bench` comes from one progressive run: each checkpoint
+/// must be the image a separate render with that many paths gives, bit for bit, and be timed
+/// as no longer than the whole run (times grow with the checkpoint).
+#[test]
+fn progressive_checkpoints_equal_separate_renders() {
+    let scene = sphere_scene();
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    let settings = ReferenceSettings {
+        width: 12,
+        height: 8,
+        spp: 0,
+        bounces: Bounces::Limited(2),
+        seed: 21,
+        progress: false,
+    };
+    let mut frames = vec![];
+    // Unsorted and repeated on purpose: checkpoints are sorted and deduplicated.
+    reference::render_progressive(
+        &scene,
+        &world,
+        &camera,
+        &settings,
+        &[9, 1, 3, 9],
+        |spp, f| frames.push((spp, f)),
+    );
+    assert_eq!(frames.iter().map(|f| f.0).collect::<Vec<_>>(), [1, 3, 9]);
+    let mut last_seconds = 0.0;
+    for (spp, frame) in &frames {
+        let separate = reference::render(
+            &scene,
+            &world,
+            &camera,
+            &ReferenceSettings {
+                spp: *spp,
+                ..settings
+            },
+        );
+        assert_eq!(frame.direct, separate.direct, "direct at {spp} spp");
+        assert_eq!(frame.indirect, separate.indirect, "indirect at {spp} spp");
+        assert_eq!(frame.variance, separate.variance, "variance at {spp} spp");
+        assert_eq!(frame.paths, 12 * 8 * *spp as u64);
+        assert!(frame.seconds >= last_seconds, "checkpoint times grow");
+        last_seconds = frame.seconds;
+    }
+    // The checkpoints differ from each other (more paths, another mean).
+    assert_ne!(frames[0].1.indirect, frames[2].1.indirect);
+}
+
 #[test]
 fn error_falls_as_one_over_sqrt_spp() {
     let scene = sphere_scene();

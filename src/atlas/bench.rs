@@ -217,27 +217,28 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
         let exposure = metrics::auto_exposure(ref_indirect);
         let ref_mean = metrics::mean_luminance(ref_indirect);
 
-        // The path tracer's convergence against the same reference (independent seed).
+        // The path tracer's convergence against the same reference (independent seed): one
+        // progressive run, each point timed as the separate render it equals.
         let mut curve = vec![];
-        for &spp in &request.pt_spp {
-            let started = Instant::now();
-            let image = reference::render(
-                &scene,
-                &world,
-                &camera,
-                &ref_settings(spp, request.ref_seed ^ 0xC0FFEE),
-            );
-            let ms = started.elapsed().as_secs_f64() * 1000.0;
-            let mut indirect = image.indirect;
-            indirect.sanitize();
-            curve.push(ConvergencePoint {
-                scene: scene.name.clone(),
-                spp,
-                ms,
-                flip_indirect: metrics::flip(&indirect, ref_indirect, exposure),
-                rmse_indirect: metrics::rmse(&indirect, ref_indirect),
-            });
-        }
+        reference::render_progressive(
+            &scene,
+            &world,
+            &camera,
+            &ref_settings(0, request.ref_seed ^ 0xC0FFEE),
+            &request.pt_spp,
+            |spp, image| {
+                let mut indirect = image.indirect;
+                indirect.sanitize();
+                log::info!("path tracer {spp} spp: {:.1} s", image.seconds);
+                curve.push(ConvergencePoint {
+                    scene: scene.name.clone(),
+                    spp,
+                    ms: image.seconds * 1000.0,
+                    flip_indirect: metrics::flip(&indirect, ref_indirect, exposure),
+                    rmse_indirect: metrics::rmse(&indirect, ref_indirect),
+                });
+            },
+        );
         curve.sort_by_key(|p| p.spp);
         summary.pt_ms_at_target.push((
             scene.name.clone(),

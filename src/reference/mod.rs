@@ -228,33 +228,81 @@ pub fn render(
     camera: &CameraView,
     settings: &ReferenceSettings,
 ) -> ReferenceImage {
+    let mut image = None;
+    render_progressive(
+        scene,
+        world_from_node,
+        camera,
+        settings,
+        &[settings.spp],
+        |_, frame| image = Some(frame),
+    );
+    image.expect("one checkpoint gives one image")
+}
+
+/// [`render`] stopped at every paths-per-pixel count in `checkpoints` (sorted and deduplicated
+/// here; `settings.spp` is ignored): `at(spp, image)` gets the image a separate `render` with
+/// that `spp` and the same seed returns, bit for bit (path s of a pixel depends only on the
+/// seed, the pixel and s, and each pixel sums its paths in order), with `seconds` the time that
+/// separate render would take: the tracer's build and the paths up to `spp`, without the other
+/// checkpoints' images or the time spent in `at`. One run gives a whole convergence curve for
+/// the price of its longest point.
+pub fn render_progressive(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    camera: &CameraView,
+    settings: &ReferenceSettings,
+    checkpoints: &[u32],
+    mut at: impl FnMut(u32, ReferenceImage),
+) {
     let started = Instant::now();
     let tracer = Tracer::new(scene, world_from_node);
     let (w, h) = (settings.width.max(1), settings.height.max(1));
-    let spp = settings.spp.max(1);
-    let bar = progress_bar(settings.progress, h as u64, "path tracing rows");
-    let rows: Vec<Vec<PixelStats>> = (0..h)
-        .into_par_iter()
-        .map(|y| {
-            let row = (0..w)
-                .map(|x| {
+    let mut stops: Vec<u32> = checkpoints.iter().map(|&s| s.max(1)).collect();
+    stops.sort_unstable();
+    stops.dedup();
+    let mut stats = vec![PixelStats::default(); w as usize * h as usize];
+    // Time spent outside the paths of the checkpoint being timed (earlier images, `at`).
+    let mut excluded = std::time::Duration::ZERO;
+    let mut done = 0u32;
+    for spp in stops {
+        let bar = progress_bar(
+            settings.progress,
+            h as u64,
+            &format!("path tracing rows ({spp} spp)"),
+        );
+        let passes = done..spp;
+        stats
+            .par_chunks_mut(w as usize)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, stats) in row.iter_mut().enumerate() {
                     let pixel = (y as u64) * w as u64 + x as u64;
-                    let mut stats = PixelStats::default();
-                    for s in 0..spp {
+                    for s in passes.clone() {
                         let mut rng = Rng::new(settings.seed, pixel, s as u64);
                         let (jx, jy) = (rng.next_f32(), rng.next_f32());
                         let (o, d) = camera_ray(camera, w, h, x as f32 + jx, y as f32 + jy);
                         let path = trace_path(&tracer, o, d, settings.bounces, &mut rng);
                         stats.add(&path);
                     }
-                    stats
-                })
-                .collect();
-            bar.inc(1);
-            row
-        })
-        .collect();
-    bar.finish_and_clear();
+                }
+                bar.inc(1);
+            });
+        bar.finish_and_clear();
+        done = spp;
+        let resolving = Instant::now();
+        let mut image = resolve(&stats, w, h, spp);
+        let resolve_time = resolving.elapsed();
+        image.seconds = (started.elapsed() - excluded).as_secs_f64();
+        let handed_over = Instant::now();
+        at(spp, image);
+        // This checkpoint's image belongs to its own time, not to the next checkpoint's.
+        excluded += resolve_time + handed_over.elapsed();
+    }
+}
+
+/// Pixel means and variances of `spp` paths per pixel.
+fn resolve(stats: &[PixelStats], w: u32, h: u32, spp: u32) -> ReferenceImage {
     let n = spp as f32;
     let mut out = ReferenceImage {
         direct: Image::new(w, h),
@@ -264,21 +312,17 @@ pub fn render(
         paths: w as u64 * h as u64 * spp as u64,
         seconds: 0.0,
     };
-    for (y, row) in rows.iter().enumerate() {
-        for (x, s) in row.iter().enumerate() {
-            let i = y * w as usize + x;
-            let alpha = s.hits / n;
-            let direct = s.direct / n;
-            let indirect = s.indirect / n;
-            out.direct.pixels[i] = [direct.x, direct.y, direct.z, alpha];
-            out.indirect.pixels[i] = [indirect.x, indirect.y, indirect.z, alpha];
-            let var = mean_variance(s.full, s.full_sq, n);
-            let var_i = mean_variance(s.indirect, s.indirect_sq, n);
-            out.variance.pixels[i] = [var.x, var.y, var.z, 1.0];
-            out.variance_indirect.pixels[i] = [var_i.x, var_i.y, var_i.z, 1.0];
-        }
+    for (i, s) in stats.iter().enumerate() {
+        let alpha = s.hits / n;
+        let direct = s.direct / n;
+        let indirect = s.indirect / n;
+        out.direct.pixels[i] = [direct.x, direct.y, direct.z, alpha];
+        out.indirect.pixels[i] = [indirect.x, indirect.y, indirect.z, alpha];
+        let var = mean_variance(s.full, s.full_sq, n);
+        let var_i = mean_variance(s.indirect, s.indirect_sq, n);
+        out.variance.pixels[i] = [var.x, var.y, var.z, 1.0];
+        out.variance_indirect.pixels[i] = [var_i.x, var_i.y, var_i.z, 1.0];
     }
-    out.seconds = started.elapsed().as_secs_f64();
     out
 }
 
