@@ -211,6 +211,10 @@ struct BakeArgs {
     /// disc: faster, darker corners and contacts).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_rays)]
     near_rays: u32,
+    /// Face resolution of the shooters' depth cubes (finer: fewer rays at depth edges, more
+    /// memory: VPLs × 6 × res² × 4 bytes).
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().cube_res)]
+    cube_res: usize,
     /// Tessellation of built-in scenes (render with the same value).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -237,7 +241,8 @@ struct BakeBenchArgs {
     /// Paths per pixel of the reference.
     #[arg(long, default_value_t = 4096)]
     ref_spp: u32,
-    /// Paths per pixel of the path tracer's convergence runs.
+    /// Paths per pixel at which the path tracer's convergence run is measured (one
+    /// progressive run; each point is timed as a separate render with that many paths).
     #[arg(long, value_delimiter = ',', default_value = "1,4,16,64,256,1024")]
     pt_spp: Vec<u32>,
     /// FLIP at which the path tracer's time is reported.
@@ -250,6 +255,9 @@ struct BakeBenchArgs {
     /// Near-field gather rays per texel of every bake (0 = off).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_rays)]
     near_rays: u32,
+    /// Face resolution of the shooters' depth cubes of every bake.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().cube_res)]
+    cube_res: usize,
     /// Tessellation of built-in scenes (metres).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -270,6 +278,7 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
         flip_target: args.flip_target,
         ssaa: args.ssaa,
         near_rays: args.near_rays,
+        cube_res: args.cube_res,
         max_edge: args.max_edge,
         out: args.out,
         ..Default::default()
@@ -482,6 +491,7 @@ fn bake(args: BakeArgs) -> ExitCode {
             bounces: args.bounces,
             atlas_res: args.atlas_res,
             near_rays: args.near_rays,
+            cube_res: args.cube_res,
             ..Default::default()
         },
         from_bounce: args.from_bounce,

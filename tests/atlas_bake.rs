@@ -266,6 +266,24 @@ fn bad_input_fails_with_a_clear_error() {
     .unwrap()
     .to_string();
     assert!(err.contains("--near-rays"), "{err}");
+    // Depth cubes that would not fit in memory are refused before anything is allocated.
+    for (vpls, cube_res) in [(400, 2), (400, 1024), (100_000, 128)] {
+        let err = bake_now(
+            &box_scene(),
+            &BakeSettings {
+                vpls,
+                cube_res,
+                ..BakeSettings::default()
+            },
+        )
+        .err()
+        .unwrap()
+        .to_string();
+        assert!(
+            err.contains("--cube-res") && err.contains(&format!("{vpls} VPLs")),
+            "{err}"
+        );
+    }
 }
 
 /// Across a chart seam the irradiance stays continuous. In the box the seams are the edges

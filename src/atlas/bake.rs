@@ -414,6 +414,12 @@ pub const NEAR_NOISE: f32 = 0.04;
 /// Upper bound of `--near-rays` (a 64×64 stratification per texel).
 pub const MAX_NEAR_RAYS: u32 = 4096;
 
+/// Upper bound of `--cube-res`.
+pub const MAX_CUBE_RES: usize = 256;
+
+/// Memory all shooters' depth cubes may take together.
+pub const MAX_CUBE_BYTES: u64 = 4 << 30;
+
 /// Visibility of the point `source` from `(x, n)`, 1 or 0: the depth map's answer where it
 /// is sure ([`ShadowTest::settled`]: all 3×3 taps lit, or all shadowed by a surface well in
 /// front of x), a ray through the scene's BVH otherwise. A depth texel's footprint grows with
@@ -464,6 +470,18 @@ pub fn bake(
         return Err(BakeError::Settings(format!(
             "--near-rays must be at most {MAX_NEAR_RAYS} (got {}) and the near radius positive",
             settings.near_rays
+        )));
+    }
+    // One depth cube per patch stays in memory from the visibility stage to the fill.
+    let cube_bytes = settings.vpls as u64 * 6 * (settings.cube_res as u64).pow(2) * 4;
+    if !(4..=MAX_CUBE_RES).contains(&settings.cube_res) || cube_bytes > MAX_CUBE_BYTES {
+        return Err(BakeError::Settings(format!(
+            "--cube-res must be 4..={MAX_CUBE_RES} and the depth cubes fit in {} GiB \
+             (got {} VPLs × 6 × {}² texels × 4 bytes = {:.2} GiB)",
+            MAX_CUBE_BYTES >> 30,
+            settings.vpls,
+            settings.cube_res,
+            cube_bytes as f64 / (1u64 << 30) as f64
         )));
     }
     let lights = WorldLight::from_scene(scene, world_from_node);

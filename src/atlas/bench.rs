@@ -34,7 +34,7 @@ pub struct BakeBenchRequest {
     /// Paths per pixel of the reference every error is measured against.
     pub ref_spp: u32,
     pub ref_seed: u64,
-    /// Path-tracer runs of the convergence curve (paths per pixel, another seed).
+    /// Checkpoints of the path tracer's convergence run (paths per pixel, another seed).
     pub pt_spp: Vec<u32>,
     /// The FLIP at which the path tracer's time is reported (`pt_ms_at_target`).
     pub flip_target: f64,
@@ -42,6 +42,8 @@ pub struct BakeBenchRequest {
     pub ssaa: u32,
     /// Near-field gather rays per texel of every bake.
     pub near_rays: u32,
+    /// Face resolution of every bake's shooter depth cubes.
+    pub cube_res: usize,
     pub max_edge: f32,
     pub out: PathBuf,
     pub progress: bool,
@@ -62,6 +64,7 @@ impl Default for BakeBenchRequest {
             flip_target: 0.05,
             ssaa: 4,
             near_rays: BakeSettings::default().near_rays,
+            cube_res: BakeSettings::default().cube_res,
             max_edge: BuiltinParams::default().max_edge,
             out: PathBuf::from("out/bake-bench"),
             progress: true,
@@ -252,6 +255,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 bounces: request.bounces,
                 atlas_res: request.atlas_res,
                 near_rays: request.near_rays,
+                cube_res: request.cube_res,
                 ..Default::default()
             };
             let started = Instant::now();

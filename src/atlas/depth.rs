@@ -40,6 +40,34 @@ fn major_face(d: Vec3) -> usize {
     axis * 2 + usize::from(d[axis] < 0.0)
 }
 
+/// `max(0, ⌈v⌉)` as an integer (0 for NaN). Written with a truncating cast: without SSE4.1,
+/// `f32::ceil` and `floor` are library calls, and a depth cube sets up every triangle of a
+/// finely tessellated scene (most cover no texel), so the bounding box's rounding showed in
+/// profiles.
+#[inline]
+fn ceil_at_least_zero(v: f32) -> i64 {
+    if !(v > 0.0) {
+        return 0;
+    }
+    let t = v as i64;
+    if (t as f32) < v {
+        t.saturating_add(1)
+    } else {
+        t
+    }
+}
+
+/// `⌊v⌋` for `v ≥ 0` (and NaN → 0), some negative number otherwise: an upper loop bound whose
+/// lower bound is at least 0, where any negative value means an empty range.
+#[inline]
+fn floor_or_negative(v: f32) -> i64 {
+    if v < 0.0 {
+        -1
+    } else {
+        v as i64
+    }
+}
+
 /// Rasterizes a screen-space triangle (x, y in texels, w = 1/depth) into `depth` (keeps the
 /// smallest depth).
 fn raster_triangle(depth: &mut [f32], res: usize, t: [Vec3; 3], perspective: bool) {
@@ -50,10 +78,10 @@ fn raster_triangle(depth: &mut [f32], res: usize, t: [Vec3; 3], perspective: boo
     }
     let lo = a.min(b).min(c);
     let hi = a.max(b).max(c);
-    let x0 = (lo.x - 0.5).ceil().max(0.0) as i64;
-    let y0 = (lo.y - 0.5).ceil().max(0.0) as i64;
-    let x1 = ((hi.x - 0.5).floor() as i64).min(res as i64 - 1);
-    let y1 = ((hi.y - 0.5).floor() as i64).min(res as i64 - 1);
+    let x0 = ceil_at_least_zero(lo.x - 0.5);
+    let y0 = ceil_at_least_zero(lo.y - 0.5);
+    let x1 = floor_or_negative(hi.x - 0.5).min(res as i64 - 1);
+    let y1 = floor_or_negative(hi.y - 0.5).min(res as i64 - 1);
     for y in y0..=y1 {
         for x in x0..=x1 {
             let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
@@ -229,8 +257,9 @@ impl DepthCube {
             return ShadowTest::LIT;
         }
         let half = self.res as f32 * 0.5;
-        let x = ((l.x / l.z + 1.0) * half).floor() as i64;
-        let y = ((l.y / l.z + 1.0) * half).floor() as i64;
+        // |l.x|, |l.y| ≤ l.z on the major face, so both are in [0, res]: truncation is floor.
+        let x = ((l.x / l.z + 1.0) * half) as i64;
+        let y = ((l.y / l.z + 1.0) * half) as i64;
         let bias = l.z * (1.0 / self.res as f32) + 1e-5;
         let base = face * self.res * self.res;
         let at = |dx: i64, dy: i64| {
@@ -401,6 +430,41 @@ mod tests {
         let c = Vec3::new(half, y, half);
         let d = Vec3::new(-half, y, half);
         vec![[a, b, c], [a, c, d]]
+    }
+
+    #[test]
+    fn bounding_box_rounding_matches_floor_and_ceil() {
+        let values = [
+            -1e30f32,
+            -3.5,
+            -1.0,
+            -0.3,
+            -0.0,
+            0.0,
+            1e-7,
+            0.3,
+            0.5,
+            1.0,
+            1.5,
+            31.999,
+            32.0,
+            1e7,
+            16_777_217.0,
+            3e18,
+            1e30,
+        ];
+        for v in values
+            .into_iter()
+            .chain([f32::NAN, f32::INFINITY, f32::NEG_INFINITY])
+        {
+            assert_eq!(ceil_at_least_zero(v), v.ceil().max(0.0) as i64, "ceil {v}");
+            let f = floor_or_negative(v);
+            if v >= 0.0 || v.is_nan() {
+                assert_eq!(f, v.floor() as i64, "floor {v}");
+            } else {
+                assert!(f < 0 && v.floor() < 0.0, "floor {v}");
+            }
+        }
     }
 
     #[test]
