@@ -215,6 +215,10 @@ struct BakeArgs {
     /// memory: VPLs × 6 × res² × 4 bytes).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().cube_res)]
     cube_res: usize,
+    /// Radius of the near-field gather in sample spacings √C (capped at a tenth of the
+    /// scene's diagonal); samples within it are gathered by rays instead of disc kernels.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_radius)]
+    near_radius: f32,
     /// Tessellation of built-in scenes (render with the same value).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -258,6 +262,10 @@ struct BakeBenchArgs {
     /// Face resolution of the shooters' depth cubes of every bake.
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().cube_res)]
     cube_res: usize,
+    /// Near-field radius of every bake, in sample spacings √C (capped at a tenth of the
+    /// scene's diagonal).
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().near_radius)]
+    near_radius: f32,
     /// Tessellation of built-in scenes (metres).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
@@ -279,6 +287,7 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
         ssaa: args.ssaa,
         near_rays: args.near_rays,
         cube_res: args.cube_res,
+        near_radius: args.near_radius,
         max_edge: args.max_edge,
         out: args.out,
         ..Default::default()
@@ -492,6 +501,7 @@ fn bake(args: BakeArgs) -> ExitCode {
             atlas_res: args.atlas_res,
             near_rays: args.near_rays,
             cube_res: args.cube_res,
+            near_radius: args.near_radius,
             ..Default::default()
         },
         from_bounce: args.from_bounce,

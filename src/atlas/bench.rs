@@ -44,6 +44,8 @@ pub struct BakeBenchRequest {
     pub near_rays: u32,
     /// Face resolution of every bake's shooter depth cubes.
     pub cube_res: usize,
+    /// Near-field radius of every bake (sample spacings).
+    pub near_radius: f32,
     pub max_edge: f32,
     pub out: PathBuf,
     pub progress: bool,
@@ -65,6 +67,7 @@ impl Default for BakeBenchRequest {
             ssaa: 4,
             near_rays: BakeSettings::default().near_rays,
             cube_res: BakeSettings::default().cube_res,
+            near_radius: BakeSettings::default().near_radius,
             max_edge: BuiltinParams::default().max_edge,
             out: PathBuf::from("out/bake-bench"),
             progress: true,
@@ -256,6 +259,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 atlas_res: request.atlas_res,
                 near_rays: request.near_rays,
                 cube_res: request.cube_res,
+                near_radius: request.near_radius,
                 ..Default::default()
             };
             let started = Instant::now();

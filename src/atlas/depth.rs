@@ -46,7 +46,7 @@ fn major_face(d: Vec3) -> usize {
 /// profiles.
 #[inline]
 fn ceil_at_least_zero(v: f32) -> i64 {
-    if !(v > 0.0) {
+    if v.is_nan() || v <= 0.0 {
         return 0;
     }
     let t = v as i64;
