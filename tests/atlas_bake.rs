@@ -389,20 +389,6 @@ fn texcoord1_is_used_when_present() {
     assert!(result.layout.texels.iter().all(|t| t.centre));
 }
 
-/// World-space triangles of the scene at rest.
-fn world_triangles(scene: &valgi::scene::Scene) -> Vec<[glam::Vec3; 3]> {
-    let world = scene.world_from_node();
-    let mut out = vec![];
-    for inst in &scene.instances {
-        let mesh = &scene.meshes[inst.mesh];
-        let m = world[inst.node];
-        for t in mesh.indices.chunks_exact(3) {
-            out.push([0, 1, 2].map(|k| m.transform_point3(mesh.positions[t[k] as usize])));
-        }
-    }
-    out
-}
-
 /// A 32² depth cube's texel is ~3 cm wide half a metre away, so along a concave edge it often
 /// stores the other surface, in front of the receiver: floor points 2 mm from Cornell's red
 /// wall, seen from a ceiling point with nothing in between, come out shadowed. The confirming
@@ -414,7 +400,7 @@ fn depth_map_shadows_are_confirmed_by_a_ray() {
     use valgi::atlas::depth::DepthCube;
     let scene = scene::load("cornell", &BuiltinParams::default()).unwrap();
     let tracer = valgi::reference::Tracer::new(&scene, &scene.world_from_node());
-    let triangles = world_triangles(&scene);
+    let triangles = scene.world_triangles(&scene.world_from_node());
     let shooter = Vec3::new(0.10, 0.54, 0.30);
     let cube = DepthCube::new(shooter, 32, 1e-4, &triangles);
     let floor: Vec<Vec3> = (0..100)

@@ -472,16 +472,17 @@ pub fn bake(
             settings.near_rays
         )));
     }
-    // One depth cube per patch stays in memory from the visibility stage to the fill.
-    let cube_bytes = settings.vpls as u64 * 6 * (settings.cube_res as u64).pow(2) * 4;
-    if !(4..=MAX_CUBE_RES).contains(&settings.cube_res) || cube_bytes > MAX_CUBE_BYTES {
+    // One depth cube per patch stays in memory from the visibility stage to the fill (counted
+    // in f64: no overflow for absurd settings).
+    let cube_bytes = settings.vpls as f64 * 24.0 * (settings.cube_res as f64).powi(2);
+    if !(4..=MAX_CUBE_RES).contains(&settings.cube_res) || cube_bytes > MAX_CUBE_BYTES as f64 {
         return Err(BakeError::Settings(format!(
             "--cube-res must be 4..={MAX_CUBE_RES} and the depth cubes fit in {} GiB \
              (got {} VPLs × 6 × {}² texels × 4 bytes = {:.2} GiB)",
             MAX_CUBE_BYTES >> 30,
             settings.vpls,
             settings.cube_res,
-            cube_bytes as f64 / (1u64 << 30) as f64
+            cube_bytes / (1u64 << 30) as f64
         )));
     }
     let lights = WorldLight::from_scene(scene, world_from_node);

@@ -562,14 +562,7 @@ mod tests {
         )
         .unwrap();
         let world = scene.world_from_node();
-        let mut tris = vec![];
-        for inst in &scene.instances {
-            let mesh = &scene.meshes[inst.mesh];
-            let m = world[inst.node];
-            for t in mesh.indices.chunks_exact(3) {
-                tris.push([0, 1, 2].map(|k| m.transform_point3(mesh.positions[t[k] as usize])));
-            }
-        }
+        let tris = scene.world_triangles(&world);
         assert!(tris.len() > 500, "{} triangles", tris.len());
         let mut straddling = 0;
         let bounds = scene.world_bounds(&world);

@@ -310,7 +310,7 @@ fn edge_key(a: u32, b: u32) -> (u32, u32) {
 
 /// The three indices of a triangle as `usize`, or `None` when one is out of range or two are
 /// equal.
-fn triangle(tri: &[u32], vertex_count: usize) -> Option<[usize; 3]> {
+pub(crate) fn triangle(tri: &[u32], vertex_count: usize) -> Option<[usize; 3]> {
     let [a, b, c] = [tri[0] as usize, tri[1] as usize, tri[2] as usize];
     if a >= vertex_count || b >= vertex_count || c >= vertex_count || a == b || b == c || a == c {
         return None;

@@ -368,6 +368,23 @@ impl Scene {
         self.world_from_node_at(0.0)
     }
 
+    /// Every instanced triangle in world space (triangles with an out-of-range or repeated
+    /// index are skipped).
+    pub fn world_triangles(&self, world_from_node: &[Mat4]) -> Vec<[Vec3; 3]> {
+        let mut out = vec![];
+        for inst in &self.instances {
+            let mesh = &self.meshes[inst.mesh];
+            let m = world_from_node[inst.node];
+            for t in mesh.indices.chunks_exact(3) {
+                let Some(corners) = mesh::triangle(t, mesh.positions.len()) else {
+                    continue;
+                };
+                out.push(corners.map(|k| m.transform_point3(mesh.positions[k])));
+            }
+        }
+        out
+    }
+
     /// Bounds of all instanced geometry in world space.
     pub fn world_bounds(&self, world_from_node: &[Mat4]) -> Aabb {
         let mut b = Aabb::EMPTY;
