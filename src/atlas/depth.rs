@@ -550,18 +550,21 @@ mod tests {
         }
     }
 
+    /// A built-in scene tessellated to 10 cm, placed.
+    fn built_in(name: &str) -> (crate::scene::Scene, Vec<glam::Mat4>) {
+        let params = crate::scene::builtin::BuiltinParams { max_edge: 0.1 };
+        let scene = crate::scene::load(name, &params).unwrap();
+        let world = scene.world_from_node();
+        (scene, world)
+    }
+
     /// Drawing a triangle whose corners share a major face into that face alone gives the
     /// same cube, texel for texel, as drawing every triangle into all six faces: on a finely
     /// tessellated scene (the built-in Cornell box) seen from points near walls, corners and
     /// edges, where many triangles straddle faces.
     #[test]
     fn one_face_culling_draws_the_same_cube() {
-        let scene = crate::scene::load(
-            "cornell",
-            &crate::scene::builtin::BuiltinParams { max_edge: 0.1 },
-        )
-        .unwrap();
-        let world = scene.world_from_node();
+        let (scene, world) = built_in("cornell");
         let tris = scene.world_triangles(&world);
         assert!(tris.len() > 500, "{} triangles", tris.len());
         let mut straddling = 0;
@@ -588,6 +591,57 @@ mod tests {
             straddling > 50,
             "only {straddling} triangles straddle faces"
         );
+    }
+
+    /// The bake draws its cubes from the tracer's merged triangles, where a wall is two
+    /// triangles spanning several faces and reaching past the near plane. They must draw the
+    /// cube the tessellated walls draw, seen from where shooting VPLs sit.
+    #[test]
+    fn merged_walls_draw_the_cube_the_tessellated_walls_draw() {
+        let (scene, world) = built_in("corridor");
+        let fine = scene.world_triangles(&world);
+        let merged = crate::reference::Tracer::new(&scene, &world).world_triangles();
+        assert!(
+            merged.len() * 100 < fine.len(),
+            "{} of {}",
+            merged.len(),
+            fine.len()
+        );
+        // Points 5 mm off the floor, the walls and the partition, as shooting VPLs sit.
+        let mut origins = vec![Vec3::new(1.0, 1.2, 1.0), Vec3::new(4.195, 2.395, 1.995)];
+        for k in 0..6 {
+            let t = (k as f32 + 0.5) / 6.0;
+            origins.extend([
+                Vec3::new(4.2 * t, 0.005, 2.0 * (1.0 - t)),
+                Vec3::new(0.005, 2.4 * t, 2.0 * t),
+                Vec3::new(4.2 * t, 2.4 * (1.0 - t), 1.995),
+                Vec3::new(2.095, 2.4 * t, 0.6 * t),
+            ]);
+        }
+        for origin in origins {
+            // The bake's offsets: VPLs 10 ε off their surface, the near plane at ε.
+            let a = DepthCube::new(origin, 32, 5e-4, &fine);
+            let b = DepthCube::new(origin, 32, 5e-4, &merged);
+            // A closed room has no empty texel in either. Texels whose centre falls on the
+            // partition's or the door's silhouette may take either side.
+            let empty = |c: &DepthCube| c.depth.iter().filter(|d| !d.is_finite()).count();
+            assert_eq!(
+                (empty(&a), empty(&b)),
+                (0, 0),
+                "empty texels, cube at {origin}"
+            );
+            let differing = a
+                .depth
+                .iter()
+                .zip(&b.depth)
+                .filter(|(x, y)| (*x - *y).abs() > 1e-3 * x.abs().max(1e-3))
+                .count();
+            assert!(
+                differing * 500 <= a.depth.len(),
+                "cube at {origin}: {differing} of {} texels differ",
+                a.depth.len()
+            );
+        }
     }
 
     #[test]

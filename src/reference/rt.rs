@@ -1,5 +1,7 @@
 //! The scene placed in the world for ray tracing: world-space triangles in a BVH (the `obvhs`
-//! crate's compressed wide BVH), closest-hit and shadow queries, and the material at a hit
+//! crate's compressed wide BVH; flat regions merged by [`crate::scene::merge`], the same
+//! surface and attributes with far fewer triangles), closest-hit and shadow queries, and the
+//! material at a hit
 //! reduced to DESIGN §3's (ρ_d, ρ_s, k, emission) exactly as `shaders/gbuffer.wgsl` does it
 //! (base colour, metallic-roughness, normal and emissive textures; back faces shade with the
 //! flipped normal).
@@ -13,6 +15,7 @@ use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
+use crate::scene::merge::flat_region_indices;
 use crate::scene::{ColorSpace, Material, Scene, Texture};
 use crate::shading::WorldLight;
 
@@ -45,8 +48,12 @@ pub struct Tracer<'a> {
     scene: &'a Scene,
     placed: Vec<PlacedMesh>,
     triangles: Vec<Triangle>,
-    /// (placed mesh, first index into the mesh's index list) per triangle.
+    /// (placed mesh, first index into its mesh's entry of `indices`) per triangle.
     triangle_source: Vec<(u32, u32)>,
+    /// Each scene mesh's triangles with its flat regions merged
+    /// ([`crate::scene::merge::flat_region_indices`]): the same surface and attributes, far
+    /// fewer triangles on the tessellated built-in scenes.
+    indices: Vec<Vec<u32>>,
     bvh: Option<CwBvh>,
     pub lights: Vec<WorldLight>,
     /// Offset for secondary-ray origins, metres (scaled with the scene).
@@ -56,6 +63,19 @@ pub struct Tracer<'a> {
 impl<'a> Tracer<'a> {
     /// Places every instance by `world_from_node` and builds the BVH.
     pub fn new(scene: &'a Scene, world_from_node: &[Mat4]) -> Self {
+        let indices: Vec<Vec<u32>> = scene
+            .meshes
+            .iter()
+            .map(|mesh| {
+                let textured = scene.materials.get(mesh.material).is_some_and(|m| {
+                    m.base_color_texture.is_some()
+                        || m.metallic_roughness_texture.is_some()
+                        || m.normal_texture.is_some()
+                        || m.emissive_texture.is_some()
+                });
+                flat_region_indices(mesh, textured)
+            })
+            .collect();
         let mut placed = Vec::with_capacity(scene.instances.len());
         let mut triangles = Vec::new();
         let mut triangle_source = Vec::new();
@@ -80,7 +100,7 @@ impl<'a> Tracer<'a> {
                 .map(|t| (linear * t.truncate()).extend(t.w))
                 .collect();
             let index = placed.len() as u32;
-            for (i, tri) in mesh.indices.chunks_exact(3).enumerate() {
+            for (i, tri) in indices[inst.mesh].chunks_exact(3).enumerate() {
                 let n = positions.len();
                 if tri.iter().any(|&v| v as usize >= n) {
                     continue;
@@ -121,14 +141,25 @@ impl<'a> Tracer<'a> {
             placed,
             triangles,
             triangle_source,
+            indices,
             bvh,
             lights: WorldLight::from_scene(scene, world_from_node),
             epsilon: 1e-4 * size,
         }
     }
 
+    /// Triangles in the BVH (after merging flat regions).
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
+    }
+
+    /// The BVH's triangles in world space: the scene's surface with its flat regions merged,
+    /// for rasterizing depth maps.
+    pub fn world_triangles(&self) -> Vec<[Vec3; 3]> {
+        self.triangles
+            .iter()
+            .map(|t| [t.v0, t.v1, t.v2].map(Vec3::from))
+            .collect()
     }
 
     /// Closest hit along `origin + t·dir`, t in (0, `t_max`).
@@ -196,7 +227,8 @@ impl<'a> Tracer<'a> {
         let (placed_index, first) = self.triangle_source[tri];
         let placed = &self.placed[placed_index as usize];
         let mesh = &self.scene.meshes[placed.mesh];
-        let idx = [0, 1, 2].map(|j| mesh.indices[first as usize + j] as usize);
+        let indices = &self.indices[placed.mesh];
+        let idx = [0, 1, 2].map(|j| indices[first as usize + j] as usize);
         let [a, b, c] = idx.map(|i| placed.positions[i]);
         let position = origin + dir * t;
         // Barycentrics of the hit point.

@@ -8,6 +8,7 @@
 pub mod animation;
 pub mod builtin;
 pub mod gltf_import;
+pub mod merge;
 pub mod mesh;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
