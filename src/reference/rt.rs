@@ -1,10 +1,9 @@
 //! The scene placed in the world for ray tracing: world-space triangles in a BVH (the `obvhs`
 //! crate's compressed wide BVH; flat regions merged by [`crate::scene::merge`], the same
 //! surface and attributes with far fewer triangles), closest-hit and shadow queries, and the
-//! material at a hit
-//! reduced to DESIGN §3's (ρ_d, ρ_s, k, emission) exactly as `shaders/gbuffer.wgsl` does it
-//! (base colour, metallic-roughness, normal and emissive textures; back faces shade with the
-//! flipped normal).
+//! material at a hit reduced to DESIGN §3's (ρ_d, ρ_s, k, emission) exactly as
+//! `shaders/gbuffer.wgsl` does it (base colour, metallic-roughness, normal and emissive
+//! textures; back faces shade with the flipped normal).
 
 use std::time::Duration;
 
@@ -67,12 +66,10 @@ impl<'a> Tracer<'a> {
             .meshes
             .iter()
             .map(|mesh| {
-                let textured = scene.materials.get(mesh.material).is_some_and(|m| {
-                    m.base_color_texture.is_some()
-                        || m.metallic_roughness_texture.is_some()
-                        || m.normal_texture.is_some()
-                        || m.emissive_texture.is_some()
-                });
+                let textured = scene
+                    .materials
+                    .get(mesh.material)
+                    .is_some_and(Material::has_textures);
                 flat_region_indices(mesh, textured)
             })
             .collect();

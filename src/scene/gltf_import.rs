@@ -1143,13 +1143,7 @@ impl<'a> Importer<'a> {
         let material = self.material_index(primitive.material().index());
         let (has_textures, has_normal_map) = {
             let m = &self.scene.materials[material];
-            (
-                m.base_color_texture.is_some()
-                    || m.metallic_roughness_texture.is_some()
-                    || m.normal_texture.is_some()
-                    || m.emissive_texture.is_some(),
-                m.normal_texture.is_some(),
-            )
+            (m.has_textures(), m.normal_texture.is_some())
         };
 
         let normals = match primitive.get(&gltf::Semantic::Normals) {

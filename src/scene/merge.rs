@@ -20,7 +20,7 @@
 
 use std::collections::{HashMap, HashSet};
 
-use glam::{DVec3, Vec2, Vec3};
+use glam::{DVec3, Vec3};
 
 use super::{mesh, Mesh};
 
@@ -280,6 +280,9 @@ fn fan(
     if (region_area - fan_area).abs() > 1e-5 * region_area.abs() {
         return None; // overlapping triangles
     }
+    if !uvs_matter {
+        return Some(fan);
+    }
     // uvs affine in position: fit on a well-spread corner triangle, check every vertex.
     let c0 = corner_vertices[0];
     let c1 = *corner_vertices.iter().max_by(|&&a, &&b| {
@@ -291,28 +294,32 @@ fn fan(
         spread(a).total_cmp(&spread(b))
     })?;
     let frame = [c0, c1, c2];
-    let uv_sets = [Some(&mesh.uv0), mesh.uv1.as_ref()].map(|uvs| uvs.filter(|_| uvs_matter));
-    for uvs in uv_sets.into_iter().flatten() {
+    let [a, b, c] = frame.map(p);
+    let (e1, e2) = (b - a, c - a);
+    let cross = e1.cross(e2);
+    let area2 = cross.length_squared();
+    // Barycentrics of every region vertex in the frame triangle (extended over the plane).
+    let weights: Vec<(f32, f32)> = vertices
+        .iter()
+        .map(|&v| {
+            let rel = p(v) - a;
+            (
+                rel.cross(e2).dot(cross) / area2,
+                e1.cross(rel).dot(cross) / area2,
+            )
+        })
+        .collect();
+    for uvs in [Some(&mesh.uv0), mesh.uv1.as_ref()].into_iter().flatten() {
         if uvs.len() != mesh.positions.len() {
             continue;
         }
-        let affine = |x: Vec3| -> Option<Vec2> {
-            let [a, b, c] = frame.map(p);
-            let (e1, e2) = (b - a, c - a);
-            let cross = e1.cross(e2);
-            let area2 = cross.length_squared();
-            if area2 <= 0.0 {
-                return None;
-            }
-            let rel = x - a;
-            let w1 = rel.cross(e2).dot(cross) / area2;
-            let w2 = e1.cross(rel).dot(cross) / area2;
-            let [ua, ub, uc] = frame.map(|v| uvs[v as usize]);
-            Some(ua + (ub - ua) * w1 + (uc - ua) * w2)
-        };
-        for &v in &vertices {
+        if area2 <= 0.0 {
+            return None;
+        }
+        let [ua, ub, uc] = frame.map(|v| uvs[v as usize]);
+        for (&v, &(w1, w2)) in vertices.iter().zip(&weights) {
             let want = uvs[v as usize];
-            let got = affine(p(v))?;
+            let got = ua + (ub - ua) * w1 + (uc - ua) * w2;
             if (got - want).abs().max_element() > UV_TOLERANCE * (1.0 + want.abs().max_element()) {
                 return None;
             }
@@ -325,7 +332,7 @@ fn fan(
 mod tests {
     use super::*;
     use crate::scene::mesh::MeshBuilder;
-    use glam::Vec4;
+    use glam::{Vec2, Vec4};
 
     fn built(build: impl FnOnce(&mut MeshBuilder)) -> Mesh {
         let mut b = MeshBuilder::new("test", 0);
@@ -487,8 +494,7 @@ mod tests {
         smooth.normals[5] = Vec3::new(0.1, 1.0, 0.0).normalize();
         let merged = flat_region_indices(&smooth, true);
         assert!(merged.len() > 6, "the vertex with its own normal must stay");
-        // The triangles that do not touch it still merge where they form a convex disc, and
-        // nothing is lost: the areas add up.
+        // Whatever merges around it, nothing is lost: the areas add up.
         let area = |idx: &[u32]| -> f32 {
             idx.chunks_exact(3)
                 .map(|t| {

@@ -160,6 +160,15 @@ impl Default for Material {
 }
 
 impl Material {
+    /// True when any of the material's inputs is sampled from a texture (so its meshes' uvs
+    /// are read at render time).
+    pub fn has_textures(&self) -> bool {
+        self.base_color_texture.is_some()
+            || self.metallic_roughness_texture.is_some()
+            || self.normal_texture.is_some()
+            || self.emissive_texture.is_some()
+    }
+
     /// A pure Lambertian material of albedo `rho` (no specular lobe).
     pub fn lambert(name: &str, rho: Vec3) -> Self {
         Self {
