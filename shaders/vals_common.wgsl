@@ -39,6 +39,8 @@ struct InstanceRange {
 
 const FLAG_GLOSSY: u32 = 1u;
 const FLAG_FLUX_WEIGHTS: u32 = 2u;
+// Per-view glossy eye: recompute the glossy half only; the diffuse half stays as it is.
+const FLAG_GLOSSY_ONLY: u32 = 4u;
 const POSITION_EPSILON: f32 = 1e-12;
 const COS_MIN: f32 = 1e-2;
 const WEIGHT_EPSILON: f32 = 1e-6;

@@ -150,7 +150,15 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         off_d = vec3<f32>(0.0);
         off_s = vec3<f32>(0.0);
     }
-    point_diffuse[index] = vec4<u32>(rgb_bits(sums.diffuse), pack2x16float(off_d.xy));
     point_glossy[index] = vec4<u32>(rgb_bits(sums.glossy), pack2x16float(off_s.xy));
+    if ((params.flags & FLAG_GLOSSY_ONLY) != 0u) {
+        // Keep the diffuse halves of the shared words as the frame's update wrote them.
+        let extra = point_extra[index];
+        let z = unpack2x16float(extra.x);
+        let spheres = unpack2x16float(extra.y);
+        point_extra[index] = vec2<u32>(pack2x16float(vec2<f32>(z.x, off_s.z)), pack2x16float(vec2<f32>(spheres.x, s.w)));
+        return;
+    }
+    point_diffuse[index] = vec4<u32>(rgb_bits(sums.diffuse), pack2x16float(off_d.xy));
     point_extra[index] = vec2<u32>(pack2x16float(vec2<f32>(off_d.z, off_s.z)), pack2x16float(vec2<f32>(d.w, s.w)));
 }

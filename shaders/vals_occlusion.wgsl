@@ -139,6 +139,8 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
         od = 1.0 - shares.visible_d;
         os = 1.0 - shares.visible_s;
     }
-    point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse * (1.0 - od)), d.w);
     point_glossy[index] = vec4<u32>(rgb_bits(lights.glossy * (1.0 - os)), s.w);
+    if ((params.flags & FLAG_GLOSSY_ONLY) == 0u) {
+        point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse * (1.0 - od)), d.w);
+    }
 }

@@ -33,12 +33,15 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let ls = lights.glossy_position - point.position;
     let fs = glossy_point_factor(point.position, point.normal, r, point.k, lights.glossy_position);
     let cs = COS_MIN / max(dot(ls, ls), 1e-30);
-    if (fd < cd && max(lights.diffuse.r, max(lights.diffuse.g, lights.diffuse.b)) > 0.0) {
+    let glossy_only = (params.flags & FLAG_GLOSSY_ONLY) != 0u;
+    if (!glossy_only && fd < cd && max(lights.diffuse.r, max(lights.diffuse.g, lights.diffuse.b)) > 0.0) {
         atomicAdd(&clamp_count[0], 1u);
     }
     if (fs < cs && max(lights.glossy.r, max(lights.glossy.g, lights.glossy.b)) > 0.0) {
         atomicAdd(&clamp_count[1], 1u);
     }
-    point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse / max(fd, cd)), d.w);
     point_glossy[index] = vec4<u32>(rgb_bits(lights.glossy / max(fs, cs)), s.w);
+    if (!glossy_only) {
+        point_diffuse[index] = vec4<u32>(rgb_bits(lights.diffuse / max(fd, cd)), d.w);
+    }
 }

@@ -1,9 +1,12 @@
-//! What `valgi render` does, as a library call: load the scene, pick the camera, build the
-//! method, render, write the files, and report. The binary only parses arguments.
+//! What `valgi render` does, as a library call: load the scene, pick the camera and its
+//! views, build the method, render the frames, write the files, and report. The binary only
+//! parses arguments.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
+use crate::frame::{record_frame, View, ViewRig};
+use crate::gpu::timing::round3;
 use crate::gpu::{GpuContext, GpuError};
 use crate::image_io::{prepare_output, ImageError};
 use crate::method::{self, MethodOptions};
@@ -46,6 +49,8 @@ pub struct RenderRequest {
     pub frames: Option<u32>,
     /// Frames per second for `frames`.
     pub fps: f32,
+    /// The views of each frame (mono, stereo, a CAVE, a grid).
+    pub views: ViewRig,
 }
 
 impl Default for RenderRequest {
@@ -63,18 +68,125 @@ impl Default for RenderRequest {
             time: 0.0,
             frames: None,
             fps: 30.0,
+            views: ViewRig::Mono,
         }
     }
 }
 
-/// Renders and writes the request's outputs; returns the JSON report line.
+/// Where frame `frame` of view `view` is written, for each requested output.
+///
+/// - One frame, one view: the outputs as given.
+/// - One frame, several views: `<stem>_<view>.<ext>` beside each output.
+/// - Several frames into a folder (an output without `.exr`/`.png`): `frame_NNNN.exr`, or
+///   `frame_NNNN_<view>.exr` with several views.
+/// - Several frames to a file name: numbered files beside it, `<stem>_NNNN[_<view>].<ext>`.
+fn output_paths(request: &RenderRequest, frame: u32, view: &str, multi_view: bool) -> Vec<PathBuf> {
+    let suffix = if multi_view {
+        format!("_{view}")
+    } else {
+        String::new()
+    };
+    let Some(frames) = request.frames else {
+        return request
+            .outputs
+            .iter()
+            .map(|p| {
+                if multi_view {
+                    with_stem_suffix(p, &suffix)
+                } else {
+                    p.clone()
+                }
+            })
+            .collect();
+    };
+    let _ = frames;
+    let dir_or_file = request
+        .outputs
+        .first()
+        .cloned()
+        .unwrap_or_else(|| PathBuf::from("out/frames"));
+    if is_image_path(&dir_or_file) {
+        request
+            .outputs
+            .iter()
+            .map(|p| with_stem_suffix(p, &format!("_{frame:04}{suffix}")))
+            .collect()
+    } else {
+        vec![dir_or_file.join(format!("frame_{frame:04}{suffix}.exr"))]
+    }
+}
+
+fn is_image_path(path: &std::path::Path) -> bool {
+    matches!(
+        path.extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref(),
+        Some("exr") | Some("png")
+    )
+}
+
+/// `dir/stem.ext` → `dir/stem<suffix>.ext`.
+fn with_stem_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match path.extension() {
+        Some(ext) => format!("{stem}{suffix}.{}", ext.to_string_lossy()),
+        None => format!("{stem}{suffix}"),
+    };
+    path.with_file_name(name)
+}
+
+/// `frame_NNNN.exr` for frame `index` in `dir`.
+pub fn frame_path(dir: &std::path::Path, index: u32) -> PathBuf {
+    dir.join(format!("frame_{index:04}.exr"))
+}
+
+/// The views of a request at one pose: the rig applied to the scene camera.
+fn rig_views(
+    request: &RenderRequest,
+    scene: &scene::Scene,
+    world_from_node: &[glam::Mat4],
+) -> Result<Vec<crate::frame::rig::RigView>, AppError> {
+    let settings = request.settings;
+    let camera = scene.camera_view(
+        request.camera.as_deref(),
+        settings.width as f32 / settings.height as f32,
+        world_from_node,
+    )?;
+    let bounds = scene.world_bounds(world_from_node);
+    let pivot = if bounds.is_empty() {
+        camera.position()
+    } else {
+        (bounds.min + bounds.max) * 0.5
+    };
+    Ok(request
+        .views
+        .views(&camera, (settings.width, settings.height), pivot))
+}
+
+/// Renders the request's frames through its views and writes the outputs; returns the JSON
+/// report line. Each frame is one update of the method's lighting solution and one record
+/// per view; the method is built once, so preprocessing happens once.
 pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let started = Instant::now();
-    if let Some(frames) = request.frames {
-        return render_frames(request, frames, started);
+    let frames = request.frames.unwrap_or(1);
+    if frames == 0 || !(request.fps.is_finite() && request.fps > 0.0) {
+        return Err(
+            RenderError::Settings("--frames must be at least 1 and --fps positive".into()).into(),
+        );
     }
+    if !request.time.is_finite() {
+        return Err(
+            RenderError::Settings("--time must be a finite number of seconds".into()).into(),
+        );
+    }
+    let multi_view = request.views != ViewRig::Mono;
     // Fail on an unwritable output before spending time on the scene and the GPU.
-    for path in &request.outputs {
+    let first_outputs = output_paths(request, 0, "main", false);
+    for path in &first_outputs {
         prepare_output(path)?;
     }
     let scene = scene::load(
@@ -86,28 +198,89 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     for warning in &scene.warnings {
         log::warn!("{warning}");
     }
-    let ctx = GpuContext::new()?;
-    let settings = request.settings;
-    let world_from_node = scene.world_from_node_at(request.time);
-    let camera = scene.camera_view(
-        request.camera.as_deref(),
-        settings.width as f32 / settings.height as f32,
-        &world_from_node,
-    )?;
-    let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
-    let frame = method.render(&ctx, &scene, &world_from_node, &camera)?;
+    if request.frames.is_some() && scene.animations.is_empty() {
+        log::warn!(
+            "scene '{}' has no animation: every frame is the same",
+            scene.name
+        );
+    }
     if request.indirect_only && request.method == "direct" {
         log::warn!("--indirect-only with method 'direct': the image is black by definition");
     }
-    let mut image = frame.radiance(request.indirect_only);
-    let non_finite = image.sanitize();
+    let ctx = GpuContext::new()?;
+    let settings = request.settings;
+    let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
+    let first_world = scene.world_from_node_at(request.time);
+    let mut views = Vec::new();
+    for rig in rig_views(request, &scene, &first_world)? {
+        views.push(View::new(
+            &ctx,
+            &rig.name,
+            rig.camera,
+            rig.size,
+            settings.ssaa,
+        )?);
+    }
+    let mut frame_ms = Vec::with_capacity(frames as usize);
+    let mut non_finite = 0;
+    let mut last = None;
+    let mut written = Vec::new();
+    let mut last_images = Vec::new();
+    for index in 0..frames {
+        let time = request.time + index as f32 / request.fps;
+        let world_from_node = scene.world_from_node_at(time);
+        for (view, rig) in views
+            .iter_mut()
+            .zip(rig_views(request, &scene, &world_from_node)?)
+        {
+            view.camera = rig.camera;
+        }
+        let frame = record_frame(method.as_mut(), &ctx, &scene, &world_from_node, &views)?;
+        last_images.clear();
+        for (view, result) in views.iter().zip(&frame.results) {
+            let (direct, indirect) = view.read(&ctx, result.has_indirect())?;
+            let mut image = if request.indirect_only {
+                indirect
+            } else {
+                direct.add(&indirect)
+            };
+            non_finite += image.sanitize();
+            for path in output_paths(request, index, &view.name, multi_view) {
+                if index > 0 || multi_view {
+                    prepare_output(&path)?;
+                }
+                image.write(&path, request.exposure)?;
+                written.push(path.display().to_string());
+            }
+            last_images.push(image);
+        }
+        frame_ms.push(round3(frame.timings.merged().total_ms()));
+        last = Some(frame);
+    }
     if non_finite > 0 {
         log::warn!("{non_finite} pixels had non-finite radiance; written as black");
     }
-    for path in &request.outputs {
-        image.write(path, request.exposure)?;
+    let frame = last.expect("at least one frame");
+    if multi_view && request.frames.is_none() {
+        if let Some(first) = request.outputs.first() {
+            let sheet = with_stem_suffix(first, "_views").with_extension("png");
+            prepare_output(&sheet)?;
+            side_by_side(&last_images).write(&sheet, request.exposure)?;
+            written.push(sheet.display().to_string());
+        }
     }
-    let variance_outputs = write_variance(method.as_ref(), request)?;
+    let variance_outputs = if multi_view || request.frames.is_some() {
+        vec![]
+    } else {
+        write_variance(method.as_ref(), request)?
+    };
+    let merged = frame.timings.merged();
+    let gpu_bytes = method.gpu_bytes()
+        + views
+            .iter()
+            .zip(&frame.results)
+            .map(|(v, r)| r.view_bytes(v))
+            .sum::<u64>();
     let mut report = serde_json::json!({
         "scene": scene.name,
         "method": method.name(),
@@ -115,117 +288,80 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "width": settings.width,
         "height": settings.height,
         "ssaa": settings.ssaa,
-        "passes": frame.timings.to_json(),
-        "total_ms": crate::gpu::timing::round3(frame.timings.total_ms()),
-        "gpu_timestamps": frame.timings.gpu_timestamps,
-        "gpu_bytes": frame.gpu_bytes,
+        "passes": merged.to_json(),
+        "total_ms": round3(merged.total_ms()),
+        "gpu_timestamps": merged.gpu_timestamps,
+        "gpu_bytes": gpu_bytes,
         "adapter": ctx.adapter_label(),
         "lights": scene.lights.len(),
         "triangles": scene.triangle_count(),
         "indirect_only": request.indirect_only,
         "non_finite_pixels": non_finite,
         "warnings": scene.warnings.len(),
-        "outputs": request.outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+        "outputs": written,
+        "views": views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
+        "view_rig": request.views.label(),
+        // Same-size views are recorded one pass per view; wgpu's multiview layers are not
+        // used.
+        "view_recording": "one pass per view",
+        "solution_ms": round3(frame.timings.solution.total_ms()),
+        "solution_passes": frame.timings.solution.to_json(),
+        "view_ms": frame.timings.views.iter().map(|t| round3(t.total_ms())).collect::<Vec<_>>(),
+        "view_passes": frame.timings.views.iter().map(|t| t.to_json()).collect::<Vec<_>>(),
+        "solution_pass_counts": frame
+            .solution_pass_counts
+            .iter()
+            .map(|(l, n)| (l.clone(), serde_json::json!(n)))
+            .collect::<serde_json::Map<_, _>>(),
     });
     if !variance_outputs.is_empty() {
         report["variance_outputs"] = serde_json::json!(variance_outputs);
     }
+    if let Some(frames) = request.frames {
+        let dir = request
+            .outputs
+            .first()
+            .cloned()
+            .unwrap_or_else(|| PathBuf::from("out/frames"));
+        report["frames"] = serde_json::json!(frames);
+        report["fps"] = serde_json::json!(request.fps);
+        report["frame_total_ms"] = serde_json::json!(frame_ms);
+        report["last_frame_passes"] = merged.to_json();
+        report["out_dir"] = serde_json::json!(if is_image_path(&dir) {
+            dir.parent()
+                .unwrap_or(std::path::Path::new("."))
+                .display()
+                .to_string()
+        } else {
+            dir.display().to_string()
+        });
+    }
     if let Some(obj) = report.as_object_mut() {
         obj.extend(method.report());
         obj.insert(
             "wall_ms".into(),
-            serde_json::json!(crate::gpu::timing::round3(
-                started.elapsed().as_secs_f64() * 1000.0
-            )),
+            serde_json::json!(round3(started.elapsed().as_secs_f64() * 1000.0)),
         );
     }
     Ok(report)
 }
 
-/// `frame_NNNN.exr` for frame `index` in `dir`.
-pub fn frame_path(dir: &std::path::Path, index: u32) -> PathBuf {
-    dir.join(format!("frame_{index:04}.exr"))
-}
-
-/// Renders `frames` frames of the animation with one method instance (so preprocessing happens
-/// once) and writes numbered EXRs into the request's single output folder.
-fn render_frames(
-    request: &RenderRequest,
-    frames: u32,
-    started: Instant,
-) -> Result<serde_json::Value, AppError> {
-    let dir = request
-        .outputs
-        .first()
-        .cloned()
-        .unwrap_or_else(|| PathBuf::from("out/frames"));
-    if frames == 0 || !(request.fps.is_finite() && request.fps > 0.0) {
-        return Err(
-            RenderError::Settings("--frames must be at least 1 and --fps positive".into()).into(),
-        );
+/// The views' images next to each other, top-aligned, for people to look at.
+fn side_by_side(images: &[crate::image_io::Image]) -> crate::image_io::Image {
+    let width: u32 = images.iter().map(|i| i.width).sum();
+    let height = images.iter().map(|i| i.height).max().unwrap_or(1);
+    let mut sheet = crate::image_io::Image::new(width.max(1), height);
+    let mut x0 = 0;
+    for image in images {
+        for y in 0..image.height {
+            for x in 0..image.width {
+                sheet.pixels[(y * sheet.width + x0 + x) as usize] =
+                    image.pixels[(y * image.width + x) as usize];
+            }
+        }
+        x0 += image.width;
     }
-    prepare_output(&frame_path(&dir, 0))?;
-    let scene = scene::load(
-        &request.scene,
-        &BuiltinParams {
-            max_edge: request.max_edge,
-        },
-    )?;
-    for warning in &scene.warnings {
-        log::warn!("{warning}");
-    }
-    if scene.animations.is_empty() {
-        log::warn!(
-            "scene '{}' has no animation: every frame is the same",
-            scene.name
-        );
-    }
-    let ctx = GpuContext::new()?;
-    let settings = request.settings;
-    let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
-    let mut frame_ms = Vec::with_capacity(frames as usize);
-    let mut non_finite = 0;
-    let mut last_timings = None;
-    for index in 0..frames {
-        let time = request.time + index as f32 / request.fps;
-        let world_from_node = scene.world_from_node_at(time);
-        let camera = scene.camera_view(
-            request.camera.as_deref(),
-            settings.width as f32 / settings.height as f32,
-            &world_from_node,
-        )?;
-        let frame = method.render(&ctx, &scene, &world_from_node, &camera)?;
-        let mut image = frame.radiance(request.indirect_only);
-        non_finite += image.sanitize();
-        image.write(&frame_path(&dir, index), request.exposure)?;
-        frame_ms.push(crate::gpu::timing::round3(frame.timings.total_ms()));
-        last_timings = Some(frame.timings);
-    }
-    let mut report = serde_json::json!({
-        "scene": scene.name,
-        "method": method.name(),
-        "options": request.options.to_string(),
-        "width": settings.width,
-        "height": settings.height,
-        "frames": frames,
-        "fps": request.fps,
-        "frame_total_ms": frame_ms,
-        "last_frame_passes": last_timings.map(|t| t.to_json()),
-        "adapter": ctx.adapter_label(),
-        "indirect_only": request.indirect_only,
-        "non_finite_pixels": non_finite,
-        "out_dir": dir.display().to_string(),
-    });
-    if let Some(obj) = report.as_object_mut() {
-        obj.extend(method.report());
-        obj.insert(
-            "wall_ms".into(),
-            serde_json::json!(crate::gpu::timing::round3(
-                started.elapsed().as_secs_f64() * 1000.0
-            )),
-        );
-    }
-    Ok(report)
+    sheet
 }
 
 /// `<stem>.variance.exr` beside every EXR output of a method that estimates its own per-pixel

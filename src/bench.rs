@@ -91,7 +91,7 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
                 pad2: 0,
             }),
         );
-        let mut passes = Passes::new(ctx, 2);
+        let mut passes = Passes::new(ctx);
         passes.compute("fma", |pass| {
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &group, &[]);
@@ -384,4 +384,15 @@ fn print_row(r: &Row, peak: f64) {
         r.pairs_per_s,
         100.0 * r.pairs_per_s * GATHER_OPS_PER_PAIR / peak
     );
+}
+
+/// The benchmark's structs shared with WGSL, for the layout test.
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::shared_layout;
+    vec![shared_layout!(
+        "FmaParams",
+        "bench_fma.wgsl",
+        FmaParams,
+        [iterations, pad0, pad1, pad2]
+    )]
 }

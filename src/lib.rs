@@ -4,9 +4,13 @@
 pub mod app;
 pub mod atlas;
 pub mod bench;
+pub mod composite;
+pub mod direct;
 pub mod eval;
+pub mod frame;
 pub mod gpu;
 pub mod image_io;
+pub mod light;
 pub mod method;
 pub mod peers;
 pub mod raster;

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use valgi::app::{self, RenderRequest};
 use valgi::raster::RenderSettings;
 use valgi::scene::builtin;
@@ -45,6 +45,7 @@ enum Command {
 }
 
 #[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
 struct RenderArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
     #[arg(long, default_value = "cornell")]
@@ -52,8 +53,10 @@ struct RenderArgs {
     /// Rendering method (see `valgi methods`).
     #[arg(long, default_value = "direct")]
     method: String,
+    /// Output width in pixels (per view).
     #[arg(long, default_value_t = 512)]
     width: u32,
+    /// Output height in pixels (per view).
     #[arg(long, default_value_t = 512)]
     height: u32,
     /// Camera name or index (default: the scene's first camera, or one framing the scene).
@@ -81,31 +84,6 @@ struct RenderArgs {
     /// Animation time in seconds (glTF animations).
     #[arg(long, default_value_t = 0.0)]
     time: f32,
-    /// RSM resolution per light layer (sparse, brute): R×R texels, six layers for a point light.
-    #[arg(long)]
-    rsm: Option<u32>,
-    /// Sparse receiver points for the whole scene (sparse).
-    #[arg(long)]
-    sparse_points: Option<usize>,
-    /// VALs per workgroup-memory tile in the gather (sparse, brute), 1..=256.
-    #[arg(long)]
-    tile: Option<u32>,
-    /// Glossy indirect light (sparse, brute).
-    #[arg(long, value_parser = ["on", "off"])]
-    glossy: Option<String>,
-    /// Indirect occlusion from the sparse points' discs (sparse: off|sum|union), or from the
-    /// geometry volume (lpv, holpv: on|off; sum and union also mean on).
-    #[arg(long, value_parser = ["off", "sum", "union", "on"])]
-    occlusion: Option<String>,
-    /// Weights of the averaged light positions (sparse).
-    #[arg(long, value_parser = ["geometric", "flux"])]
-    weights: Option<String>,
-    /// Light propagation volume cells per axis (lpv, holpv; default 32).
-    #[arg(long)]
-    grid: Option<u32>,
-    /// Light propagation steps (lpv, holpv; default = --grid).
-    #[arg(long)]
-    steps: Option<u32>,
     /// Render F frames of the scene's animation (from --time, at --fps) as numbered EXRs into
     /// the folder given by --out.
     #[arg(long)]
@@ -116,15 +94,11 @@ struct RenderArgs {
     /// A method option as key=value (repeatable); the method-specific flags are shorthands.
     #[arg(long = "opt", value_name = "KEY=VALUE")]
     options: Vec<String>,
-    /// Shorthand for --opt bounces=B (reference: 0 = direct only, 1, 2, … or inf).
-    #[arg(long)]
-    bounces: Option<String>,
-    /// Shorthand for --opt spp=N (reference: paths per pixel).
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Baked light atlas for `--method atlas` (shorthand for --opt atlas=FILE).
-    #[arg(long)]
-    atlas: Option<PathBuf>,
+    /// Views of one frame: mono, stereo[:IPD_METRES] (two eyes from the camera, default
+    /// IPD 0.064), grid:N (N cameras on a small arc) or cave:FILE.json (one off-axis view per
+    /// wall). One image per view, <stem>_<view>.exr/.png, plus a side-by-side PNG.
+    #[arg(long, default_value = "mono")]
+    views: String,
 }
 
 #[derive(clap::Args)]
@@ -325,11 +299,21 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
 
 fn main() -> ExitCode {
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
-    let cli = Cli::parse();
+    let matches = with_method_flags(Cli::command()).get_matches();
+    let cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
     match cli.command {
         Command::Render(args) => {
-            if args.frames.is_some() && args.out.len() != 1 {
-                eprintln!("error: --frames needs exactly one --out DIR for the numbered EXRs");
+            let into_folder = args
+                .out
+                .iter()
+                .any(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("exr" | "png")));
+            if args.frames.is_some() && into_folder && args.out.len() != 1 {
+                eprintln!(
+                    "error: --frames writes numbered EXRs into one --out DIR, or numbered files beside --out NAME.exr/.png"
+                );
                 return ExitCode::FAILURE;
             }
             let outputs = if args.out.is_empty() {
@@ -342,19 +326,11 @@ fn main() -> ExitCode {
                 args.out
             };
             let mut options = valgi::method::MethodOptions::default();
-            let shorthands = [
-                ("rsm", args.rsm.map(|v| v.to_string())),
-                ("sparse-points", args.sparse_points.map(|v| v.to_string())),
-                ("tile", args.tile.map(|v| v.to_string())),
-                ("glossy", args.glossy.clone()),
-                ("occlusion", args.occlusion.clone()),
-                ("weights", args.weights.clone()),
-                ("grid", args.grid.map(|v| v.to_string())),
-                ("steps", args.steps.map(|v| v.to_string())),
-            ];
-            for (key, value) in shorthands {
-                if let Some(value) = value {
-                    options.set(key, value);
+            if let Some(render) = matches.subcommand_matches("render") {
+                for (spec, _) in valgi::method::all_options() {
+                    if let Some(value) = render.get_one::<String>(spec.name) {
+                        options.set(spec.name, value);
+                    }
                 }
             }
             for pair in &args.options {
@@ -364,15 +340,13 @@ fn main() -> ExitCode {
                 };
                 options.set(key.trim(), value.trim());
             }
-            if let Some(bounces) = &args.bounces {
-                options.set("bounces", bounces);
-            }
-            if let Some(spp) = args.spp {
-                options.set("spp", spp);
-            }
-            if let Some(atlas) = &args.atlas {
-                options.set("atlas", atlas.display());
-            }
+            let views = match valgi::frame::ViewRig::parse(&args.views) {
+                Ok(rig) => rig,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
             let request = RenderRequest {
                 scene: args.scene,
                 method: args.method,
@@ -392,6 +366,7 @@ fn main() -> ExitCode {
                 time: args.time,
                 frames: args.frames,
                 fps: args.fps,
+                views,
             };
             match app::render(&request) {
                 Ok(report) => {
@@ -430,14 +405,30 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake(args),
         Command::BakeBench(args) => bake_bench(args),
         Command::Scenes => {
-            for (name, description) in builtin::names() {
-                println!("{name:<16} {description}");
+            let names = builtin::names();
+            let width = names.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
+            for (name, description) in names {
+                println!("{name:<width$}  {description}");
             }
             ExitCode::SUCCESS
         }
         Command::Methods => {
-            for (name, description) in valgi::method::METHODS {
-                println!("{name:<16} {description}");
+            for entry in valgi::method::REGISTRY {
+                println!("{:<14} {}", entry.name, entry.help);
+                for o in entry.options {
+                    let default = if o.default.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (default {})", o.default)
+                    };
+                    println!(
+                        "{:<16} --{} {}: {}{default}",
+                        "",
+                        o.name,
+                        o.value_hint(),
+                        o.help
+                    );
+                }
             }
             ExitCode::SUCCESS
         }
@@ -576,4 +567,26 @@ fn run_eval(args: EvalArgs) -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `valgi render`'s method flags, one per option in the method registry (`--rsm 64` is
+/// `--opt rsm=64`); values are checked by the chosen method's entry.
+fn with_method_flags(cli: clap::Command) -> clap::Command {
+    cli.mut_subcommand("render", |mut render| {
+        for (spec, methods) in valgi::method::all_options() {
+            let default = if spec.default.is_empty() {
+                String::new()
+            } else {
+                format!("; default {}", spec.default)
+            };
+            render = render.arg(
+                clap::Arg::new(spec.name)
+                    .long(spec.name)
+                    .value_name(spec.value_hint())
+                    .allow_negative_numbers(true)
+                    .help(format!("{} ({}{default})", spec.help, methods.join(", "))),
+            );
+        }
+        render
+    })
 }

@@ -1,79 +1,155 @@
-//! Every rendering method implements [`Method`]: scene, transforms and camera in; direct and
-//! indirect radiance, per-pass GPU times and owned GPU bytes out. The CLI and (later) the
-//! evaluation harness treat all methods alike through it.
+//! The one registry of rendering methods. Each technique exports an [`Entry`] (name, help,
+//! options, constructor); [`REGISTRY`] lists them. `valgi render` generates its method flags
+//! from it, `valgi methods` prints it, options are validated against it, and `valgi eval`
+//! builds its methods through it. Adding a method is its folder plus one line here.
 
 use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
 use std::str::FromStr;
 
-use glam::Mat4;
-
+pub use crate::frame::{Method, ViewResult};
 use crate::gpu::GpuContext;
-use crate::raster::{FrameOutput, Rasterizer, RenderError, RenderSettings};
-use crate::scene::{CameraView, Scene};
+use crate::raster::{RenderError, RenderSettings};
+use crate::scene::Scene;
 
-pub trait Method {
-    /// The method's name as given to `--method`.
-    fn name(&self) -> &'static str;
+/// Every method, in the order `valgi methods` lists them.
+pub static REGISTRY: &[&Entry] = &[
+    &crate::direct::ENTRY,
+    &crate::vals::ENTRY,
+    &crate::peers::brute::ENTRY,
+    &crate::reference::ENTRY,
+    &crate::atlas::ENTRY,
+    &crate::peers::lpv::LPV_ENTRY,
+    &crate::peers::lpv::HOLPV_ENTRY,
+    &crate::composite::SPARSE_ATLAS_ENTRY,
+];
 
-    /// Renders one frame with the scene's nodes at `world_from_node`.
-    fn render(
-        &mut self,
-        ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError>;
+/// Every struct shared between Rust and WGSL: the base layer's, the light module's and each
+/// technique's own list (checked against naga by `tests/shader_layout.rs`).
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    let lists: [fn() -> Vec<crate::raster::types::SharedLayout>; 6] = [
+        crate::raster::types::shared_layouts,
+        crate::light::shared_layouts,
+        crate::vals::shared_layouts,
+        crate::peers::lpv::shared_layouts,
+        crate::atlas::shared_layouts,
+        crate::bench::shared_layouts,
+    ];
+    lists.iter().flat_map(|list| list()).collect()
+}
 
-    /// Method-specific keys for the JSON report (empty by default).
-    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
-        serde_json::Map::new()
+/// What values an option takes.
+#[derive(Clone, Copy, Debug)]
+pub enum OptionKind {
+    /// A whole number in `min..=max`.
+    Int { min: i64, max: i64 },
+    /// One of these words.
+    Choice(&'static [&'static str]),
+    /// A file.
+    Path,
+    /// Free text the method parses itself (e.g. `bounces=1|B|inf`).
+    Text,
+}
+
+/// One option of a method: `--NAME VALUE` on the command line, `NAME=VALUE` in a spec.
+#[derive(Clone, Copy, Debug)]
+pub struct OptionSpec {
+    pub name: &'static str,
+    pub kind: OptionKind,
+    /// The default as text ("" where the method computes it, e.g. LPV steps = grid).
+    pub default: &'static str,
+    pub help: &'static str,
+}
+
+impl OptionSpec {
+    /// Checks `value` against the option's type and range.
+    pub fn check(&self, method: &str, value: &str) -> Result<(), RenderError> {
+        let bad = |why: String| {
+            RenderError::Settings(format!(
+                "method '{method}': option {}={value}: {why}",
+                self.name
+            ))
+        };
+        match self.kind {
+            OptionKind::Int { min, max } => {
+                let v: i64 = value
+                    .parse()
+                    .map_err(|_| bad("not a whole number".into()))?;
+                if !(min..=max).contains(&v) {
+                    return Err(bad(format!("must be {min}..={max}")));
+                }
+            }
+            OptionKind::Choice(allowed) => {
+                if !allowed.contains(&value) {
+                    return Err(bad(format!("expected one of {}", allowed.join("|"))));
+                }
+            }
+            OptionKind::Path => {
+                if value.is_empty() {
+                    return Err(bad("empty path".into()));
+                }
+            }
+            OptionKind::Text => {}
+        }
+        Ok(())
     }
 
-    /// Estimated variance of each pixel of the last frame (full or indirect image), for
-    /// Monte Carlo methods; `None` for deterministic ones.
-    fn variance(&self, _indirect_only: bool) -> Option<crate::image_io::Image> {
-        None
+    /// `INT a..=b`, `on|off`, `FILE` for help texts.
+    pub fn value_hint(&self) -> String {
+        match self.kind {
+            OptionKind::Int { min, max } => format!("{min}..={max}"),
+            OptionKind::Choice(c) => c.join("|"),
+            OptionKind::Path => "FILE".into(),
+            OptionKind::Text => "TEXT".into(),
+        }
     }
 }
 
-/// Methods `valgi render --method` accepts, with a one-line description.
-pub const METHODS: &[(&str, &str)] = &[
-    (
-        "direct",
-        "direct light only: shadow-mapped punctual lights and emission (indirect is black)",
-    ),
-    (
-        "sparse",
-        "direct + one-bounce diffuse and glossy light from RSM virtual area lights gathered at sparse model-space points (options: rsm, sparse-points, tile, glossy, occlusion, weights, seed)",
-    ),
-    (
-        "brute",
-        "direct + every VAL summed at every pixel: the sparse method without interpolation or occlusion (options: rsm, tile, glossy)",
-    ),
-    (
-        "reference",
-        "CPU path tracer, the ground truth (options: bounces=N|inf, spp=N, seed=N)",
-    ),
-    (
-        "atlas",
-        "direct light plus the indirect bounces of a baked light atlas (--atlas FILE)",
-    ),
-    (
-        "lpv",
-        "direct + one diffuse bounce through a light propagation volume: 2-band SH, 6-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
-    ),
-    (
-        "holpv",
-        "direct + one diffuse bounce through a higher-order LPV: 3-band SH, 26-direction propagation (options: grid, steps, occlusion=on|off, rsm)",
-    ),
-    (
-        "sparse+atlas",
-        "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2 (--atlas FILE)",
-    ),
-];
+/// A method's constructor: scene, the mono view's size and quality, and its options.
+pub type Create =
+    fn(&GpuContext, &Scene, RenderSettings, &MethodOptions) -> Result<Box<dyn Method>, RenderError>;
 
-/// Builds a method by name for one scene and output size.
+/// One registered method.
+pub struct Entry {
+    pub name: &'static str,
+    pub help: &'static str,
+    pub options: &'static [OptionSpec],
+    pub create: Create,
+}
+
+/// The registry entry of `name`.
+pub fn entry(name: &str) -> Result<&'static Entry, RenderError> {
+    REGISTRY
+        .iter()
+        .copied()
+        .find(|e| e.name == name)
+        .ok_or_else(|| {
+            RenderError::Settings(format!(
+                "unknown method '{name}' (available: {})",
+                REGISTRY
+                    .iter()
+                    .map(|e| e.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
+}
+
+/// Every option name any method takes, with the methods that take it (for generated flags).
+pub fn all_options() -> Vec<(OptionSpec, Vec<&'static str>)> {
+    let mut out: Vec<(OptionSpec, Vec<&'static str>)> = vec![];
+    for e in REGISTRY {
+        for o in e.options {
+            match out.iter_mut().find(|(spec, _)| spec.name == o.name) {
+                Some((_, methods)) => methods.push(e.name),
+                None => out.push((*o, vec![e.name])),
+            }
+        }
+    }
+    out
+}
+
+/// Validates the options against the registry entry and builds the method.
 pub fn create(
     name: &str,
     ctx: &GpuContext,
@@ -81,40 +157,26 @@ pub fn create(
     settings: RenderSettings,
     options: &MethodOptions,
 ) -> Result<Box<dyn Method>, RenderError> {
-    let method: Box<dyn Method> = match name {
-        "direct" => Box::new(DirectMethod {
-            raster: Rasterizer::new(ctx, scene, settings)?,
-        }),
-        "sparse" => crate::vals::create(ctx, scene, settings, options)?,
-        "brute" => Box::new(crate::peers::brute::BruteMethod::new(
-            ctx, scene, settings, options,
-        )?),
-        "reference" => Box::new(crate::reference::ReferenceMethod::new(settings, options)?),
-        "atlas" => Box::new(crate::atlas::AtlasMethod::new(
-            ctx, scene, settings, options,
-        )?),
-        "sparse+atlas" => crate::atlas::create_sparse_atlas(ctx, scene, settings, options)?,
-        "lpv" => {
-            crate::peers::lpv::create(ctx, scene, settings, crate::peers::lpv::Order::Lpv, options)?
-        }
-        "holpv" => crate::peers::lpv::create(
-            ctx,
-            scene,
-            settings,
-            crate::peers::lpv::Order::HoLpv,
-            options,
-        )?,
-        other => {
+    let entry = entry(name)?;
+    for (key, value) in options.entries() {
+        let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
             return Err(RenderError::Settings(format!(
-                "unknown method '{other}' (available: {})",
-                METHODS
-                    .iter()
-                    .map(|(n, _)| *n)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )))
-        }
-    };
+                "method '{name}' has no option(s) {key} (it takes: {})",
+                if entry.options.is_empty() {
+                    "none".to_string()
+                } else {
+                    entry
+                        .options
+                        .iter()
+                        .map(|o| o.name)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            )));
+        };
+        spec.check(name, value)?;
+    }
+    let method = (entry.create)(ctx, scene, settings, options)?;
     options.reject_unused(name)?;
     Ok(method)
 }
@@ -165,6 +227,11 @@ impl MethodOptions {
 
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
+    }
+
+    /// The `key=value` pairs given.
+    pub fn entries(&self) -> impl Iterator<Item = (&str, &str)> {
+        self.entries.iter().map(|(k, v)| (k.as_str(), v.as_str()))
     }
 
     /// The value of `key` parsed as `T`, or `default` when absent.
@@ -225,27 +292,5 @@ impl std::fmt::Display for MethodOptions {
             .map(|(k, v)| format!("{k}={v}"))
             .collect();
         f.write_str(&pairs.join(","))
-    }
-}
-
-/// Direct light only: the base every indirect method adds to.
-pub struct DirectMethod {
-    pub raster: Rasterizer,
-}
-
-impl Method for DirectMethod {
-    fn name(&self) -> &'static str {
-        "direct"
-    }
-
-    fn render(
-        &mut self,
-        ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
-        self.raster
-            .render_direct(ctx, scene, world_from_node, camera)
     }
 }

@@ -482,6 +482,7 @@ fn point_light_cube_shadow_faces_each_shadow_their_own_wall() {
             aspect: 1.0,
             znear: 0.01,
             zfar: 4.0,
+            off_axis: None,
         };
         let frame = raster.render_direct(&ctx, &scene, &world, &camera).unwrap();
         let world_from_clip = camera.clip_from_world().inverse();

@@ -1,7 +1,7 @@
 //! Every WGSL file parses and validates with naga, and every `#[repr(C)]` struct shared with
 //! WGSL has the size and field offsets naga computes for it. No GPU needed.
 
-use valgi::raster::types::shared_layouts;
+use valgi::method::shared_layouts;
 use valgi::shaders;
 
 #[test]

@@ -35,6 +35,7 @@ fn sparse_settings(
             occlusion,
             weights: Weights::Geometric,
         },
+        ..Default::default()
     }
 }
 

@@ -280,7 +280,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 ..RenderSettings::default()
             };
             let raster = Rasterizer::new(&ctx, &scene, render)?;
-            let layer = AtlasLayer::new(&ctx, &scene, &raster, &atlas)?;
+            let layer = AtlasLayer::new(&ctx, &scene, &atlas)?;
             let mut method = AtlasMethod { raster, layer };
             let frame = method.render(&ctx, &scene, &world, &camera)?;
             let mut indirect: Image = frame.indirect;

@@ -15,17 +15,17 @@ use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
 pub use bake::{bake, Bake, BakeError, BakeSettings, EnergyAccount};
-pub use compose::{create_sparse_atlas, AtlasOnVals};
+pub use compose::AtlasOnVals;
 
-use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::frame::{FrameInput, Method, View, ViewCache, ViewResult};
+use crate::gpu::{GpuBytes, GpuContext, Passes};
 use crate::image_io::Image;
-use crate::method::{Method, MethodOptions};
+use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
     buffer_binding, compute_pipeline, storage_texture_entry, texture_entry, uniform_entry,
-    view_binding, FrameOutput, Rasterizer, RenderError, RenderSettings, DEPTH_FORMAT,
-    RADIANCE_FORMAT,
+    view_binding, Rasterizer, RenderError, RenderSettings, DEPTH_FORMAT, RADIANCE_FORMAT,
 };
-use crate::scene::{CameraView, Scene};
+use crate::scene::Scene;
 
 /// One `valgi bake` invocation.
 #[derive(Clone, Debug)]
@@ -177,39 +177,46 @@ pub fn load_atlas(path: &Path) -> Result<Image, RenderError> {
     Image::read_exr(path).map_err(|e| RenderError::Settings(format!("--atlas: {e}")))
 }
 
-/// GPU lookup of a baked atlas: rasterizes the light-map meshes from the camera into an
-/// irradiance target (pass "atlas lookup"), then writes ρ_d/π·E into the rasterizer's
+/// GPU lookup of a baked atlas: rasterizes the light-map meshes from a view's camera into an
+/// irradiance target (pass "atlas lookup"), then writes ρ_d/π·E into the view's
 /// `radiance_indirect` (pass "atlas apply"). A layer for any method that wants the atlas's
-/// bounces (`atlas`, later `sparse+atlas`), which can also read [`AtlasLayer::irradiance`].
+/// bounces (`atlas`, `sparse+atlas`). The atlas itself is shared; the irradiance target and
+/// its depth belong to each view.
 pub struct AtlasLayer {
     meshes: Vec<LayerMesh>,
-    frame_buffer: wgpu::Buffer,
     transforms: wgpu::Buffer,
-    apply_buffer: wgpu::Buffer,
     render_pipeline: wgpu::RenderPipeline,
     /// The same with back faces culled, for the two faces of sheets.
     sheet_pipeline: wgpu::RenderPipeline,
-    render_group: wgpu::BindGroup,
+    render_bgl: wgpu::BindGroupLayout,
     apply_pipeline: wgpu::ComputePipeline,
-    apply_group: wgpu::BindGroup,
-    /// Per-pixel atlas irradiance E (render resolution, Rgba32Float, alpha 1 on surfaces).
-    pub irradiance: wgpu::TextureView,
-    irradiance_texture: wgpu::Texture,
-    depth: wgpu::TextureView,
+    apply_bgl: wgpu::BindGroupLayout,
+    atlas_view: wgpu::TextureView,
+    cuts_view: wgpu::TextureView,
     atlas_size: u32,
-    render_size: [u32; 2],
+    views: ViewCache<AtlasView>,
+    /// The view recorded last (tests read its irradiance).
+    last_view: Option<u64>,
     pub bytes: GpuBytes,
     /// Layout texels missing from the atlas file (0 when it matches the scene).
     pub missing_texels: usize,
 }
 
+/// One view's share of the lookup: camera uniform, irradiance target and depth.
+pub struct AtlasView {
+    frame_buffer: wgpu::Buffer,
+    pub apply_buffer: wgpu::Buffer,
+    /// Per-pixel atlas irradiance E (render resolution, Rgba32Float, alpha 1 on surfaces).
+    pub irradiance: wgpu::TextureView,
+    irradiance_texture: wgpu::Texture,
+    depth: wgpu::TextureView,
+    render_group: wgpu::BindGroup,
+    render_size: [u32; 2],
+    bytes: GpuBytes,
+}
+
 impl AtlasLayer {
-    pub fn new(
-        ctx: &GpuContext,
-        scene: &Scene,
-        raster: &Rasterizer,
-        atlas: &Image,
-    ) -> Result<Self, RenderError> {
+    pub fn new(ctx: &GpuContext, scene: &Scene, atlas: &Image) -> Result<Self, RenderError> {
         let device = &ctx.device;
         if atlas.width != atlas.height {
             return Err(RenderError::Settings(format!(
@@ -262,8 +269,6 @@ impl AtlasLayer {
                 sheet_face: m.sheet_face,
             });
         }
-        let frame_buffer = bytes.uniform::<AtlasFrame>(device, "atlas frame");
-        let apply_buffer = bytes.uniform::<ApplyParams>(device, "atlas apply");
         let transforms = bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -301,28 +306,6 @@ impl AtlasLayer {
             bytemuck::cast_slice(&layout.cuts.dense(res)),
             8,
         );
-        let (rw, rh) = (raster.targets.render_width, raster.targets.render_height);
-        let irradiance_texture = texture(
-            &mut bytes,
-            "atlas irradiance",
-            rw,
-            rh,
-            RADIANCE_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-        );
-        let irradiance = irradiance_texture.create_view(&Default::default());
-        let depth = texture(
-            &mut bytes,
-            "atlas depth",
-            rw,
-            rh,
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        )
-        .create_view(&Default::default());
-
         let render_module = ctx.shader("atlas_render.wgsl");
         let render_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("atlas lookup"),
@@ -340,16 +323,6 @@ impl AtlasLayer {
                     },
                     count: None,
                 },
-            ],
-        });
-        let render_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("atlas lookup"),
-            layout: &render_bgl,
-            entries: &[
-                buffer_binding(0, &frame_buffer),
-                buffer_binding(1, &transforms),
-                view_binding(2, &atlas_view),
-                view_binding(3, &cuts_view),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -412,46 +385,27 @@ impl AtlasLayer {
                 storage_texture_entry(3, wgpu::ShaderStages::COMPUTE),
             ],
         });
-        let apply_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("atlas apply"),
-            layout: &apply_bgl,
-            entries: &[
-                buffer_binding(0, &apply_buffer),
-                view_binding(1, &irradiance),
-                view_binding(2, &raster.targets.diffuse),
-                view_binding(3, &raster.targets.radiance_indirect),
-            ],
-        });
         let apply_pipeline = compute_pipeline(device, "atlas apply", &apply_module, &apply_bgl);
         Ok(Self {
             meshes,
-            frame_buffer,
             transforms,
-            apply_buffer,
             render_pipeline,
             sheet_pipeline,
-            render_group,
+            render_bgl,
             apply_pipeline,
-            apply_group,
-            irradiance,
-            irradiance_texture,
-            depth,
+            apply_bgl,
+            atlas_view,
+            cuts_view,
             atlas_size: res,
-            render_size: [rw, rh],
+            views: ViewCache::default(),
+            last_view: None,
             bytes,
             missing_texels,
         })
     }
 
-    /// Uploads the camera and the instances' transforms.
-    pub fn prepare(&self, ctx: &GpuContext, world_from_node: &[Mat4], camera: &CameraView) {
-        let frame = AtlasFrame {
-            clip_from_world: camera.clip_from_world().to_cols_array_2d(),
-            atlas_size: [self.atlas_size; 2],
-            pad: [0; 2],
-        };
-        ctx.queue
-            .write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+    /// Uploads the instances' transforms and drops the state of views that are gone.
+    pub fn update(&mut self, ctx: &GpuContext, world_from_node: &[Mat4], views: &[&View]) {
         let transforms: Vec<[[f32; 4]; 4]> = self
             .meshes
             .iter()
@@ -461,39 +415,138 @@ impl AtlasLayer {
             ctx.queue
                 .write_buffer(&self.transforms, 0, bytemuck::cast_slice(&transforms));
         }
-        let apply = ApplyParams {
-            render_size: self.render_size,
+        self.views.retain(views);
+    }
+
+    /// GPU bytes of the atlas and of every view's lookup targets.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.bytes.0 + self.views.values().map(|v| v.bytes.0).sum::<u64>()
+    }
+
+    /// The view's lookup state (made on first use), with this frame's camera uploaded.
+    pub fn view_state(&mut self, ctx: &GpuContext, view: &View) -> Result<&AtlasView, RenderError> {
+        let device = &ctx.device;
+        let (rw, rh) = view.render_size();
+        let (render_bgl, transforms, atlas_view, cuts_view) = (
+            &self.render_bgl,
+            &self.transforms,
+            &self.atlas_view,
+            &self.cuts_view,
+        );
+        let state = self.views.get_or_try_insert(view, || {
+            let mut bytes = GpuBytes::default();
+            let frame_buffer = bytes.uniform::<AtlasFrame>(device, "atlas frame");
+            let apply_buffer = bytes.uniform::<ApplyParams>(device, "atlas apply");
+            let irradiance_texture = bytes.texture_2d(
+                device,
+                "atlas irradiance",
+                (rw, rh),
+                RADIANCE_FORMAT,
+                wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+            );
+            let irradiance = irradiance_texture.create_view(&Default::default());
+            let depth = bytes
+                .texture_2d(
+                    device,
+                    "atlas depth",
+                    (rw, rh),
+                    DEPTH_FORMAT,
+                    wgpu::TextureUsages::RENDER_ATTACHMENT,
+                )
+                .create_view(&Default::default());
+            let render_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("atlas lookup"),
+                layout: render_bgl,
+                entries: &[
+                    buffer_binding(0, &frame_buffer),
+                    buffer_binding(1, transforms),
+                    view_binding(2, atlas_view),
+                    view_binding(3, cuts_view),
+                ],
+            });
+            Ok(AtlasView {
+                frame_buffer,
+                apply_buffer,
+                irradiance,
+                irradiance_texture,
+                depth,
+                render_group,
+                render_size: [rw, rh],
+                bytes,
+            })
+        })?;
+        let frame = AtlasFrame {
+            clip_from_world: view.camera.clip_from_world().to_cols_array_2d(),
+            atlas_size: [self.atlas_size; 2],
             pad: [0; 2],
         };
         ctx.queue
-            .write_buffer(&self.apply_buffer, 0, bytemuck::bytes_of(&apply));
+            .write_buffer(&state.frame_buffer, 0, bytemuck::bytes_of(&frame));
+        let apply = ApplyParams {
+            render_size: state.render_size,
+            pad: [0; 2],
+        };
+        ctx.queue
+            .write_buffer(&state.apply_buffer, 0, bytemuck::bytes_of(&apply));
+        self.last_view = Some(view.id());
+        Ok(state)
     }
 
-    /// Reads back the last frame's per-pixel atlas irradiance (render resolution; alpha 1
-    /// where a light-mapped surface was drawn, 0 on background).
-    pub fn read_irradiance(&self, ctx: &GpuContext) -> Result<Image, GpuError> {
-        let [w, h] = self.render_size;
+    /// Reads back the last recorded view's per-pixel atlas irradiance (render resolution;
+    /// alpha 1 where a light-mapped surface was drawn, 0 on background).
+    pub fn read_irradiance(&self, ctx: &GpuContext) -> Result<Image, RenderError> {
+        let state = self
+            .last_view
+            .and_then(|id| self.views.values_by_id(id))
+            .ok_or_else(|| RenderError::Settings("no atlas lookup recorded yet".into()))?;
+        let [w, h] = state.render_size;
         Ok(Image::from_rgba(
             w,
             h,
-            crate::gpu::read_texture_rgba32f(ctx, &self.irradiance_texture)?,
+            crate::gpu::read_texture_rgba32f(ctx, &state.irradiance_texture)?,
         ))
     }
 
-    /// Atlas lookup (render pass) and ρ_d/π·E into `radiance_indirect` (compute pass). Needs
-    /// the G-buffer of this frame.
-    pub fn record(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        self.record_lookup(passes)?;
-        self.record_apply(passes)
+    /// Atlas lookup (render pass) and ρ_d/π·E into the view's `radiance_indirect` (compute
+    /// pass). Needs the view's G-buffer.
+    pub fn record(
+        &mut self,
+        ctx: &GpuContext,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<(), RenderError> {
+        self.record_lookup(ctx, view, passes)?;
+        let state = self.views.get(view).expect("made by the lookup");
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("atlas apply"),
+            layout: &self.apply_bgl,
+            entries: &[
+                buffer_binding(0, &state.apply_buffer),
+                view_binding(1, &state.irradiance),
+                view_binding(2, &view.targets.diffuse),
+                view_binding(3, &view.targets.radiance_indirect),
+            ],
+        });
+        view.record_per_pixel(passes, "atlas apply", &self.apply_pipeline, &group)?;
+        Ok(())
     }
 
-    /// Only the lookup: per-pixel atlas irradiance into [`AtlasLayer::irradiance`], for a
-    /// method that applies it together with its own indirect light.
-    pub fn record_lookup(&self, passes: &mut Passes) -> Result<(), GpuError> {
+    /// Only the lookup: per-pixel atlas irradiance into the view's [`AtlasView::irradiance`],
+    /// for a method that applies it together with its own indirect light.
+    pub fn record_lookup(
+        &mut self,
+        ctx: &GpuContext,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<&AtlasView, RenderError> {
+        self.view_state(ctx, view)?;
+        let state = self.views.get(view).expect("made above");
         passes.render(
             "atlas lookup",
             &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.irradiance,
+                view: &state.irradiance,
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
@@ -502,7 +555,7 @@ impl AtlasLayer {
                 },
             })],
             Some(wgpu::RenderPassDepthStencilAttachment {
-                view: &self.depth,
+                view: &state.depth,
                 depth_ops: Some(wgpu::Operations {
                     load: wgpu::LoadOp::Clear(1.0),
                     store: wgpu::StoreOp::Store,
@@ -510,7 +563,7 @@ impl AtlasLayer {
                 stencil_ops: None,
             }),
             |pass| {
-                pass.set_bind_group(0, &self.render_group, &[]);
+                pass.set_bind_group(0, &state.render_group, &[]);
                 for (i, m) in self.meshes.iter().enumerate() {
                     pass.set_pipeline(if m.sheet_face {
                         &self.sheet_pipeline
@@ -523,17 +576,8 @@ impl AtlasLayer {
                     pass.draw_indexed(0..m.index_count, 0, i..i + 1);
                 }
             },
-        )
-    }
-
-    /// ρ_d/π·E into `radiance_indirect` (overwrites it).
-    pub fn record_apply(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        let [w, h] = self.render_size;
-        passes.compute("atlas apply", |pass| {
-            pass.set_pipeline(&self.apply_pipeline);
-            pass.set_bind_group(0, &self.apply_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })
+        )?;
+        Ok(state)
     }
 }
 
@@ -541,6 +585,30 @@ impl AtlasLayer {
 pub struct AtlasMethod {
     raster: Rasterizer,
     layer: AtlasLayer,
+}
+
+/// The `atlas` option every atlas method takes.
+pub const ATLAS_OPTION: OptionSpec = OptionSpec {
+    name: "atlas",
+    kind: OptionKind::Path,
+    default: "",
+    help: "baked light atlas (.exr from `valgi bake`)",
+};
+
+pub static ENTRY: Entry = Entry {
+    name: "atlas",
+    help: "direct light plus the indirect bounces of a baked light atlas",
+    options: &[ATLAS_OPTION],
+    create,
+};
+
+fn create(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: RenderSettings,
+    options: &MethodOptions,
+) -> Result<Box<dyn Method>, RenderError> {
+    Ok(Box::new(AtlasMethod::new(ctx, scene, settings, options)?))
 }
 
 impl AtlasMethod {
@@ -558,12 +626,10 @@ impl AtlasMethod {
         }
         let atlas = load_atlas(Path::new(&path))?;
         let raster = Rasterizer::new(ctx, scene, settings)?;
-        let layer = AtlasLayer::new(ctx, scene, &raster, &atlas)?;
+        let layer = AtlasLayer::new(ctx, scene, &atlas)?;
         Ok(Self { raster, layer })
     }
-}
 
-impl AtlasMethod {
     /// The atlas layer (for tests and composed methods).
     pub fn layer(&self) -> &AtlasLayer {
         &self.layer
@@ -575,20 +641,37 @@ impl Method for AtlasMethod {
         "atlas"
     }
 
-    fn render(
+    fn settings(&self) -> RenderSettings {
+        self.raster.settings
+    }
+
+    fn update(
         &mut self,
         ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
-        self.raster.prepare(ctx, scene, world_from_node, camera);
-        self.layer.prepare(ctx, world_from_node, camera);
-        let mut passes = Passes::new(ctx, 6 * scene.lights.len() as u32 + 10);
-        self.raster.record_base(&mut passes)?;
-        self.layer.record(&mut passes)?;
+        frame: &FrameInput,
+        views: &[&View],
+        passes: &mut Passes,
+    ) -> Result<(), RenderError> {
         self.raster
-            .finish_frame(ctx, passes, true, self.layer.bytes.0)
+            .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
+        self.layer.update(ctx, frame.world_from_node, views);
+        Ok(())
+    }
+
+    fn record_view(
+        &mut self,
+        ctx: &GpuContext,
+        _frame: &FrameInput,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<ViewResult, RenderError> {
+        self.raster.record_view_base(ctx, view, passes)?;
+        self.layer.record(ctx, view, passes)?;
+        Ok(ViewResult::DirectAndIndirect)
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.raster.gpu_bytes() + self.layer.gpu_bytes()
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

@@ -312,16 +312,16 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         .iter()
         .map(|s| MethodOptions::parse_spec(s))
         .collect::<Result<_, _>>()?;
-    for (name, _) in &specs {
-        if !method::METHODS.iter().any(|(n, _)| n == name) {
-            return Err(EvalError::Settings(format!(
-                "unknown method '{name}' (available: {})",
-                method::METHODS
-                    .iter()
-                    .map(|(n, _)| *n)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
+    for (name, options) in &specs {
+        let entry = method::entry(name).map_err(|e| EvalError::Settings(e.to_string()))?;
+        for (key, value) in options.entries() {
+            let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
+                return Err(EvalError::Settings(format!(
+                    "method '{name}' has no option(s) {key}"
+                )));
+            };
+            spec.check(name, value)
+                .map_err(|e| EvalError::Settings(e.to_string()))?;
         }
     }
     let out = &request.out;

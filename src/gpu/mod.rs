@@ -7,7 +7,7 @@ pub mod timing;
 
 pub use readback::{read_buffer, read_texture_rgba32f};
 pub use resources::GpuBytes;
-pub use timing::{PassTimings, Passes};
+pub use timing::{FrameTimings, PassTimings, Passes, Scope};
 
 /// Why no GPU device could be made. The message names the remedy.
 #[derive(Debug, thiserror::Error)]

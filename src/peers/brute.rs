@@ -4,18 +4,51 @@
 //! the sparse method would give with a receiver point at every pixel, so the difference between
 //! the two is the sparse method's interpolation error alone.
 
-use glam::Mat4;
-
-use crate::gpu::{GpuContext, Passes};
-use crate::method::{Method, MethodOptions};
+use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::gpu::{FrameTimings, GpuContext, Passes};
+use crate::light::rsm::Rsm;
+use crate::light::{ValParams, FLAG_GLOSSY};
+use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
     buffer_binding, compute_pipeline, depth_texture_entry, storage_entry, storage_texture_entry,
-    texture_entry, uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError,
-    RenderSettings,
+    texture_entry, uniform_entry, view_binding, Rasterizer, RenderError, RenderSettings,
 };
-use crate::scene::{CameraView, Scene};
-use crate::vals::rsm::Rsm;
-use crate::vals::sparse::{SparseParams, FLAG_GLOSSY};
+use crate::scene::Scene;
+
+pub static ENTRY: Entry = Entry {
+    name: "brute",
+    help: "direct + every VAL summed at every pixel: the sparse method without interpolation or occlusion",
+    options: &[
+        OptionSpec {
+            name: "rsm",
+            kind: OptionKind::Int { min: 1, max: 2048 },
+            default: "128",
+            help: "RSM resolution per light layer: R×R texels, six layers for a point light",
+        },
+        OptionSpec {
+            name: "tile",
+            kind: OptionKind::Int { min: 1, max: 256 },
+            default: "128",
+            help: "VALs per workgroup-memory tile",
+        },
+        OptionSpec {
+            name: "glossy",
+            kind: OptionKind::Choice(&["on", "off"]),
+            default: "on",
+            help: "glossy indirect light",
+        },
+    ],
+    create,
+};
+
+fn create(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: RenderSettings,
+    options: &MethodOptions,
+) -> Result<Box<dyn Method>, RenderError> {
+    Ok(Box::new(BruteMethod::new(ctx, scene, settings, options)?))
+}
 
 pub struct BruteMethod {
     pub raster: Rasterizer,
@@ -24,7 +57,7 @@ pub struct BruteMethod {
     tile: u32,
     params_buffer: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
-    group: wgpu::BindGroup,
+    layout: wgpu::BindGroupLayout,
     vals: u32,
 }
 
@@ -48,7 +81,7 @@ impl BruteMethod {
         let device = &ctx.device;
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brute params"),
-            size: std::mem::size_of::<SparseParams>() as u64,
+            size: std::mem::size_of::<ValParams>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -67,22 +100,6 @@ impl BruteMethod {
                 storage_texture_entry(8, cs),
             ],
         });
-        let t = &raster.targets;
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("brute"),
-            layout: &layout,
-            entries: &[
-                buffer_binding(0, &raster.frame_buffer),
-                buffer_binding(1, &params_buffer),
-                buffer_binding(2, &rsm.vals_buffer),
-                buffer_binding(3, &rsm.val_count_buffer),
-                view_binding(4, &t.depth),
-                view_binding(5, &t.normal),
-                view_binding(6, &t.diffuse),
-                view_binding(7, &t.specular),
-                view_binding(8, &t.radiance_indirect),
-            ],
-        });
         let pipeline = compute_pipeline(device, "brute", &ctx.shader("brute_vals.wgsl"), &layout);
         Ok(Self {
             raster,
@@ -91,7 +108,7 @@ impl BruteMethod {
             tile,
             params_buffer,
             pipeline,
-            group,
+            layout,
             vals: 0,
         })
     }
@@ -102,33 +119,69 @@ impl Method for BruteMethod {
         "brute"
     }
 
-    fn render(
+    fn settings(&self) -> RenderSettings {
+        self.raster.settings
+    }
+
+    fn update(
         &mut self,
         ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
-        self.raster.prepare(ctx, scene, world_from_node, camera);
-        self.rsm.prepare(ctx, scene, world_from_node);
-        let params = SparseParams {
-            eye: camera.position().extend(1.0).to_array(),
+        frame: &FrameInput,
+        _views: &[&View],
+        passes: &mut Passes,
+    ) -> Result<(), RenderError> {
+        self.raster
+            .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
+        self.rsm.prepare(ctx, frame.scene, frame.world_from_node);
+        // Every pixel's glossy lobe uses its own view's eye (the shader reads the frame
+        // uniform's camera), so nothing here depends on a view.
+        let params = ValParams {
+            eye: frame.solution_eye.extend(1.0).to_array(),
             flags: if self.glossy { FLAG_GLOSSY } else { 0 },
             tile: self.tile,
             ..Default::default()
         };
         ctx.queue
             .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
-        let mut passes = Passes::new(ctx, self.rsm.layer_count + 16);
-        self.raster.record_base(&mut passes)?;
-        self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
-        self.raster
-            .record_per_pixel(&mut passes, "brute", &self.pipeline, &self.group)?;
-        let frame = self
-            .raster
-            .finish_frame(ctx, passes, true, self.rsm.bytes.0)?;
+        self.rsm.record(passes, &self.raster.scene_gpu)?;
+        Ok(())
+    }
+
+    fn record_view(
+        &mut self,
+        ctx: &GpuContext,
+        _frame: &FrameInput,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<ViewResult, RenderError> {
+        self.raster.record_view_base(ctx, view, passes)?;
+        let t = &view.targets;
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("brute"),
+            layout: &self.layout,
+            entries: &[
+                buffer_binding(0, &view.frame_buffer),
+                buffer_binding(1, &self.params_buffer),
+                buffer_binding(2, &self.rsm.vals_buffer),
+                buffer_binding(3, &self.rsm.val_count_buffer),
+                view_binding(4, &t.depth),
+                view_binding(5, &t.normal),
+                view_binding(6, &t.diffuse),
+                view_binding(7, &t.specular),
+                view_binding(8, &t.radiance_indirect),
+            ],
+        });
+        view.record_per_pixel(passes, "brute", &self.pipeline, &group)?;
+        Ok(ViewResult::DirectAndIndirect)
+    }
+
+    fn end_frame(&mut self, ctx: &GpuContext, _timings: &FrameTimings) -> Result<(), RenderError> {
         self.vals = self.rsm.read_count(ctx)?;
-        Ok(frame)
+        Ok(())
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.raster.gpu_bytes() + self.rsm.bytes.0
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

@@ -1,6 +1,7 @@
-//! Rasterization shared by every method: shadow maps, the G-buffer, direct lighting and the
-//! SSAA resolve. Indirect methods render into [`FrameTargets::radiance_indirect`] between the
-//! direct pass and the resolve, so direct and indirect light stay separate to the end.
+//! Rasterization shared by every method: shadow maps (view-free), and per view the G-buffer
+//! and direct lighting. Indirect methods render into [`FrameTargets::radiance_indirect`]
+//! between the direct pass and the view's resolve, so direct and indirect light stay separate
+//! to the end.
 
 pub mod scene_gpu;
 pub mod shadows;
@@ -8,11 +9,12 @@ pub mod types;
 
 use glam::Mat4;
 
-use crate::gpu::{GpuBytes, GpuContext, GpuError, PassTimings, Passes};
-use crate::image_io::Image;
+use crate::frame::View;
+pub use crate::frame::{FrameOutput, FrameTargets};
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::scene::{Aabb, CameraView, Scene};
 use scene_gpu::{SceneGpu, SceneTooLarge};
-use types::{FrameUniforms, ResolveParams, ShadowView, Vertex};
+use types::{ShadowView, Vertex};
 
 /// Size and quality knobs shared by every method.
 #[derive(Clone, Copy, Debug)]
@@ -54,124 +56,12 @@ pub const GBUFFER_MATERIAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 pub const RADIANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
-/// Render targets at the supersampled resolution, plus the resolved outputs.
-pub struct FrameTargets {
-    pub render_width: u32,
-    pub render_height: u32,
-    pub depth: wgpu::TextureView,
-    pub normal: wgpu::TextureView,
-    pub diffuse: wgpu::TextureView,
-    pub specular: wgpu::TextureView,
-    pub emissive: wgpu::TextureView,
-    pub radiance_direct: wgpu::TextureView,
-    /// Indirect methods write their radiance here (render resolution).
-    pub radiance_indirect: wgpu::TextureView,
-    pub output_direct: wgpu::Texture,
-    pub output_indirect: wgpu::Texture,
-    pub bytes: GpuBytes,
-}
-
-impl FrameTargets {
-    fn new(device: &wgpu::Device, settings: &RenderSettings) -> Self {
-        let mut bytes = GpuBytes::default();
-        let (rw, rh) = (
-            settings.width * settings.ssaa,
-            settings.height * settings.ssaa,
-        );
-        let mut target = |label: &str, w: u32, h: u32, format, usage| {
-            bytes.texture_2d(device, label, (w, h), format, usage)
-        };
-        let attachment =
-            wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING;
-        let storage = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING;
-        let output = wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC;
-        let view = |t: wgpu::Texture| t.create_view(&wgpu::TextureViewDescriptor::default());
-        Self {
-            render_width: rw,
-            render_height: rh,
-            depth: view(target("gbuffer depth", rw, rh, DEPTH_FORMAT, attachment)),
-            normal: view(target(
-                "gbuffer normal",
-                rw,
-                rh,
-                GBUFFER_NORMAL_FORMAT,
-                attachment,
-            )),
-            diffuse: view(target(
-                "gbuffer diffuse",
-                rw,
-                rh,
-                GBUFFER_MATERIAL_FORMAT,
-                attachment,
-            )),
-            specular: view(target(
-                "gbuffer specular",
-                rw,
-                rh,
-                GBUFFER_MATERIAL_FORMAT,
-                attachment,
-            )),
-            emissive: view(target(
-                "gbuffer emissive",
-                rw,
-                rh,
-                GBUFFER_MATERIAL_FORMAT,
-                attachment,
-            )),
-            radiance_direct: view(target("radiance direct", rw, rh, RADIANCE_FORMAT, storage)),
-            // Compute passes (brute force) store into it; raster passes (sparse apply) draw.
-            radiance_indirect: view(target(
-                "radiance indirect",
-                rw,
-                rh,
-                RADIANCE_FORMAT,
-                storage | wgpu::TextureUsages::RENDER_ATTACHMENT,
-            )),
-            output_direct: target(
-                "output direct",
-                settings.width,
-                settings.height,
-                RADIANCE_FORMAT,
-                output,
-            ),
-            output_indirect: target(
-                "output indirect",
-                settings.width,
-                settings.height,
-                RADIANCE_FORMAT,
-                output,
-            ),
-            bytes,
-        }
-    }
-}
-
-/// One rendered frame: direct and indirect radiance at the output resolution (linear, W/(m²·sr)).
-pub struct FrameOutput {
-    pub direct: Image,
-    pub indirect: Image,
-    pub timings: PassTimings,
-    pub gpu_bytes: u64,
-}
-
-impl FrameOutput {
-    /// Direct + indirect, or the indirect part alone.
-    pub fn radiance(&self, indirect_only: bool) -> Image {
-        if indirect_only {
-            self.indirect.clone()
-        } else {
-            self.direct.add(&self.indirect)
-        }
-    }
-}
-
-/// Shadow maps, G-buffer, direct light and resolve for one scene at one output size.
+/// Shadow maps, G-buffer and direct light for one scene: the view-free part (scene upload,
+/// lights, shadow maps) is updated once per frame; the G-buffer and direct light are recorded
+/// per [`View`].
 pub struct Rasterizer {
     pub settings: RenderSettings,
     pub scene_gpu: SceneGpu,
-    pub targets: FrameTargets,
-    /// The `Frame` uniform of the current frame (camera, render size), for passes methods add.
-    pub frame_buffer: wgpu::Buffer,
     lights_buffer: wgpu::Buffer,
     shadow_views_buffer: wgpu::Buffer,
     shadow_layer_buffers: Vec<wgpu::Buffer>,
@@ -179,12 +69,11 @@ pub struct Rasterizer {
     shadow_layer_groups: Vec<wgpu::BindGroup>,
     shadow_pipeline: wgpu::RenderPipeline,
     gbuffer_pipeline: wgpu::RenderPipeline,
-    gbuffer_group: wgpu::BindGroup,
+    gbuffer_bgl: wgpu::BindGroupLayout,
     direct_pipeline: wgpu::ComputePipeline,
-    direct_group: wgpu::BindGroup,
-    resolve_pipeline: wgpu::ComputePipeline,
-    resolve_params_buffer: wgpu::Buffer,
-    resolve_group: wgpu::BindGroup,
+    direct_bgl: wgpu::BindGroupLayout,
+    shadow_array_view: wgpu::TextureView,
+    comparison_sampler: wgpu::Sampler,
     light_count: u32,
     shadow_bytes: GpuBytes,
     /// Model-space bounds of every mesh, for per-frame shadow-frustum fitting.
@@ -199,21 +88,8 @@ impl Rasterizer {
     ) -> Result<Self, RenderError> {
         let device = &ctx.device;
         let limits = device.limits();
-        if settings.width == 0 || settings.height == 0 || settings.ssaa == 0 {
-            return Err(RenderError::Settings(
-                "width, height and ssaa must be at least 1".into(),
-            ));
-        }
-        let (rw, rh) = (
-            settings.width * settings.ssaa,
-            settings.height * settings.ssaa,
-        );
-        if rw > limits.max_texture_dimension_2d || rh > limits.max_texture_dimension_2d {
-            return Err(RenderError::Settings(format!(
-                "{rw}×{rh} render targets (output × SSAA) exceed the device's limit of {} texels per side; lower --width/--height or --ssaa",
-                limits.max_texture_dimension_2d
-            )));
-        }
+        // The mono view's size is checked here so that a bad size fails before any upload.
+        crate::frame::check_size(ctx, settings.width, settings.height, settings.ssaa)?;
         let shadow_resolution = settings
             .shadow_resolution
             .clamp(16, limits.max_texture_dimension_2d);
@@ -234,11 +110,9 @@ impl Rasterizer {
             )));
         }
         let scene_gpu = SceneGpu::upload(ctx, scene)?;
-        let targets = FrameTargets::new(device, &settings);
         let mut shadow_bytes = GpuBytes::default();
 
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let frame_buffer = shadow_bytes.uniform::<FrameUniforms>(device, "frame uniforms");
         let lights_buffer = shadow_bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -354,20 +228,6 @@ impl Rasterizer {
                 storage_entry(1, wgpu::ShaderStages::VERTEX),
             ],
         });
-        let gbuffer_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer frame"),
-            layout: &frame_bgl,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: frame_buffer.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: scene_gpu.instance_buffer.as_entire_binding(),
-                },
-            ],
-        });
         let gbuffer_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer"),
             bind_group_layouts: &[Some(&frame_bgl), Some(&scene_gpu.material_layout)],
@@ -432,59 +292,7 @@ impl Rasterizer {
             compare: Some(wgpu::CompareFunction::LessEqual),
             ..Default::default()
         });
-        let direct_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("direct light"),
-            layout: &direct_bgl,
-            entries: &[
-                buffer_binding(0, &frame_buffer),
-                buffer_binding(1, &lights_buffer),
-                buffer_binding(2, &shadow_views_buffer),
-                view_binding(3, &shadow_array_view),
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::Sampler(&comparison_sampler),
-                },
-                view_binding(5, &targets.depth),
-                view_binding(6, &targets.normal),
-                view_binding(7, &targets.diffuse),
-                view_binding(8, &targets.specular),
-                view_binding(9, &targets.emissive),
-                view_binding(10, &targets.radiance_direct),
-            ],
-        });
         let direct_pipeline = compute_pipeline(device, "direct light", &direct_module, &direct_bgl);
-
-        // Resolve.
-        let resolve_module = ctx.shader("resolve.wgsl");
-        let resolve_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("resolve"),
-            entries: &[
-                uniform_entry(0, cs),
-                texture_entry(1, cs),
-                texture_entry(2, cs),
-                storage_texture_entry(3, cs),
-                storage_texture_entry(4, cs),
-            ],
-        });
-        let resolve_params_buffer = shadow_bytes.uniform::<ResolveParams>(device, "resolve params");
-        let out_direct_view = targets
-            .output_direct
-            .create_view(&wgpu::TextureViewDescriptor::default());
-        let out_indirect_view = targets
-            .output_indirect
-            .create_view(&wgpu::TextureViewDescriptor::default());
-        let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("resolve"),
-            layout: &resolve_bgl,
-            entries: &[
-                buffer_binding(0, &resolve_params_buffer),
-                view_binding(1, &targets.radiance_direct),
-                view_binding(2, &targets.radiance_indirect),
-                view_binding(3, &out_direct_view),
-                view_binding(4, &out_indirect_view),
-            ],
-        });
-        let resolve_pipeline = compute_pipeline(device, "resolve", &resolve_module, &resolve_bgl);
 
         if scene.lights.is_empty() {
             log::warn!(
@@ -499,8 +307,6 @@ impl Rasterizer {
                 ..settings
             },
             scene_gpu,
-            targets,
-            frame_buffer,
             lights_buffer,
             shadow_views_buffer,
             shadow_layer_buffers,
@@ -508,31 +314,25 @@ impl Rasterizer {
             shadow_layer_groups,
             shadow_pipeline,
             gbuffer_pipeline,
-            gbuffer_group,
+            gbuffer_bgl: frame_bgl,
             direct_pipeline,
-            direct_group,
-            resolve_pipeline,
-            resolve_params_buffer,
-            resolve_group,
+            direct_bgl,
+            shadow_array_view,
+            comparison_sampler,
             light_count: scene.lights.len() as u32,
             shadow_bytes,
             mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
         })
     }
 
-    /// GPU bytes of everything the rasterizer owns: scene, targets, shadow maps, uniforms.
+    /// GPU bytes of everything the rasterizer owns: scene, shadow maps, uniforms.
     pub fn gpu_bytes(&self) -> u64 {
-        self.scene_gpu.bytes.0 + self.targets.bytes.0 + self.shadow_bytes.0
+        self.scene_gpu.bytes.0 + self.shadow_bytes.0
     }
 
-    /// Uploads this frame's transforms, lights, shadow views and camera.
-    pub fn prepare(
-        &self,
-        ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) {
+    /// Uploads this frame's transforms, lights and shadow views (no camera: views have
+    /// their own).
+    pub fn update(&self, ctx: &GpuContext, scene: &Scene, world_from_node: &[Mat4]) {
         let queue = &ctx.queue;
         self.scene_gpu
             .update_transforms(ctx, scene, world_from_node);
@@ -555,16 +355,18 @@ impl Rasterizer {
         for (buffer, view) in self.shadow_layer_buffers.iter().zip(&setup.views) {
             queue.write_buffer(buffer, 0, bytemuck::bytes_of(view));
         }
-        let clip_from_world = camera.clip_from_world();
-        let frame = FrameUniforms {
-            clip_from_world: clip_from_world.to_cols_array_2d(),
-            world_from_clip: clip_from_world.inverse().to_cols_array_2d(),
-            camera_position: camera.position().extend(1.0).to_array(),
-            render_size: [self.targets.render_width, self.targets.render_height],
-            light_count: self.light_count,
-            shadow_pcf_radius: self.settings.pcf_radius,
-        };
-        queue.write_buffer(&self.frame_buffer, 0, bytemuck::bytes_of(&frame));
+    }
+
+    /// The view-free half of every frame: uploads and shadow maps.
+    pub fn update_and_record(
+        &self,
+        ctx: &GpuContext,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        passes: &mut Passes,
+    ) -> Result<(), GpuError> {
+        self.update(ctx, scene, world_from_node);
+        self.record_shadows(passes)
     }
 
     /// Shadow maps of every light (pass "shadow").
@@ -595,9 +397,35 @@ impl Rasterizer {
         Ok(())
     }
 
+    /// Uploads the view's camera and records its G-buffer and direct light: what every
+    /// method draws first in a view.
+    pub fn record_view_base(
+        &self,
+        ctx: &GpuContext,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<(), GpuError> {
+        view.upload(ctx, self.light_count, self.settings.pcf_radius);
+        self.record_gbuffer(ctx, view, passes)?;
+        self.record_direct(ctx, view, passes)
+    }
+
     /// Normals and materials of the visible surfaces (pass "gbuffer").
-    pub fn record_gbuffer(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        let t = &self.targets;
+    pub fn record_gbuffer(
+        &self,
+        ctx: &GpuContext,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<(), GpuError> {
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("gbuffer frame"),
+            layout: &self.gbuffer_bgl,
+            entries: &[
+                buffer_binding(0, &view.frame_buffer),
+                buffer_binding(1, &self.scene_gpu.instance_buffer),
+            ],
+        });
+        let t = &view.targets;
         passes.render(
             "gbuffer",
             &[
@@ -616,109 +444,45 @@ impl Rasterizer {
             }),
             |pass| {
                 pass.set_pipeline(&self.gbuffer_pipeline);
-                pass.set_bind_group(0, &self.gbuffer_group, &[]);
+                pass.set_bind_group(0, &group, &[]);
                 self.scene_gpu.draw(pass, Some(1));
             },
         )
     }
 
-    /// What every method draws first: shadow maps, the G-buffer and direct light.
-    pub fn record_base(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        self.record_shadows(passes)?;
-        self.record_gbuffer(passes)?;
-        self.record_direct(passes)
-    }
-
     /// Direct light and emission per pixel (pass "direct").
-    pub fn record_direct(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        let (w, h) = (self.targets.render_width, self.targets.render_height);
-        passes.compute("direct", |pass| {
-            pass.set_pipeline(&self.direct_pipeline);
-            pass.set_bind_group(0, &self.direct_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })
-    }
-
-    /// SSAA box filter of direct and indirect radiance to the output size (pass "resolve").
-    pub fn record_resolve(
+    pub fn record_direct(
         &self,
         ctx: &GpuContext,
+        view: &View,
         passes: &mut Passes,
-        has_indirect: bool,
     ) -> Result<(), GpuError> {
-        let params = ResolveParams {
-            output_size: [self.settings.width, self.settings.height],
-            ssaa: self.settings.ssaa,
-            has_indirect: has_indirect as u32,
-        };
-        ctx.queue
-            .write_buffer(&self.resolve_params_buffer, 0, bytemuck::bytes_of(&params));
-        let (w, h) = (self.settings.width, self.settings.height);
-        passes.compute("resolve", |pass| {
-            pass.set_pipeline(&self.resolve_pipeline);
-            pass.set_bind_group(0, &self.resolve_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })
+        let t = &view.targets;
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("direct light"),
+            layout: &self.direct_bgl,
+            entries: &[
+                buffer_binding(0, &view.frame_buffer),
+                buffer_binding(1, &self.lights_buffer),
+                buffer_binding(2, &self.shadow_views_buffer),
+                view_binding(3, &self.shadow_array_view),
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::Sampler(&self.comparison_sampler),
+                },
+                view_binding(5, &t.depth),
+                view_binding(6, &t.normal),
+                view_binding(7, &t.diffuse),
+                view_binding(8, &t.specular),
+                view_binding(9, &t.emissive),
+                view_binding(10, &t.radiance_direct),
+            ],
+        });
+        view.record_per_pixel(passes, "direct", &self.direct_pipeline, &group)
     }
 
-    /// A compute pass with one 8×8 workgroup per render-target tile (per-pixel methods).
-    pub fn record_per_pixel(
-        &self,
-        passes: &mut Passes,
-        label: &str,
-        pipeline: &wgpu::ComputePipeline,
-        group: &wgpu::BindGroup,
-    ) -> Result<(), GpuError> {
-        let (w, h) = (self.targets.render_width, self.targets.render_height);
-        passes.compute(label, |pass| {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
-        })
-    }
-
-    /// The end of every frame: resolve, submit, read back. `method_bytes` are the GPU bytes
-    /// the method owns besides the rasterizer's.
-    pub fn finish_frame(
-        &self,
-        ctx: &GpuContext,
-        mut passes: Passes,
-        has_indirect: bool,
-        method_bytes: u64,
-    ) -> Result<FrameOutput, RenderError> {
-        self.record_resolve(ctx, &mut passes, has_indirect)?;
-        let timings = passes.finish()?;
-        let (direct, indirect) = self.read_outputs(ctx, has_indirect)?;
-        Ok(FrameOutput {
-            direct,
-            indirect,
-            timings,
-            gpu_bytes: self.gpu_bytes() + method_bytes,
-        })
-    }
-
-    /// Reads the resolved direct and indirect images back (the indirect one only when a
-    /// method wrote it; otherwise it is black).
-    pub fn read_outputs(
-        &self,
-        ctx: &GpuContext,
-        has_indirect: bool,
-    ) -> Result<(Image, Image), GpuError> {
-        let (w, h) = (self.settings.width, self.settings.height);
-        let direct = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_direct)?;
-        let indirect = if has_indirect {
-            Image::from_rgba(
-                w,
-                h,
-                crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_indirect)?,
-            )
-        } else {
-            Image::new(w, h)
-        };
-        Ok((Image::from_rgba(w, h, direct), indirect))
-    }
-
-    /// Shadows, G-buffer, direct light and resolve: the whole direct-only frame.
+    /// Shadows, G-buffer, direct light and resolve of one camera, read back: the whole
+    /// direct-only frame (what `--method direct` renders).
     pub fn render_direct(
         &self,
         ctx: &GpuContext,
@@ -726,10 +490,21 @@ impl Rasterizer {
         world_from_node: &[Mat4],
         camera: &CameraView,
     ) -> Result<FrameOutput, RenderError> {
-        self.prepare(ctx, scene, world_from_node, camera);
-        let mut passes = Passes::new(ctx, self.shadow_layer_views.len() as u32 + 8);
-        self.record_base(&mut passes)?;
-        self.finish_frame(ctx, passes, false, 0)
+        let s = self.settings;
+        let view = View::new(ctx, "main", *camera, (s.width, s.height), s.ssaa)?;
+        let mut passes = Passes::new(ctx);
+        self.update_and_record(ctx, scene, world_from_node, &mut passes)?;
+        passes.set_scope(crate::gpu::Scope::View(0));
+        self.record_view_base(ctx, &view, &mut passes)?;
+        view.record_resolve(ctx, &mut passes, false)?;
+        let timings = passes.finish()?;
+        let (direct, indirect) = view.read(ctx, false)?;
+        Ok(FrameOutput {
+            direct,
+            indirect,
+            timings,
+            gpu_bytes: self.gpu_bytes() + view.gpu_bytes(),
+        })
     }
 }
 

@@ -111,10 +111,11 @@ macro_rules! shared_layout {
 }
 pub(crate) use shared_layout;
 
-/// Every struct shared between Rust and WGSL, across all techniques.
+/// The base layer's structs shared with WGSL (each technique lists its own; the registry
+/// collects them all for the layout test).
 pub fn shared_layouts() -> Vec<SharedLayout> {
     use shared_layout as layout;
-    let mut layouts = vec![
+    vec![
         layout!(
             "Frame",
             "common.wgsl",
@@ -173,20 +174,5 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             ResolveParams,
             [output_size, ssaa, has_indirect]
         ),
-        layout!(
-            "LpvParams",
-            "lpv_common.wgsl",
-            crate::peers::lpv::LpvParams,
-            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
-        ),
-        layout!(
-            "LpvFace",
-            "lpv_common.wgsl",
-            crate::peers::lpv::LpvFace,
-            [y0, y1, y2, offset, corners_lo, corners_hi]
-        ),
-    ];
-    layouts.extend(crate::vals::shared_layouts());
-    layouts.extend(crate::atlas::shared_layouts());
-    layouts
+    ]
 }

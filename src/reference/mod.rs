@@ -14,11 +14,11 @@ use std::time::Instant;
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
-use crate::gpu::timing::PassTimings;
-use crate::gpu::GpuContext;
+use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::gpu::{GpuContext, Passes};
 use crate::image_io::Image;
-use crate::method::{Method, MethodOptions};
-use crate::raster::{FrameOutput, RenderError, RenderSettings};
+use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
+use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{CameraView, Scene};
 pub use rt::{Hit, Tracer};
 use sampling::{cosine_hemisphere, sample_brdf, Rng};
@@ -211,8 +211,16 @@ pub fn trace_path(
 pub fn camera_ray(camera: &CameraView, width: u32, height: u32, px: f32, py: f32) -> (Vec3, Vec3) {
     let ndc_x = px / width as f32 * 2.0 - 1.0;
     let ndc_y = 1.0 - py / height as f32 * 2.0;
-    let tan = (camera.yfov * 0.5).tan();
-    let view_dir = Vec3::new(ndc_x * tan * camera.aspect, ndc_y * tan, -1.0);
+    let view_dir = match camera.off_axis {
+        None => {
+            let tan = (camera.yfov * 0.5).tan();
+            Vec3::new(ndc_x * tan * camera.aspect, ndc_y * tan, -1.0)
+        }
+        Some([l, r, b, t]) => {
+            let lerp = |a: f32, c: f32, s: f32| a + (c - a) * (s * 0.5 + 0.5);
+            Vec3::new(lerp(l, r, ndc_x), lerp(b, t, ndc_y), -1.0)
+        }
+    };
     let m = camera.world_from_view;
     let dir = m.transform_vector3(view_dir).normalize();
     // Start on the near plane, as rasterization does.
@@ -486,29 +494,85 @@ impl ReferenceMethod {
     }
 }
 
+pub static ENTRY: Entry = Entry {
+    name: "reference",
+    help: "CPU path tracer, the ground truth",
+    options: &[
+        OptionSpec {
+            name: "bounces",
+            kind: OptionKind::Text,
+            default: "1",
+            help: "indirect bounces: 0 = direct only, 1, 2, … or inf",
+        },
+        OptionSpec {
+            name: "spp",
+            kind: OptionKind::Int {
+                min: 1,
+                max: 1 << 20,
+            },
+            default: "64",
+            help: "paths per pixel",
+        },
+        OptionSpec {
+            name: "seed",
+            kind: OptionKind::Int {
+                min: 0,
+                max: i64::MAX,
+            },
+            default: "1",
+            help: "random seed of the paths",
+        },
+    ],
+    create: |_ctx, _scene, settings, options| {
+        Ok(Box::new(ReferenceMethod::new(settings, options)?))
+    },
+};
+
 impl Method for ReferenceMethod {
     fn name(&self) -> &'static str {
         "reference"
     }
 
-    fn render(
+    fn settings(&self) -> RenderSettings {
+        RenderSettings {
+            width: self.settings.width,
+            height: self.settings.height,
+            ..RenderSettings::default()
+        }
+    }
+
+    fn update(
         &mut self,
         _ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
-        let image = render(scene, world_from_node, camera, &self.settings);
-        let mut timings = PassTimings::default();
-        timings.add("path_trace", image.seconds * 1000.0);
-        let frame = FrameOutput {
-            direct: image.direct.clone(),
-            indirect: image.indirect.clone(),
-            timings,
-            gpu_bytes: 0,
+        _frame: &FrameInput,
+        _views: &[&View],
+        _passes: &mut Passes,
+    ) -> Result<(), RenderError> {
+        Ok(())
+    }
+
+    /// Path-traces the view on the CPU and writes the images into its outputs.
+    fn record_view(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &FrameInput,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<ViewResult, RenderError> {
+        let settings = ReferenceSettings {
+            width: view.width,
+            height: view.height,
+            ..self.settings
         };
+        let image = render(frame.scene, frame.world_from_node, &view.camera, &settings);
+        passes.add_cpu("path_trace", image.seconds * 1000.0);
+        view.write_outputs(ctx, &image.direct, &image.indirect);
         self.last = Some(image);
-        Ok(frame)
+        Ok(ViewResult::Outputs)
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        0
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

@@ -274,9 +274,21 @@ pub struct CameraView {
     pub aspect: f32,
     pub znear: f32,
     pub zfar: f32,
+    /// An off-axis frustum (a CAVE wall seen from a tracked head): the view-space x and y of
+    /// the frustum's left, right, bottom and top edges at distance 1 in front of the eye.
+    /// `None` is the symmetric frustum of `yfov` and `aspect`.
+    pub off_axis: Option<[f32; 4]>,
 }
 
 impl CameraView {
+    /// Left, right, bottom and top of the frustum at unit distance (view space, −z forward).
+    pub fn tangent_extents(&self) -> [f32; 4] {
+        self.off_axis.unwrap_or_else(|| {
+            let t = (self.yfov * 0.5).tan();
+            [-t * self.aspect, t * self.aspect, -t, t]
+        })
+    }
+
     pub fn position(&self) -> Vec3 {
         self.world_from_view.w_axis.truncate()
     }
@@ -287,9 +299,26 @@ impl CameraView {
 
     /// Right-handed projection with depth in [0, 1] (wgpu's clip space).
     pub fn clip_from_view(&self) -> Mat4 {
-        // glam 0.34 moved projections to `glam::camera`; `directx` is wgpu's convention
-        // (right-handed view space, NDC z in [0, 1], y up), the old `Mat4::perspective_rh`.
-        glam::camera::rh::proj::directx::perspective(self.yfov, self.aspect, self.znear, self.zfar)
+        let Some([l, r, b, t]) = self.off_axis else {
+            // glam 0.34 moved projections to `glam::camera`; `directx` is wgpu's convention
+            // (right-handed view space, NDC z in [0, 1], y up), the old `Mat4::perspective_rh`.
+            return glam::camera::rh::proj::directx::perspective(
+                self.yfov,
+                self.aspect,
+                self.znear,
+                self.zfar,
+            );
+        };
+        // The general (off-axis) perspective with the same depth convention: x_ndc = ±1 on
+        // the left/right edges, y_ndc = ±1 on bottom/top, z_ndc = 0 at znear and 1 at zfar.
+        let (n, f) = (self.znear, self.zfar);
+        let (sx, sy) = (2.0 / (r - l), 2.0 / (t - b));
+        Mat4::from_cols(
+            glam::Vec4::new(sx, 0.0, 0.0, 0.0),
+            glam::Vec4::new(0.0, sy, 0.0, 0.0),
+            glam::Vec4::new((r + l) / (r - l), (t + b) / (t - b), f / (n - f), -1.0),
+            glam::Vec4::new(0.0, 0.0, n * f / (n - f), 0.0),
+        )
     }
 
     pub fn clip_from_world(&self) -> Mat4 {
@@ -491,6 +520,7 @@ impl Scene {
                     aspect: c.aspect.unwrap_or(output_aspect),
                     znear: c.znear.max(1e-4),
                     zfar: c.zfar.unwrap_or(far_needed * 1.5).max(c.znear * 2.0),
+                    off_axis: None,
                 }
             }
             None => default_camera(&bounds, radius, output_aspect),
@@ -525,6 +555,7 @@ fn default_camera(bounds: &Aabb, radius: f32, aspect: f32) -> CameraView {
         aspect,
         znear: (fit - radius).max(radius * 1e-3),
         zfar: fit + radius * 2.0,
+        off_axis: None,
     }
 }
 

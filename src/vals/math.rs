@@ -17,22 +17,7 @@ pub const COS_MIN: f32 = 1e-2;
 /// Interpolation weight sum below which a vertex gets no light rather than a division by ~0.
 pub const WEIGHT_EPSILON: f32 = 1e-6;
 
-/// One virtual area light: a disc at `position` facing `normal` that reflects `flux` (W, RGB),
-/// with the area `area` (m²) of its footprint had the surface faced the light.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct Val {
-    pub position: Vec3,
-    pub normal: Vec3,
-    pub flux: Vec3,
-    pub area: f32,
-}
-
-impl Val {
-    /// r² = A/π.
-    pub fn radius_squared(&self) -> f32 {
-        self.area / PI
-    }
-}
+pub use crate::light::Val;
 
 /// A sparse receiver point in world space with its material's Phong exponent.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]

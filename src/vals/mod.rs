@@ -8,23 +8,21 @@
 
 pub mod math;
 pub mod points;
-pub mod rsm;
 pub mod sparse;
 
 use std::sync::Arc;
 use std::time::Instant;
 
-use glam::Mat4;
-
-use crate::gpu::{GpuContext, GpuError, Passes};
-use crate::method::{Method, MethodOptions};
-use crate::raster::{FrameOutput, Rasterizer, RenderError, RenderSettings};
-use crate::scene::{CameraView, Scene};
+use crate::frame::{FrameInput, IndirectLayer, Method, View, ViewCache, ViewResult};
+use crate::gpu::{FrameTimings, GpuContext, Passes};
+use crate::light::rsm::Rsm;
+use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
+use crate::raster::{Rasterizer, RenderError, RenderSettings};
+use crate::scene::Scene;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
-use rsm::Rsm;
 pub use sparse::Stage;
-use sparse::{SparseGpu, SparseOptions};
+use sparse::{KernelGroups, SparseGpu, SparseOptions};
 
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,6 +34,7 @@ pub struct SparseSettings {
     /// Placement seed.
     pub seed: u64,
     pub options: SparseOptions,
+    pub glossy_eye: GlossyEye,
 }
 
 impl Default for SparseSettings {
@@ -50,6 +49,7 @@ impl Default for SparseSettings {
                 occlusion: OcclusionMode::Sum,
                 weights: Weights::Geometric,
             },
+            glossy_eye: GlossyEye::Mid,
         }
     }
 }
@@ -88,6 +88,10 @@ impl SparseSettings {
                     _ => Weights::Geometric,
                 },
             },
+            glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
+                "per-view" => GlossyEye::PerView,
+                _ => GlossyEye::Mid,
+            },
         })
     }
 }
@@ -96,12 +100,6 @@ impl SparseSettings {
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     use crate::raster::types::shared_layout;
     vec![
-        shared_layout!(
-            "Val",
-            "vals_common.wgsl",
-            rsm::GpuVal,
-            [position_area, normal, flux]
-        ),
         shared_layout!(
             "SparseParams",
             "vals_common.wgsl",
@@ -124,30 +122,6 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             sparse::InstanceRange,
             [vertex_offset, vertex_count, point_offset, link_offset]
         ),
-        shared_layout!(
-            "RsmView",
-            "vals_rsm.wgsl",
-            rsm::RsmView,
-            [
-                clip_from_world,
-                light_index,
-                resolution,
-                tan_half_fov,
-                texel_area
-            ]
-        ),
-        shared_layout!(
-            "RsmSize",
-            "vals_from_rsm.wgsl",
-            rsm::RsmSize,
-            [resolution, layers, capacity, pad]
-        ),
-        shared_layout!(
-            "FmaParams",
-            "bench_fma.wgsl",
-            crate::bench::FmaParams,
-            [iterations, pad0, pad1, pad2]
-        ),
     ]
 }
 
@@ -167,25 +141,73 @@ pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
     })
 }
 
-/// Indirect light that a composed method adds on top of the VAL bounce (`sparse+atlas`: the
-/// atlas's bounces 2..B). With a layer set, the sparse apply pass draws the VAL bounce into
-/// [`IndirectLayer::vals_target`] and the layer's `record` then writes `radiance_indirect`
-/// (VAL bounce + its own light) after it. The layer reads the same G-buffer.
-pub trait IndirectLayer {
-    /// The composed method's name (as given to `--method`).
-    fn method_name(&self) -> &'static str;
-    /// Per-frame uploads (camera, transforms).
-    fn prepare(&self, ctx: &GpuContext, world_from_node: &[Mat4], camera: &CameraView);
-    /// Where the sparse apply pass draws (`RADIANCE_FORMAT`, render resolution).
-    fn vals_target(&self) -> &wgpu::TextureView;
-    /// Writes `radiance_indirect` from the VAL bounce in `vals_target` plus the layer's light.
-    fn record(&self, passes: &mut Passes) -> Result<(), GpuError>;
-    fn gpu_bytes(&self) -> u64;
-    /// Extra keys for the method's JSON report.
-    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
-        serde_json::Map::new()
-    }
+/// Where the glossy lobes of the solution are aimed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GlossyEye {
+    /// One solution for every view, for the mid-eye of the frame's views.
+    Mid,
+    /// The glossy half re-gathered for each view's own eye; everything else shared.
+    PerView,
 }
+
+/// The sparse method's options, as the registry lists them.
+pub const OPTIONS: &[OptionSpec] = &[
+    OptionSpec {
+        name: "rsm",
+        kind: OptionKind::Int { min: 1, max: 2048 },
+        default: "128",
+        help: "RSM resolution per light layer: R×R texels, six layers for a point light",
+    },
+    OptionSpec {
+        name: "sparse-points",
+        kind: OptionKind::Int { min: 1, max: 1 << 20 },
+        default: "4096",
+        help: "sparse receiver points for the whole scene",
+    },
+    OptionSpec {
+        name: "seed",
+        kind: OptionKind::Int { min: 0, max: i64::MAX },
+        default: "1",
+        help: "seed of the sparse-point placement",
+    },
+    OptionSpec {
+        name: "tile",
+        kind: OptionKind::Int { min: 1, max: 256 },
+        default: "128",
+        help: "VALs per workgroup-memory tile in the gather",
+    },
+    OptionSpec {
+        name: "glossy",
+        kind: OptionKind::Choice(&["on", "off"]),
+        default: "on",
+        help: "glossy indirect light",
+    },
+    OptionSpec {
+        name: "glossy-eye",
+        kind: OptionKind::Choice(&["mid", "per-view"]),
+        default: "mid",
+        help: "the eye of the glossy gather: one solution at the views' mid-eye, or the glossy half per view",
+    },
+    OptionSpec {
+        name: "occlusion",
+        kind: OptionKind::Choice(&["sum", "union", "off"]),
+        default: "sum",
+        help: "indirect occlusion from the sparse points' discs",
+    },
+    OptionSpec {
+        name: "weights",
+        kind: OptionKind::Choice(&["geometric", "flux"]),
+        default: "geometric",
+        help: "weights of the averaged light positions",
+    },
+];
+
+pub static ENTRY: Entry = Entry {
+    name: "sparse",
+    help: "direct + one-bounce diffuse and glossy light from RSM virtual area lights gathered at sparse model-space points",
+    options: OPTIONS,
+    create,
+};
 
 pub struct SparseMethod {
     pub settings: SparseSettings,
@@ -200,6 +222,8 @@ pub struct SparseMethod {
     pub meshes_computed: usize,
     /// Further indirect light added after the apply pass (`None` for `--method sparse`).
     pub layer: Option<Box<dyn IndirectLayer>>,
+    /// Per-view parameter blocks and kernel bindings (`--glossy-eye per-view`).
+    per_view: ViewCache<(wgpu::Buffer, KernelGroups)>,
     report: serde_json::Map<String, serde_json::Value>,
 }
 
@@ -220,8 +244,6 @@ impl SparseMethod {
             ctx,
             scene,
             &raster.scene_gpu,
-            &raster.targets,
-            &raster.frame_buffer,
             &points,
             &rsm.vals_buffer,
             &rsm.val_count_buffer,
@@ -236,6 +258,7 @@ impl SparseMethod {
             preprocess_ms,
             meshes_computed,
             layer: None,
+            per_view: ViewCache::default(),
             report: Default::default(),
         })
     }
@@ -251,65 +274,91 @@ impl Method for SparseMethod {
         self.layer.as_ref().map_or("sparse", |l| l.method_name())
     }
 
-    fn render(
+    fn settings(&self) -> RenderSettings {
+        self.raster.settings
+    }
+
+    fn update(
         &mut self,
         ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
+        frame: &FrameInput,
+        views: &[&View],
+        passes: &mut Passes,
+    ) -> Result<(), RenderError> {
         let opts = self.settings.options;
-        self.raster.prepare(ctx, scene, world_from_node, camera);
-        self.rsm.prepare(ctx, scene, world_from_node);
-        self.sparse.prepare(ctx, camera.position(), &opts);
-        if let Some(layer) = &self.layer {
-            layer.prepare(ctx, world_from_node, camera);
+        self.raster
+            .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
+        self.rsm.prepare(ctx, frame.scene, frame.world_from_node);
+        self.sparse.prepare(ctx, frame.solution_eye, &opts);
+        self.per_view.retain(views);
+        if let Some(layer) = &mut self.layer {
+            layer.update(ctx, frame, views);
         }
-        let mut passes = Passes::new(ctx, self.rsm.layer_count + 36);
-        self.raster.record_base(&mut passes)?;
-        self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
-        let has_indirect = self.last_stage == Stage::Apply;
-        match self.layer.as_ref().filter(|_| has_indirect) {
-            None => self.sparse.record(
-                &mut passes,
-                &self.raster.scene_gpu,
-                &self.raster.targets,
-                &opts,
-                self.last_stage,
+        self.rsm.record(passes, &self.raster.scene_gpu)?;
+        self.sparse
+            .record_solution(passes, &opts, self.last_stage.min(Stage::Interpolate))?;
+        Ok(())
+    }
+
+    fn record_view(
+        &mut self,
+        ctx: &GpuContext,
+        _frame: &FrameInput,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<ViewResult, RenderError> {
+        let opts = self.settings.options;
+        self.raster.record_view_base(ctx, view, passes)?;
+        if self.last_stage < Stage::Apply {
+            return Ok(ViewResult::Direct);
+        }
+        if self.settings.glossy_eye == GlossyEye::PerView && opts.glossy {
+            let sparse = &self.sparse;
+            let (params, groups) = self.per_view.get_or_try_insert(view, || {
+                let mut bytes = crate::gpu::GpuBytes::default();
+                let params =
+                    bytes.uniform::<sparse::SparseParams>(&ctx.device, "view sparse params");
+                let groups = sparse.bind_kernels(&ctx.device, &params);
+                Ok((params, groups))
+            })?;
+            let block = sparse.params(view.camera.position(), &opts, true);
+            ctx.queue
+                .write_buffer(params, 0, bytemuck::bytes_of(&block));
+            sparse.record_view_glossy(passes, &opts, groups)?;
+        }
+        let (sparse, scene_gpu) = (&self.sparse, &self.raster.scene_gpu);
+        match &mut self.layer {
+            None => sparse.record_apply(
+                ctx,
+                passes,
+                scene_gpu,
+                view,
+                &view.targets.radiance_indirect,
             )?,
-            Some(layer) => {
-                self.sparse.record_into(
-                    &mut passes,
-                    &self.raster.scene_gpu,
-                    &self.raster.targets,
-                    &opts,
-                    self.last_stage,
-                    layer.vals_target(),
-                )?;
-                layer.record(&mut passes)?;
-            }
+            Some(layer) => layer.record_view(ctx, view, passes, &mut |passes, target| {
+                sparse.record_apply(ctx, passes, scene_gpu, view, target)
+            })?,
         }
-        let solution = self.solution_bytes();
-        let layer_bytes = self.layer.as_ref().map_or(0, |l| l.gpu_bytes());
-        let frame = self.raster.finish_frame(
-            ctx,
-            passes,
-            has_indirect,
-            self.rsm.bytes.0 + solution + layer_bytes,
-        )?;
+        Ok(ViewResult::DirectAndIndirect)
+    }
+
+    fn end_frame(&mut self, ctx: &GpuContext, timings: &FrameTimings) -> Result<(), RenderError> {
+        let opts = self.settings.options;
         let vals = self.rsm.read_count(ctx)?;
         let (clamped_d, clamped_s) = self.sparse.read_clamps(ctx)?;
         let points = self.sparse.point_count.max(1) as f64;
         let per_point = (self.sparse.point_bytes as f64) / points;
         let vertices = self.sparse.vertex_count.max(1) as f64;
+        let solution = self.solution_bytes();
         self.report = serde_json::json!({
-            "table2": table2(&frame.timings),
+            "table2": table2(&timings.merged()),
             "vals": vals,
             "rsm": self.settings.rsm,
             "sparse_points": self.sparse.point_count,
             "instance_vertices": self.sparse.vertex_count,
             "tile": opts.tile,
             "glossy": if opts.glossy { "on" } else { "off" },
+            "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),
             "preprocess_ms": crate::gpu::timing::round3(self.preprocess_ms),
@@ -326,7 +375,12 @@ impl Method for SparseMethod {
         if let Some(layer) = &self.layer {
             self.report.extend(layer.report());
         }
-        Ok(frame)
+        Ok(())
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        let layer = self.layer.as_ref().map_or(0, |l| l.gpu_bytes());
+        self.raster.gpu_bytes() + self.rsm.bytes.0 + self.solution_bytes() + layer
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
@@ -334,7 +388,7 @@ impl Method for SparseMethod {
     }
 }
 
-pub fn create(
+fn create(
     ctx: &GpuContext,
     scene: &Scene,
     render: RenderSettings,

@@ -16,32 +16,18 @@ use half::f16;
 
 use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
+use crate::frame::View;
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
     buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
-    uniform_entry, view_binding, FrameTargets, RenderError, ScenePipeline, POSITION_ONLY,
-    RADIANCE_FORMAT,
+    uniform_entry, view_binding, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
-/// `SparseParams` in `shaders/vals_common.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct SparseParams {
-    pub eye: [f32; 4],
-    pub point_count: u32,
-    pub instance_count: u32,
-    pub flags: u32,
-    pub occlusion_mode: u32,
-    pub tile: u32,
-    pub vertex_count: u32,
-    pub pad0: u32,
-    pub pad1: u32,
-}
-
-pub const FLAG_GLOSSY: u32 = 1;
-pub const FLAG_FLUX_WEIGHTS: u32 = 2;
+pub use crate::light::{
+    ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY,
+};
 
 /// `InstanceRange` in `shaders/vals_common.wgsl`.
 #[repr(C)]
@@ -138,13 +124,43 @@ pub struct SparseGpu {
     point_extra: wgpu::Buffer,
     pub clamp_buffer: wgpu::Buffer,
     vertex_lights: wgpu::Buffer,
-    gather: (wgpu::ComputePipeline, wgpu::BindGroup),
-    renormalize: (wgpu::ComputePipeline, wgpu::BindGroup),
-    occlusion: (wgpu::ComputePipeline, wgpu::BindGroup),
-    interpolate: (wgpu::ComputePipeline, wgpu::BindGroup),
+    ranges_buffer: wgpu::Buffer,
+    gather: Kernel,
+    renormalize: Kernel,
+    occlusion: Kernel,
+    interpolate: Kernel,
     apply_pipeline: wgpu::RenderPipeline,
-    apply_group: wgpu::BindGroup,
+    apply_bgl: wgpu::BindGroupLayout,
 }
+
+/// One compute pass of the solution: pipeline, layout, and the buffers after the parameter
+/// block in binding order.
+struct Kernel {
+    label: &'static str,
+    pipeline: wgpu::ComputePipeline,
+    layout: wgpu::BindGroupLayout,
+    buffers: Vec<wgpu::Buffer>,
+    /// Bound to the solution's own parameter block.
+    group: Option<wgpu::BindGroup>,
+}
+
+impl Kernel {
+    fn bind(&self, device: &wgpu::Device, params: &wgpu::Buffer) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = std::iter::once(params)
+            .chain(&self.buffers)
+            .enumerate()
+            .map(|(i, b)| buffer_binding(i as u32, b))
+            .collect();
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+}
+
+/// The solution kernels bound to one view's parameter block.
+pub struct KernelGroups([wgpu::BindGroup; 4]);
 
 /// Which passes a frame runs; tests stop early to read intermediate buffers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
@@ -157,13 +173,10 @@ pub enum Stage {
 }
 
 impl SparseGpu {
-    #[allow(clippy::too_many_arguments)]
     pub fn new(
         ctx: &GpuContext,
         scene: &Scene,
         scene_gpu: &SceneGpu,
-        targets: &FrameTargets,
-        frame_buffer: &wgpu::Buffer,
         points: &[Arc<MeshPoints>],
         vals_buffer: &wgpu::Buffer,
         val_count_buffer: &wgpu::Buffer,
@@ -286,8 +299,10 @@ impl SparseGpu {
         let params_buffer = bytes.uniform::<SparseParams>(device, "sparse params");
 
         let cs = wgpu::ShaderStages::COMPUTE;
-        // (binding, buffer, writable) lists per pass, in the shaders' binding order.
-        let make = |name: &str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
+        // One kernel per pass: its pipeline, layout and (buffer, writable) list in the
+        // shader's binding order; binding 0 is always the parameter block, so a per-view
+        // parameter block needs only new bind groups.
+        let make = |name: &'static str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
             let entries: Vec<wgpu::BindGroupLayoutEntry> = list
                 .iter()
                 .enumerate()
@@ -305,20 +320,18 @@ impl SparseGpu {
                 label: Some(name),
                 entries: &entries,
             });
-            let group_entries: Vec<wgpu::BindGroupEntry> = list
-                .iter()
-                .enumerate()
-                .map(|(i, (b, _))| buffer_binding(i as u32, b))
-                .collect();
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(name),
-                layout: &layout,
-                entries: &group_entries,
-            });
-            (
-                compute_pipeline(device, name, &ctx.shader(shader), &layout),
-                group,
-            )
+            let pipeline = compute_pipeline(device, name, &ctx.shader(shader), &layout);
+            let buffers: Vec<wgpu::Buffer> =
+                list.iter().skip(1).map(|(b, _)| (*b).clone()).collect();
+            let mut kernel = Kernel {
+                label: name,
+                pipeline,
+                layout,
+                buffers,
+                group: None,
+            };
+            kernel.group = Some(kernel.bind(device, list[0].0));
+            kernel
         };
         let instances = &scene_gpu.instance_buffer;
         let gather = make(
@@ -395,20 +408,6 @@ impl SparseGpu {
                 uniform_entry(7, vs_fs),
             ],
         });
-        let apply_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("apply"),
-            layout: &apply_bgl,
-            entries: &[
-                buffer_binding(0, frame_buffer),
-                buffer_binding(1, instances),
-                buffer_binding(2, &ranges_buffer),
-                buffer_binding(3, &vertex_lights),
-                view_binding(4, &targets.normal),
-                view_binding(5, &targets.diffuse),
-                view_binding(6, &targets.specular),
-                buffer_binding(7, &params_buffer),
-            ],
-        });
         let apply_module = ctx.shader("vals_apply.wgsl");
         let apply_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("apply"),
@@ -446,17 +445,19 @@ impl SparseGpu {
             point_extra,
             clamp_buffer,
             vertex_lights,
+            ranges_buffer,
             gather,
             renormalize,
             occlusion,
             interpolate,
             apply_pipeline,
-            apply_group,
+            apply_bgl,
         })
     }
 
-    /// Uploads this frame's parameters: the eye for the glossy lobes and the options.
-    pub fn prepare(&self, ctx: &GpuContext, eye: Vec3, options: &SparseOptions) {
+    /// The parameter block for `eye` and the options (`glossy_only`: the per-view glossy
+    /// re-run).
+    pub fn params(&self, eye: Vec3, options: &SparseOptions, glossy_only: bool) -> SparseParams {
         let mut flags = 0;
         if options.glossy {
             flags |= FLAG_GLOSSY;
@@ -464,7 +465,10 @@ impl SparseGpu {
         if options.weights == Weights::Flux {
             flags |= FLAG_FLUX_WEIGHTS;
         }
-        let params = SparseParams {
+        if glossy_only {
+            flags |= FLAG_GLOSSY_ONLY;
+        }
+        SparseParams {
             eye: eye.extend(1.0).to_array(),
             point_count: self.point_count,
             instance_count: self.instance_count,
@@ -478,86 +482,133 @@ impl SparseGpu {
             vertex_count: self.vertex_count,
             pad0: 0,
             pad1: 0,
-        };
+        }
+    }
+
+    /// Uploads this frame's parameters: the solution eye for the glossy lobes and the options.
+    pub fn prepare(&self, ctx: &GpuContext, eye: Vec3, options: &SparseOptions) {
+        let params = self.params(eye, options, false);
         ctx.queue
             .write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
     }
 
-    /// Records the sparse passes up to and including `last`.
-    pub fn record(
-        &self,
-        passes: &mut Passes,
-        scene_gpu: &SceneGpu,
-        targets: &FrameTargets,
-        options: &SparseOptions,
-        last: Stage,
-    ) -> Result<(), GpuError> {
-        self.record_into(
-            passes,
-            scene_gpu,
-            targets,
-            options,
-            last,
-            &targets.radiance_indirect,
-        )
+    /// Bind groups of the four solution kernels over another parameter block (a view's).
+    pub fn bind_kernels(&self, device: &wgpu::Device, params: &wgpu::Buffer) -> KernelGroups {
+        KernelGroups([
+            self.gather.bind(device, params),
+            self.renormalize.bind(device, params),
+            self.occlusion.bind(device, params),
+            self.interpolate.bind(device, params),
+        ])
     }
 
-    /// [`SparseGpu::record`] with the apply pass drawing into `indirect` (cleared first)
-    /// instead of `targets.radiance_indirect`, for methods that add further indirect light
-    /// (a render target of `RADIANCE_FORMAT` at render resolution).
-    pub fn record_into(
+    /// Records the view-free sparse passes up to and including `last` (at most
+    /// interpolation): the solution every view reads.
+    pub fn record_solution(
         &self,
         passes: &mut Passes,
-        scene_gpu: &SceneGpu,
-        targets: &FrameTargets,
         options: &SparseOptions,
         last: Stage,
-        indirect: &wgpu::TextureView,
     ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
-        let groups = self.point_count.div_ceil(64);
-        let mut compute =
-            |label: &str, (pipeline, group): &(wgpu::ComputePipeline, wgpu::BindGroup), n: u32| {
-                passes.compute(label, |pass| {
-                    pass.set_pipeline(pipeline);
-                    pass.set_bind_group(0, group, &[]);
-                    pass.dispatch_workgroups(n.max(1), 1, 1);
-                })
-            };
-        compute("gather", &self.gather, groups)?;
+        let groups = [
+            self.gather.group.as_ref(),
+            self.renormalize.group.as_ref(),
+            self.occlusion.group.as_ref(),
+            self.interpolate.group.as_ref(),
+        ]
+        .map(|g| g.expect("kernels are bound at creation"));
+        self.record_kernels(passes, options, last, groups)
+    }
+
+    /// The glossy half of the solution again, for one view's eye (`--glossy-eye per-view`):
+    /// the kernels run with that view's parameter block, whose glossy-only flag leaves the
+    /// diffuse half as the update left it.
+    pub fn record_view_glossy(
+        &self,
+        passes: &mut Passes,
+        options: &SparseOptions,
+        groups: &KernelGroups,
+    ) -> Result<(), GpuError> {
+        let [g, r, o, i] = &groups.0;
+        self.record_kernels(passes, options, Stage::Interpolate, [g, r, o, i])
+    }
+
+    fn record_kernels(
+        &self,
+        passes: &mut Passes,
+        options: &SparseOptions,
+        last: Stage,
+        [gather, renormalize, occlusion, interpolate]: [&wgpu::BindGroup; 4],
+    ) -> Result<(), GpuError> {
+        let points = self.point_count.div_ceil(64);
+        let mut compute = |kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
+            passes.compute(kernel.label, |pass| {
+                pass.set_pipeline(&kernel.pipeline);
+                pass.set_bind_group(0, group, &[]);
+                pass.dispatch_workgroups(n.max(1), 1, 1);
+            })
+        };
+        compute(&self.gather, gather, points)?;
         if last >= Stage::Renormalize {
-            compute("renormalize", &self.renormalize, groups)?;
+            compute(&self.renormalize, renormalize, points)?;
         }
         if last >= Stage::Occlusion && options.occlusion != OcclusionMode::Off {
-            compute("occlusion", &self.occlusion, groups)?;
+            compute(&self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {
             compute(
-                "interpolation",
                 &self.interpolate,
+                interpolate,
                 self.vertex_count.div_ceil(64),
             )?;
         }
-        if last >= Stage::Apply {
-            passes.render(
-                "apply",
-                &[cleared(indirect)],
-                Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &targets.depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Load,
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                |pass| {
-                    pass.set_pipeline(&self.apply_pipeline);
-                    pass.set_bind_group(0, &self.apply_group, &[]);
-                    scene_gpu.draw(pass, None);
-                },
-            )?;
-        }
         Ok(())
+    }
+
+    /// The apply pass of one view: each pixel evaluates its vertices' interpolated lights
+    /// with its own normal, drawn into `indirect` (cleared first; `RADIANCE_FORMAT` at the
+    /// view's render resolution).
+    pub fn record_apply(
+        &self,
+        ctx: &GpuContext,
+        passes: &mut Passes,
+        scene_gpu: &SceneGpu,
+        view: &View,
+        indirect: &wgpu::TextureView,
+    ) -> Result<(), GpuError> {
+        let targets = &view.targets;
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("apply"),
+            layout: &self.apply_bgl,
+            entries: &[
+                buffer_binding(0, &view.frame_buffer),
+                buffer_binding(1, &scene_gpu.instance_buffer),
+                buffer_binding(2, &self.ranges_buffer),
+                buffer_binding(3, &self.vertex_lights),
+                view_binding(4, &targets.normal),
+                view_binding(5, &targets.diffuse),
+                view_binding(6, &targets.specular),
+                buffer_binding(7, &self.params_buffer),
+            ],
+        });
+        passes.render(
+            "apply",
+            &[cleared(indirect)],
+            Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &targets.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Load,
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            |pass| {
+                pass.set_pipeline(&self.apply_pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                scene_gpu.draw(pass, None);
+            },
+        )
     }
 
     /// The sparse points in world space for the given transforms, decoded like the shaders.

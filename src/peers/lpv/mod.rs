@@ -1,5 +1,5 @@
 //! Light propagation volumes (`--method lpv`) and higher-order LPVs (`--method holpv`), seed
-//! 004 / DESIGN §6. The RSM VALs of [`crate::vals::rsm::Rsm`] are injected as clamped-cosine
+//! 004 / DESIGN §6. The RSM VALs of [`crate::light::rsm::Rsm`] are injected as clamped-cosine
 //! lobes into an N³ grid fitted to the scene (`lpv_inject.wgsl`); a geometry volume of blocker
 //! potentials from the RSM and the camera's G-buffer sits half a cell off (`lpv_geometry.wgsl`);
 //! S gather steps propagate the light to 6 (LPV, 2-band SH) or 26 (HO-LPV, 3-band SH)
@@ -10,17 +10,17 @@
 pub mod math;
 
 use bytemuck::{Pod, Zeroable};
-use glam::{Mat4, UVec3};
+use glam::UVec3;
 
-use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
-use crate::method::{Method, MethodOptions};
+use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
+use crate::light::rsm::Rsm;
+use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
     buffer_binding, depth_texture_entry, storage_entry, storage_entry_rw, storage_texture_entry,
-    texture_entry, uniform_entry, view_binding, FrameOutput, Rasterizer, RenderError,
-    RenderSettings,
+    texture_entry, uniform_entry, view_binding, Rasterizer, RenderError, RenderSettings,
 };
-use crate::scene::{CameraView, Scene};
-use crate::vals::rsm::Rsm;
+use crate::scene::Scene;
 
 use math::{Face, Grid, Volume};
 
@@ -157,13 +157,16 @@ pub struct LpvMethod {
     inject_group: wgpu::BindGroup,
     geometry_rsm: wgpu::ComputePipeline,
     geometry_camera: wgpu::ComputePipeline,
-    geometry_group: wgpu::BindGroup,
+    geometry_layout: wgpu::BindGroupLayout,
     propagate_pipeline: wgpu::ComputePipeline,
     /// b→a without occlusion (step 1), a→b, b→a (with occlusion when on).
     propagate_groups: [wgpu::BindGroup; 3],
     lookup_pipeline: wgpu::ComputePipeline,
-    lookup_group: wgpu::BindGroup,
+    lookup_layout: wgpu::BindGroupLayout,
     surfel_stride: u32,
+    /// The view whose G-buffer gave this frame's camera surfels (its G-buffer is drawn in
+    /// the update, before the propagation, and not again in its record).
+    surfel_view: Option<u64>,
     vals: u32,
 }
 
@@ -289,7 +292,6 @@ impl LpvMethod {
         );
 
         let cs = wgpu::ShaderStages::COMPUTE;
-        let t = &raster.targets;
         // Injection.
         let inject_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("lpv inject"),
@@ -330,20 +332,6 @@ impl LpvMethod {
                 depth_texture_entry(5, cs),
                 texture_entry(6, cs),
                 texture_entry(7, cs),
-            ],
-        });
-        let geometry_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lpv geometry"),
-            layout: &geometry_layout,
-            entries: &[
-                buffer_binding(0, &params_off),
-                buffer_binding(1, &rsm.vals_buffer),
-                buffer_binding(2, &rsm.val_count_buffer),
-                buffer_binding(3, &gv_buffer),
-                buffer_binding(4, &raster.frame_buffer),
-                view_binding(5, &t.depth),
-                view_binding(6, &t.normal),
-                view_binding(7, &t.specular),
             ],
         });
         let geometry_rsm = pipeline(
@@ -420,20 +408,6 @@ impl LpvMethod {
                 storage_texture_entry(7, cs),
             ],
         });
-        let lookup_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lpv lookup"),
-            layout: &lookup_layout,
-            entries: &[
-                buffer_binding(0, &raster.frame_buffer),
-                buffer_binding(1, &params_off),
-                buffer_binding(2, &volumes[2]),
-                view_binding(3, &t.depth),
-                view_binding(4, &t.normal),
-                view_binding(5, &t.diffuse),
-                view_binding(6, &t.specular),
-                view_binding(7, &t.radiance_indirect),
-            ],
-        });
         let lookup_pipeline = pipeline(
             ctx,
             "lpv lookup",
@@ -442,8 +416,6 @@ impl LpvMethod {
             &lookup_layout,
             sh,
         );
-        // About 128² camera surfels whatever the resolution.
-        let surfel_stride = t.render_width.max(t.render_height).div_ceil(128).max(1);
         Ok(Self {
             raster,
             rsm,
@@ -460,12 +432,13 @@ impl LpvMethod {
             inject_group,
             geometry_rsm,
             geometry_camera,
-            geometry_group,
+            geometry_layout,
             propagate_pipeline,
             propagate_groups,
             lookup_pipeline,
-            lookup_group,
-            surfel_stride,
+            lookup_layout,
+            surfel_stride: 1,
+            surfel_view: None,
             vals: 0,
         })
     }
@@ -517,19 +490,33 @@ impl Method for LpvMethod {
         self.settings.order.name()
     }
 
-    fn render(
+    fn settings(&self) -> RenderSettings {
+        self.raster.settings
+    }
+
+    fn update(
         &mut self,
         ctx: &GpuContext,
-        scene: &Scene,
-        world_from_node: &[Mat4],
-        camera: &CameraView,
-    ) -> Result<FrameOutput, RenderError> {
-        self.raster.prepare(ctx, scene, world_from_node, camera);
-        self.rsm.prepare(ctx, scene, world_from_node);
+        frame: &FrameInput,
+        views: &[&View],
+        passes: &mut Passes,
+    ) -> Result<(), RenderError> {
+        self.raster
+            .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
+        self.rsm.prepare(ctx, frame.scene, frame.world_from_node);
+        // The geometry volume also takes surfels from a camera's G-buffer, as the LPV paper
+        // does: the first view's. That part of the solution depends on that view.
+        let surfel_view = views
+            .first()
+            .filter(|_| self.settings.occlusion && self.settings.steps > 1);
+        if let Some(view) = surfel_view {
+            let (w, h) = view.render_size();
+            // About 128² camera surfels whatever the resolution.
+            self.surfel_stride = w.max(h).div_ceil(128).max(1);
+        }
+        self.surfel_view = surfel_view.map(|v| v.id());
         self.write_params(ctx);
-        let mut passes = Passes::new(ctx, 2 * self.rsm.layer_count + 16);
-        self.raster.record_base(&mut passes)?;
-        self.rsm.record(&mut passes, &self.raster.scene_gpu)?;
+        self.rsm.record(passes, &self.raster.scene_gpu)?;
         let encoder = passes.encoder();
         encoder.clear_buffer(&self.volumes[0], 0, None);
         encoder.clear_buffer(&self.gv_buffer, 0, None);
@@ -541,12 +528,32 @@ impl Method for LpvMethod {
             pass.set_bind_group(0, &self.inject_group, &[]);
             pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
         })?;
-        if self.settings.occlusion && self.settings.steps > 1 {
-            let t = &self.raster.targets;
+        if let Some(view) = surfel_view {
+            view.upload(
+                ctx,
+                frame.scene.lights.len() as u32,
+                self.raster.settings.pcf_radius,
+            );
+            self.raster.record_gbuffer(ctx, view, passes)?;
+            let t = &view.targets;
+            let geometry_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("lpv geometry"),
+                layout: &self.geometry_layout,
+                entries: &[
+                    buffer_binding(0, &self.params_off),
+                    buffer_binding(1, &self.rsm.vals_buffer),
+                    buffer_binding(2, &self.rsm.val_count_buffer),
+                    buffer_binding(3, &self.gv_buffer),
+                    buffer_binding(4, &view.frame_buffer),
+                    view_binding(5, &t.depth),
+                    view_binding(6, &t.normal),
+                    view_binding(7, &t.specular),
+                ],
+            });
             let s = self.surfel_stride;
             let (sx, sy) = (t.render_width.div_ceil(s), t.render_height.div_ceil(s));
             passes.compute("geometry", |pass| {
-                pass.set_bind_group(0, &self.geometry_group, &[]);
+                pass.set_bind_group(0, &geometry_group, &[]);
                 pass.set_pipeline(&self.geometry_rsm);
                 pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
                 pass.set_pipeline(&self.geometry_camera);
@@ -576,17 +583,47 @@ impl Method for LpvMethod {
                 }
             })?;
         }
-        self.raster.record_per_pixel(
-            &mut passes,
-            "lookup",
-            &self.lookup_pipeline,
-            &self.lookup_group,
-        )?;
-        let frame = self
-            .raster
-            .finish_frame(ctx, passes, true, self.rsm.bytes.0 + self.bytes.0)?;
+        Ok(())
+    }
+
+    fn record_view(
+        &mut self,
+        ctx: &GpuContext,
+        _frame: &FrameInput,
+        view: &View,
+        passes: &mut Passes,
+    ) -> Result<ViewResult, RenderError> {
+        if self.surfel_view == Some(view.id()) {
+            self.raster.record_direct(ctx, view, passes)?;
+        } else {
+            self.raster.record_view_base(ctx, view, passes)?;
+        }
+        let t = &view.targets;
+        let lookup_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("lpv lookup"),
+            layout: &self.lookup_layout,
+            entries: &[
+                buffer_binding(0, &view.frame_buffer),
+                buffer_binding(1, &self.params_off),
+                buffer_binding(2, &self.volumes[2]),
+                view_binding(3, &t.depth),
+                view_binding(4, &t.normal),
+                view_binding(5, &t.diffuse),
+                view_binding(6, &t.specular),
+                view_binding(7, &t.radiance_indirect),
+            ],
+        });
+        view.record_per_pixel(passes, "lookup", &self.lookup_pipeline, &lookup_group)?;
+        Ok(ViewResult::DirectAndIndirect)
+    }
+
+    fn end_frame(&mut self, ctx: &GpuContext, _timings: &FrameTimings) -> Result<(), RenderError> {
         self.vals = self.rsm.read_count(ctx)?;
-        Ok(frame)
+        Ok(())
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.raster.gpu_bytes() + self.rsm.bytes.0 + self.bytes.0
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
@@ -608,6 +645,48 @@ impl Method for LpvMethod {
     }
 }
 
+/// LPV's options (shared by `lpv` and `holpv`).
+const OPTIONS: &[OptionSpec] = &[
+    OptionSpec {
+        name: "grid",
+        kind: OptionKind::Int { min: 3, max: 256 },
+        default: "32",
+        help: "light propagation volume cells per axis",
+    },
+    OptionSpec {
+        name: "steps",
+        kind: OptionKind::Int { min: 0, max: 1024 },
+        default: "",
+        help: "light propagation steps (default: = grid)",
+    },
+    OptionSpec {
+        name: "occlusion",
+        kind: OptionKind::Choice(&["on", "off", "sum", "union"]),
+        default: "on",
+        help: "occlusion from the geometry volume (sum and union also mean on)",
+    },
+    OptionSpec {
+        name: "rsm",
+        kind: OptionKind::Int { min: 1, max: 2048 },
+        default: "128",
+        help: "RSM resolution per light layer",
+    },
+];
+
+pub static LPV_ENTRY: Entry = Entry {
+    name: "lpv",
+    help: "direct + one diffuse bounce through a light propagation volume: 2-band SH, 6-direction propagation",
+    options: OPTIONS,
+    create: |ctx, scene, render, options| create(ctx, scene, render, Order::Lpv, options),
+};
+
+pub static HOLPV_ENTRY: Entry = Entry {
+    name: "holpv",
+    help: "direct + one diffuse bounce through a higher-order LPV: 3-band SH, 26-direction propagation",
+    options: OPTIONS,
+    create: |ctx, scene, render, options| create(ctx, scene, render, Order::HoLpv, options),
+};
+
 /// `method::create` for "lpv" and "holpv".
 pub fn create(
     ctx: &GpuContext,
@@ -618,4 +697,23 @@ pub fn create(
 ) -> Result<Box<dyn Method>, RenderError> {
     let settings = LpvSettings::from_options(order, options)?;
     Ok(Box::new(LpvMethod::new(ctx, scene, render, settings)?))
+}
+
+/// LPV's structs shared with WGSL, for the layout test.
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::shared_layout as layout;
+    vec![
+        layout!(
+            "LpvParams",
+            "lpv_common.wgsl",
+            LpvParams,
+            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
+        ),
+        layout!(
+            "LpvFace",
+            "lpv_common.wgsl",
+            LpvFace,
+            [y0, y1, y2, offset, corners_lo, corners_hi]
+        ),
+    ]
 }

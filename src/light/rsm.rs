@@ -19,7 +19,7 @@ use crate::raster::{
 };
 use crate::scene::{Aabb, LightKind, Scene};
 
-use super::math::Val;
+use super::Val;
 
 /// One VAL as the shaders store it (`Val` in `shaders/vals_common.wgsl`).
 #[repr(C)]

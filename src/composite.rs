@@ -1,0 +1,66 @@
+//! Methods composed of registered layers, not special cases: `sparse+atlas` is the sparse
+//! method with the atlas as an [`crate::frame::IndirectLayer`] on top. This module is the
+//! only place that names two techniques together; neither technique imports the other.
+
+use std::path::Path;
+
+use crate::atlas::{load_atlas, AtlasLayer, AtlasOnVals, ATLAS_OPTION};
+use crate::frame::Method;
+use crate::gpu::GpuContext;
+use crate::method::{Entry, MethodOptions, OptionSpec};
+use crate::raster::{RenderError, RenderSettings};
+use crate::scene::Scene;
+use crate::vals::{SparseMethod, SparseSettings};
+
+/// The sparse method's options plus the atlas file.
+const SPARSE_ATLAS_OPTIONS: &[OptionSpec] = &[
+    crate::vals::OPTIONS[0],
+    crate::vals::OPTIONS[1],
+    crate::vals::OPTIONS[2],
+    crate::vals::OPTIONS[3],
+    crate::vals::OPTIONS[4],
+    crate::vals::OPTIONS[5],
+    crate::vals::OPTIONS[6],
+    crate::vals::OPTIONS[7],
+    ATLAS_OPTION,
+];
+
+pub static SPARSE_ATLAS_ENTRY: Entry = Entry {
+    name: "sparse+atlas",
+    help: "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2",
+    options: SPARSE_ATLAS_OPTIONS,
+    create: create_sparse_atlas,
+};
+
+/// `--method sparse+atlas --atlas FILE` (every sparse option, plus `atlas`). The atlas should
+/// be baked with `--from-bounce 2`: bounce 1 comes from the VALs.
+pub fn create_sparse_atlas(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    options: &MethodOptions,
+) -> Result<Box<dyn Method>, RenderError> {
+    Ok(Box::new(sparse_atlas(ctx, scene, render, options)?))
+}
+
+/// [`create_sparse_atlas`] as the concrete sparse method with its atlas layer (for tests).
+pub fn sparse_atlas(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    options: &MethodOptions,
+) -> Result<SparseMethod, RenderError> {
+    let path: String = options.get("atlas", String::new())?;
+    if path.is_empty() {
+        return Err(RenderError::Settings(
+            "method 'sparse+atlas' needs --atlas FILE.exr (from `valgi bake --from-bounce 2`)"
+                .into(),
+        ));
+    }
+    let settings = SparseSettings::from_options(options)?;
+    let atlas = load_atlas(Path::new(&path))?;
+    let mut sparse = SparseMethod::new(ctx, scene, render, settings)?;
+    let layer = AtlasLayer::new(ctx, scene, &atlas)?;
+    sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
+    Ok(sparse)
+}
