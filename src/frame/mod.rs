@@ -521,11 +521,10 @@ impl<T> ViewCache<T> {
         view: &View,
         make: impl FnOnce() -> Result<T, RenderError>,
     ) -> Result<&T, RenderError> {
-        if !self.entries.contains_key(&view.id()) {
-            let value = make()?;
-            self.entries.insert(view.id(), value);
+        match self.entries.entry(view.id()) {
+            std::collections::hash_map::Entry::Occupied(e) => Ok(e.into_mut()),
+            std::collections::hash_map::Entry::Vacant(e) => Ok(e.insert(make()?)),
         }
-        Ok(&self.entries[&view.id()])
     }
 
     pub fn get(&self, view: &View) -> Option<&T> {
