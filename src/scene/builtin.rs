@@ -656,7 +656,13 @@ mod tests {
             let err = load(bad, &params).unwrap_err().to_string();
             assert!(err.contains("10..=90"), "{bad}: {err}");
         }
-        assert!(load("door-room45-moving", &params).unwrap().animations.len() == 1);
+        assert!(
+            load("door-room45-moving", &params)
+                .unwrap()
+                .animations
+                .len()
+                == 1
+        );
         assert!(load("corridor-door45", &params).is_ok());
     }
 
