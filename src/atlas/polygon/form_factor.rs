@@ -128,7 +128,12 @@ pub fn polygon_irradiance(light: &PolygonLight, p: Vec3, n: Vec3, eps: f32, max_
     if nl.dot(p - c) <= 0.0 {
         return 0.0;
     }
-    let vertices: Vec<DVec3> = light.vertices.iter().map(|v| v.as_dvec3()).collect();
+    let mut vertices = [DVec3::ZERO; MAX_CLIPPED];
+    let count = light.vertices.len().min(MAX_CLIPPED);
+    for (d, v) in vertices.iter_mut().zip(&light.vertices) {
+        *d = v.as_dvec3();
+    }
+    let vertices = &vertices[..count];
     if vertices.iter().all(|v| n.dot(*v - p) <= 0.0) {
         return 0.0;
     }
@@ -137,7 +142,7 @@ pub fn polygon_irradiance(light: &PolygonLight, p: Vec3, n: Vec3, eps: f32, max_
     if light.radius as f64 <= POINT_FALLBACK * d {
         return point_irradiance(1.0, c, nl, p, n);
     }
-    polygon_form_factor(p, n, &vertices) / area
+    polygon_form_factor(p, n, vertices) / area
 }
 
 /// `∫_cap max(0, n·ω) dω` over the cap of half-angle α (sin α = r/d) around the direction at

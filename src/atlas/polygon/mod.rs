@@ -284,7 +284,12 @@ impl Baker for PolygonBaker {
                     }
                     let v = match &cubes[i] {
                         Some(cube) => {
-                            pcss::pcss_visibility(cube, t.position, t.normal, l.size()) as f64
+                            let emitter = match &l.shape {
+                                Shape::Polygon(p) => Some((p.centre, p.normal)),
+                                Shape::Sphere(_) => None,
+                            };
+                            pcss::pcss_visibility(cube, t.position, t.normal, l.size(), emitter)
+                                as f64
                         }
                         None => 1.0,
                     };

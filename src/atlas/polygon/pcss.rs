@@ -7,7 +7,11 @@
 //!   mean blocker distance d_b and the receiver's d_r, the filter radius half of it as seen
 //!   from the light, at least one depth texel;
 //! - each tap compares the stored depth with the receiver's *plane* along the tap's
-//!   direction (receiver-plane depth), so a tilted receiver does not shadow itself.
+//!   direction (receiver-plane depth), so a tilted receiver does not shadow itself, with a
+//!   bias of one depth texel plus the tap's lateral offset (a surface meeting the receiver at
+//!   a concave edge can stand that far in front of its plane there);
+//! - a polygon light's own plane is no blocker: what the cube stores at or behind it is the
+//!   surface the light lies on, which a tap grazing the plane hits first.
 
 use glam::Vec3;
 
@@ -22,8 +26,15 @@ pub const FILTER_TAPS: usize = 8;
 const MAX_ANGLE: f32 = 1.0;
 
 /// Visibility in [0, 1] of the light of size `light_size` (world units) whose depth cube is
-/// `cube`, from the receiver `(p, n)`.
-pub fn pcss_visibility(cube: &DepthCube, p: Vec3, n: Vec3, light_size: f32) -> f32 {
+/// `cube`, from the receiver `(p, n)`. `emitter` is a polygon light's plane (its centre and
+/// normal), `None` for a sphere.
+pub fn pcss_visibility(
+    cube: &DepthCube,
+    p: Vec3,
+    n: Vec3,
+    light_size: f32,
+    emitter: Option<(Vec3, Vec3)>,
+) -> f32 {
     let texel = 2.0 / cube.res as f32;
     let dist0 = (p - cube.origin).length();
     if dist0 <= cube.near {
@@ -51,27 +62,40 @@ pub fn pcss_visibility(cube: &DepthCube, p: Vec3, n: Vec3, light_size: f32) -> f
         let a = angle.min(MAX_ANGLE).tan();
         (w + (t * phi.cos() + b * phi.sin()) * a).normalize()
     };
-    // A tap: Some(distance of the blocker along s) when something stands in front of the
-    // receiver, None when lit.
-    let tap = |s: Vec3| -> Option<f32> {
+    // A tap `angle` off the receiver's direction: Some(distance of the blocker along s) when
+    // something stands in front of the receiver, None when lit.
+    let tap = |s: Vec3, angle: f32| -> Option<f32> {
         let (stored, along_axis) = cube.depth_toward(s);
         if !stored.is_finite() {
             return None;
         }
         let r = receiver_along(s) * along_axis;
-        let bias = r * texel + 1e-5;
-        (stored < r - bias).then_some(stored / along_axis)
+        let bias = r * (texel + angle.min(MAX_ANGLE)) + 1e-5;
+        if stored >= r - bias {
+            return None;
+        }
+        let blocker = stored / along_axis;
+        if let Some((c, nl)) = emitter {
+            let height = nl.dot(cube.origin + s * blocker - c);
+            if height <= blocker * texel * 2.0 {
+                return None;
+            }
+        }
+        Some(blocker)
     };
     let search = ((0.5 * light_size / dist) * 2.0).max(texel);
     let mut blockers = 0usize;
     let mut depth_sum = 0.0f32;
     for k in 0..SEARCH_TAPS {
-        let s = if k == 0 {
-            w
+        let (s, angle) = if k == 0 {
+            (w, 0.0)
         } else {
-            dir(search, 0.4 + k as f32 * std::f32::consts::FRAC_PI_2)
+            (
+                dir(search, 0.4 + k as f32 * std::f32::consts::FRAC_PI_2),
+                search,
+            )
         };
-        if let Some(d) = tap(s) {
+        if let Some(d) = tap(s, angle) {
             blockers += 1;
             depth_sum += d;
         }
@@ -86,7 +110,7 @@ pub fn pcss_visibility(cube: &DepthCube, p: Vec3, n: Vec3, light_size: f32) -> f
     let mut lit = 0usize;
     for k in 0..FILTER_TAPS {
         let rk = radius * ((k as f32 + 0.5) / FILTER_TAPS as f32).sqrt();
-        if tap(dir(rk, k as f32 * golden)).is_none() {
+        if tap(dir(rk, k as f32 * golden), rk).is_none() {
             lit += 1;
         }
     }
