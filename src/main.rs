@@ -196,6 +196,16 @@ struct BakeArgs {
     /// Tessellation of built-in scenes (render with the same value).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
+    /// Virtual lights: patches (seed 000: --vpls patches) or polygons (seed 001: --vpls
+    /// photon paths, each leaving a VPL per bounce, clustered into polygon and sphere lights).
+    #[arg(long, default_value = "patches")]
+    lights: valgi::atlas::Lights,
+    /// Polygon lights: target VPLs per cluster.
+    #[arg(long, default_value_t = valgi::atlas::bake::PolygonSettings::default().cluster_size)]
+    cluster_size: usize,
+    /// Polygon lights: face resolution of each light's depth cube.
+    #[arg(long, default_value_t = valgi::atlas::bake::PolygonSettings::default().cube_res)]
+    polygon_cube_res: usize,
 }
 
 #[derive(clap::Args)]
@@ -206,6 +216,16 @@ struct BakeBenchArgs {
     /// VPL counts baked per scene.
     #[arg(long, value_delimiter = ',', default_value = "100,400,1600,6400")]
     vpls: Vec<usize>,
+    /// Bakers measured: patches (seed 000, at --vpls) and/or polygons (seed 001, at
+    /// --polygon-vpls photon paths).
+    #[arg(long, value_delimiter = ',', default_value = "patches")]
+    lights: Vec<valgi::atlas::Lights>,
+    /// Photon paths of the polygon-light bakes.
+    #[arg(long, value_delimiter = ',', default_value = "5000,20000,80000")]
+    polygon_vpls: Vec<usize>,
+    /// Polygon lights: target VPLs per cluster.
+    #[arg(long, default_value_t = valgi::atlas::bake::PolygonSettings::default().cluster_size)]
+    cluster_size: usize,
     /// Bounces of the bake and of the reference.
     #[arg(long, default_value_t = 4)]
     bounces: u32,
@@ -250,7 +270,10 @@ struct BakeBenchArgs {
 fn bake_bench(args: BakeBenchArgs) -> ExitCode {
     let request = valgi::atlas::bench::BakeBenchRequest {
         scenes: valgi::eval::split_list(&args.scenes),
+        lights: args.lights,
         vpls: args.vpls,
+        polygon_vpls: args.polygon_vpls,
+        cluster_size: args.cluster_size,
         bounces: args.bounces,
         atlas_res: args.atlas_res,
         width: args.width,
@@ -273,7 +296,7 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
                 .iter()
                 .map(|r| {
                     serde_json::json!({
-                        "scene": r.scene, "vpls": r.vpls, "bake_ms": r.bake_ms.round(),
+                        "scene": r.scene, "lights": r.lights.name(), "vpls": r.vpls, "bake_ms": r.bake_ms.round(),
                         "flip_indirect": r.flip_indirect, "mean_ratio": r.mean_ratio,
                         "pt_ms_same_flip": r.pt_ms_same_flip.map(f64::round),
                         "speedup": r.speedup(),
@@ -487,12 +510,18 @@ fn bake(args: BakeArgs) -> ExitCode {
         scene: args.scene,
         max_edge: args.max_edge,
         settings: valgi::atlas::BakeSettings {
+            lights: args.lights,
             vpls: args.vpls,
             bounces: args.bounces,
             atlas_res: args.atlas_res,
             near_rays: args.near_rays,
             cube_res: args.cube_res,
             near_radius: args.near_radius,
+            polygon: valgi::atlas::bake::PolygonSettings {
+                cluster_size: args.cluster_size,
+                cube_res: args.polygon_cube_res,
+                ..Default::default()
+            },
             ..Default::default()
         },
         from_bounce: args.from_bounce,

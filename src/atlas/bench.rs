@@ -12,7 +12,8 @@ use std::time::Instant;
 
 use plotters::prelude::*;
 
-use super::{bake, AtlasLayer, AtlasMethod, BakeSettings};
+use super::bake::PolygonSettings;
+use super::{bake, AtlasLayer, AtlasMethod, BakeSettings, Lights};
 use crate::eval::{cached_reference, metrics, plot, reference_key, slug, EvalError};
 use crate::gpu::GpuContext;
 use crate::image_io::Image;
@@ -25,7 +26,14 @@ use crate::scene::{self, builtin::BuiltinParams};
 #[derive(Clone, Debug)]
 pub struct BakeBenchRequest {
     pub scenes: Vec<String>,
+    /// The bakers measured.
+    pub lights: Vec<Lights>,
+    /// Patch counts of the patch baker.
     pub vpls: Vec<usize>,
+    /// Photon paths of the polygon-light baker.
+    pub polygon_vpls: Vec<usize>,
+    /// Target VPLs per cluster of the polygon-light baker.
+    pub cluster_size: usize,
     pub bounces: u32,
     pub atlas_res: u32,
     /// Image size of the error measurement.
@@ -55,7 +63,10 @@ impl Default for BakeBenchRequest {
     fn default() -> Self {
         Self {
             scenes: vec!["cornell".into(), "corridor".into()],
+            lights: vec![Lights::Patches],
             vpls: vec![100, 400, 1600, 6400],
+            polygon_vpls: vec![5000, 20000, 80000],
+            cluster_size: PolygonSettings::default().cluster_size,
             bounces: 4,
             atlas_res: 256,
             width: 128,
@@ -79,11 +90,15 @@ impl Default for BakeBenchRequest {
 #[derive(Clone, Debug)]
 pub struct BakeRow {
     pub scene: String,
+    pub lights: Lights,
+    /// Patches (patch baker) or photon paths (polygon lights).
     pub vpls: usize,
     pub bounces: u32,
     pub atlas_res: u32,
     pub texels: usize,
     pub shots: usize,
+    /// Virtual lights the polygon baker made (0 for patches).
+    pub virtual_lights: usize,
     /// Wall time of `atlas::bake` (CPU, all cores).
     pub bake_ms: f64,
     pub stages_ms: Vec<(String, f64)>,
@@ -129,7 +144,7 @@ pub struct BakeBenchSummary {
     pub charts: Vec<PathBuf>,
 }
 
-pub const CSV_HEADER: &str = "scene,vpls,bounces,atlas_res,texels,shots,bake_ms,stages_ms,render_ms,flip_indirect,rmse_indirect,relmse_indirect,mean_ratio,pt_ms_same_flip,speedup";
+pub const CSV_HEADER: &str = "scene,vpls,bounces,atlas_res,texels,shots,bake_ms,stages_ms,render_ms,flip_indirect,rmse_indirect,relmse_indirect,mean_ratio,pt_ms_same_flip,speedup,lights,virtual_lights";
 
 /// Time the convergence curve needs to reach `flip`: the first run at or below it, log-log
 /// interpolated with the run before; `None` when no run gets there.
@@ -252,9 +267,25 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
         ));
 
         let mut rows = vec![];
-        for &vpls in &request.vpls {
+        let runs: Vec<(Lights, usize)> = request
+            .lights
+            .iter()
+            .flat_map(|&lights| {
+                let counts = match lights {
+                    Lights::Patches => &request.vpls,
+                    Lights::Polygons => &request.polygon_vpls,
+                };
+                counts.iter().map(move |&n| (lights, n))
+            })
+            .collect();
+        for (lights, vpls) in runs {
             let settings = BakeSettings {
+                lights,
                 vpls,
+                polygon: PolygonSettings {
+                    cluster_size: request.cluster_size,
+                    ..Default::default()
+                },
                 bounces: request.bounces,
                 atlas_res: request.atlas_res,
                 near_rays: request.near_rays,
@@ -270,7 +301,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 &|_, _, _| {},
                 &AtomicBool::new(false),
             )
-            .map_err(|e| EvalError::Settings(format!("bake {vpls} VPLs: {e}")))?;
+            .map_err(|e| EvalError::Settings(format!("bake ({lights}) {vpls} VPLs: {e}")))?;
             let bake_ms = started.elapsed().as_secs_f64() * 1000.0;
             let atlas = result.atlas(1, request.bounces);
             let render = RenderSettings {
@@ -286,9 +317,10 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             let mut indirect: Image = frame.indirect;
             indirect.sanitize();
             let (flip, flip_map) = metrics::flip_with_map(&indirect, ref_indirect, exposure);
-            let stem = request
-                .out
-                .join(format!("{}_{vpls}vpls", slug(&scene.name)));
+            let stem = request.out.join(match lights {
+                Lights::Patches => format!("{}_{vpls}vpls", slug(&scene.name)),
+                Lights::Polygons => format!("{}_polygons_{vpls}paths", slug(&scene.name)),
+            });
             let exr = stem.with_extension("indirect.exr");
             indirect
                 .write_exr(&exr)
@@ -297,7 +329,9 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             flip_map.save(&png).map_err(|e| output_error(&png, e))?;
             let row = BakeRow {
                 scene: scene.name.clone(),
+                lights,
                 vpls,
+                virtual_lights: result.virtual_lights.len(),
                 bounces: request.bounces,
                 atlas_res: request.atlas_res,
                 texels: result.texel_count(),
@@ -316,7 +350,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
                 pt_ms_same_flip: time_to_flip(&curve, flip),
             };
             log::info!(
-                "{} {vpls} VPLs: bake {:.0} ms, indirect FLIP {:.4}",
+                "{} {lights} {vpls} VPLs: bake {:.0} ms, indirect FLIP {:.4}",
                 scene.name,
                 bake_ms,
                 flip
@@ -340,7 +374,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             .collect();
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{},{:.1},{},{:.3},{:.6},{:.6e},{:.6e},{:.4},{},{}",
+            "{},{},{},{},{},{},{:.1},{},{:.3},{:.6},{:.6e},{:.6e},{:.4},{},{},{},{}",
             r.scene,
             r.vpls,
             r.bounces,
@@ -356,6 +390,8 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             r.mean_ratio,
             opt(r.pt_ms_same_flip),
             opt(r.speedup()),
+            r.lights,
+            r.virtual_lights,
         );
     }
     std::fs::write(&summary.csv, csv).map_err(|e| output_error(&summary.csv, e))?;
@@ -443,15 +479,25 @@ fn chart_scene(
             .axis_desc_style((font, 15))
             .draw()
             .map_err(|e| err(e.to_string()))?;
-        let first = Palette99::pick(0).to_rgba();
+        let color = |lights: Lights| match lights {
+            Lights::Patches => Palette99::pick(0).to_rgba(),
+            Lights::Polygons => Palette99::pick(2).to_rgba(),
+        };
         let second = Palette99::pick(1).to_rgba();
-        let pts: Vec<(f64, f64)> = rows.iter().map(|r| (r.vpls as f64, r.bake_ms)).collect();
-        chart
-            .draw_series(LineSeries::new(pts.clone(), first.stroke_width(2)))
-            .map_err(|e| err(e.to_string()))?;
-        chart
-            .draw_series(pts.iter().map(|p| Circle::new(*p, 5, first.filled())))
-            .map_err(|e| err(e.to_string()))?;
+        for &lights in &request.lights {
+            let pts: Vec<(f64, f64)> = rows
+                .iter()
+                .filter(|r| r.lights == lights)
+                .map(|r| (r.vpls as f64, r.bake_ms))
+                .collect();
+            let c = color(lights);
+            chart
+                .draw_series(LineSeries::new(pts.clone(), c.stroke_width(2)))
+                .map_err(|e| err(e.to_string()))?;
+            chart
+                .draw_series(pts.iter().map(|p| Circle::new(*p, 5, c.filled())))
+                .map_err(|e| err(e.to_string()))?;
+        }
 
         let (x0, x1) = log_range(
             &mut rows
@@ -482,29 +528,37 @@ fn chart_scene(
             .axis_desc_style((font, 15))
             .draw()
             .map_err(|e| err(e.to_string()))?;
-        let series: [(&str, Vec<LabelledPoint>, RGBAColor); 2] = [
-            (
-                "atlas (VPLs)",
-                rows.iter()
-                    .map(|r| {
-                        (
-                            r.bake_ms + r.render_ms,
-                            r.flip_indirect,
-                            format!("{}", r.vpls),
-                        )
-                    })
-                    .collect(),
-                first,
-            ),
-            (
-                "path tracer (spp)",
-                curve
-                    .iter()
-                    .map(|p| (p.ms, p.flip_indirect, format!("{}", p.spp)))
-                    .collect(),
-                second,
-            ),
-        ];
+        let mut series: Vec<(&str, Vec<LabelledPoint>, RGBAColor)> = request
+            .lights
+            .iter()
+            .map(|&lights| {
+                (
+                    match lights {
+                        Lights::Patches => "atlas, patches (VPLs)",
+                        Lights::Polygons => "atlas, polygon lights (photon paths)",
+                    },
+                    rows.iter()
+                        .filter(|r| r.lights == lights)
+                        .map(|r| {
+                            (
+                                r.bake_ms + r.render_ms,
+                                r.flip_indirect,
+                                format!("{}", r.vpls),
+                            )
+                        })
+                        .collect(),
+                    color(lights),
+                )
+            })
+            .collect();
+        series.push((
+            "path tracer (spp)",
+            curve
+                .iter()
+                .map(|p| (p.ms, p.flip_indirect, format!("{}", p.spp)))
+                .collect(),
+            second,
+        ));
         for (name, pts, color) in series {
             chart
                 .draw_series(LineSeries::new(

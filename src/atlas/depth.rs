@@ -243,6 +243,25 @@ impl DepthCube {
         }
     }
 
+    /// The depth stored (along its face's axis) in the texel the direction `d` from the
+    /// origin falls in, and the unit direction's component along that axis (the stored
+    /// surface lies `depth / component` away along `d`).
+    pub fn depth_toward(&self, d: Vec3) -> (f32, f32) {
+        let d = d.normalize_or_zero();
+        let face = major_face(d);
+        let l = face_local(face, d);
+        if l.z <= 0.0 {
+            return (f32::INFINITY, 1.0);
+        }
+        let half = self.res as f32 * 0.5;
+        let x = (((l.x / l.z + 1.0) * half) as i64).clamp(0, self.res as i64 - 1) as usize;
+        let y = (((l.y / l.z + 1.0) * half) as i64).clamp(0, self.res as i64 - 1) as usize;
+        (
+            self.depth[face * self.res * self.res + y * self.res + x],
+            l.z,
+        )
+    }
+
     /// The centre tap's answer for `p`, whether its 3×3 neighbourhood agrees, and how far in
     /// front of the receiver the centre tap's surface lies (see [`ShadowTest`]). `n` is the
     /// receiver's normal: the point is pushed off its surface by about one texel footprint

@@ -8,13 +8,15 @@ pub mod compose;
 pub mod cuts;
 pub mod depth;
 pub mod layout;
+pub mod patches;
+pub mod polygon;
 
 use std::path::Path;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
-pub use bake::{bake, Bake, BakeError, BakeSettings, EnergyAccount};
+pub use bake::{bake, Bake, BakeError, BakeSettings, Baker, EnergyAccount, Lights};
 pub use compose::AtlasOnVals;
 
 use crate::frame::{FrameInput, Method, View, ViewCache, ViewResult};

@@ -617,6 +617,55 @@ mod tests {
         }
     }
 
+    /// Room B of `door-room` gets direct light only through the doorway: none with the spot's
+    /// beam blocked by the partition, more the wider the door opens, and `door-room<DEG>`
+    /// accepts 10..=90 only.
+    #[test]
+    fn door_room_is_lit_through_the_door() {
+        let dims = procedural::DOOR_ROOM;
+        let params = BuiltinParams { max_edge: 0.5 };
+        let room_b_direct = |name: &str| {
+            let scene = load(name, &params).unwrap();
+            let tracer = crate::reference::Tracer::new(&scene, &scene.world_from_node());
+            let mut sum = 0.0f64;
+            for i in 0..40 {
+                for k in 0..30 {
+                    let p = Vec3::new(
+                        dims.length_a + dims.length_b * (i as f32 + 0.5) / 40.0,
+                        0.0,
+                        dims.depth * (k as f32 + 0.5) / 30.0,
+                    );
+                    sum += tracer.direct_irradiance(p, Vec3::Y).y as f64;
+                }
+            }
+            sum
+        };
+        let (narrow, wide) = (room_b_direct("door-room20"), room_b_direct("door-room80"));
+        assert!(narrow > 0.0 && wide > 1.5 * narrow, "{narrow} {wide}");
+        // The spot's axis crosses the partition inside the doorway.
+        let t = (dims.length_a - dims.spot.x) / (dims.spot_target.x - dims.spot.x);
+        let at_wall = dims.spot + (dims.spot_target - dims.spot) * t;
+        assert!(at_wall.y > 0.0 && at_wall.y < dims.doorway_height);
+        assert!(at_wall.z > dims.doorway_z.0 && at_wall.z < dims.doorway_z.1);
+        // Room A's far half, behind the spot, gets no direct light (the beam points away).
+        let scene = load("door-room", &params).unwrap();
+        let tracer = crate::reference::Tracer::new(&scene, &scene.world_from_node());
+        let behind = tracer.direct_irradiance(Vec3::new(0.2, 0.0, 1.5), Vec3::Y);
+        assert_eq!(behind, Vec3::ZERO);
+        for bad in ["door-room5", "door-room95", "door-roomx"] {
+            let err = load(bad, &params).unwrap_err().to_string();
+            assert!(err.contains("10..=90"), "{bad}: {err}");
+        }
+        assert!(
+            load("door-room45-moving", &params)
+                .unwrap()
+                .animations
+                .len()
+                == 1
+        );
+        assert!(load("corridor-door45", &params).is_ok());
+    }
+
     #[test]
     fn unknown_builtin_is_an_error() {
         let err = load("nope", &BuiltinParams::default()).unwrap_err();

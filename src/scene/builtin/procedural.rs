@@ -4,6 +4,8 @@
 //!
 //! - `corridor`: two rooms joined by a door (opening angle a parameter: `corridor-door<DEG>`);
 //!   the light reaches the second room only by bouncing.
+//! - `door-room`: a room lit only through a door ajar, the spot in the next room shining
+//!   through the doorway (opening angle a parameter: `door-room<DEG>`, 10°..=90°).
 //! - `coarse-wall`: a large wall of two triangles beside a lit object.
 //! - `aligned-occluders`: two blockers in a row between a lit wall and a receiver.
 //! - `thin-wall`: a 2 cm wall (thinner than any practical LPV cell) with light on one side.
@@ -29,6 +31,12 @@ pub const LOOP_SECONDS: f32 = 4.0;
 /// Default door opening of `corridor`, degrees (0 = closed, 90 = wide open).
 pub const CORRIDOR_DOOR_DEGREES: f32 = 60.0;
 
+/// Default door opening of `door-room`, degrees.
+pub const DOOR_ROOM_DEGREES: f32 = 30.0;
+
+/// Door openings `door-room<DEG>` accepts, degrees.
+pub const DOOR_ROOM_RANGE: std::ops::RangeInclusive<f32> = 10.0..=90.0;
+
 /// Names this module builds, with descriptions (the `-moving` variants follow each scene).
 pub const NAMES: &[(&str, &str)] = &[
     (
@@ -40,6 +48,11 @@ pub const NAMES: &[(&str, &str)] = &[
         "two rooms joined by a door opened 60° (corridor-door<DEG> sets it); light reaches the second room only by bouncing",
     ),
     ("corridor-moving", "corridor with the door swinging 10°–90°"),
+    (
+        "door-room",
+        "a room lit only through a door opened 30° (door-room<DEG> sets it, 10..=90), the spot in the next room shining through the doorway",
+    ),
+    ("door-room-moving", "door-room with the door swinging 10°–90°"),
     (
         "coarse-wall",
         "a 3 m wall of two triangles beside a spot-lit orange block",
@@ -79,11 +92,26 @@ pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
     let scene = match base {
         "cornell" if moving => Ok(cornell_moving(name, max_edge)),
         "corridor" => Ok(corridor(name, CORRIDOR_DOOR_DEGREES, moving, max_edge)),
+        "door-room" => Ok(door_room(name, DOOR_ROOM_DEGREES, moving, max_edge)),
         "coarse-wall" => Ok(coarse_wall(name, moving, max_edge)),
         "aligned-occluders" => Ok(aligned_occluders(name, moving, max_edge)),
         "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
         "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
         "cornell-bunny" => cornell_bunny(name, moving, max_edge),
+        other if other.starts_with("door-room") => {
+            let degrees = &other["door-room".len()..];
+            match degrees.parse::<f32>() {
+                Ok(d) if DOOR_ROOM_RANGE.contains(&d) => Ok(door_room(name, d, moving, max_edge)),
+                _ => Err(SceneError::Other {
+                    path: name.into(),
+                    message: format!(
+                        "door angle '{degrees}' must be degrees in {}..={}",
+                        DOOR_ROOM_RANGE.start(),
+                        DOOR_ROOM_RANGE.end()
+                    ),
+                }),
+            }
+        }
         other => {
             let degrees = other.strip_prefix("corridor-door")?;
             match degrees.parse::<f32>() {
@@ -332,6 +360,126 @@ fn corridor(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene
         Vec3::new(4.0, 1.5, 1.7),
         Vec3::new(2.1, 0.8, 0.9),
         65.0,
+    );
+    let mut scene = b.scene;
+    if moving {
+        let door_node = node_named(&scene, "door");
+        add_animation(
+            &mut scene,
+            "door swing",
+            vec![channel(
+                door_node,
+                Property::Rotation,
+                rotations(&[swing(10.0), swing(90.0), swing(10.0)]),
+            )],
+        );
+    }
+    scene
+}
+
+/// Dimensions of `door-room` (metres): room A, x ∈ [0, 2.5], holds the light; room B, x ∈
+/// [2.5, 6.5], is lit only through the doorway; both y ∈ [0, 2.5] (floor to ceiling), z ∈ [0, 3].
+/// The partition at x = 2.5 has zero thickness and a doorway z ∈ [1.0, 1.9], y ∈ [0, 2.0].
+pub const DOOR_ROOM: DoorRoom = DoorRoom {
+    length_a: 2.5,
+    length_b: 4.0,
+    height: 2.5,
+    depth: 3.0,
+    doorway_z: (1.0, 1.9),
+    doorway_height: 2.0,
+    spot: Vec3::new(0.4, 2.0, 1.45),
+    spot_target: Vec3::new(3.7, 0.4, 1.45),
+};
+
+/// The measurements of [`DOOR_ROOM`].
+#[derive(Clone, Copy, Debug)]
+pub struct DoorRoom {
+    /// Room A (the light's) along x, from x = 0 to the partition.
+    pub length_a: f32,
+    /// Room B (lit through the door) along x, from the partition on.
+    pub length_b: f32,
+    pub height: f32,
+    pub depth: f32,
+    /// The doorway's extent along z in the partition.
+    pub doorway_z: (f32, f32),
+    pub doorway_height: f32,
+    pub spot: Vec3,
+    /// Where the spot's axis meets room B's floor.
+    pub spot_target: Vec3,
+}
+
+/// Two rooms side by side sharing a zero-thickness partition with a doorway (see [`DOOR_ROOM`]
+/// for the measurements). A door panel hinged at the doorway's z = 1.0 edge opens
+/// `door_degrees` into room B (90° = flat against nothing, perpendicular to the partition).
+/// A spot (inner 15°, outer 22°, 8 W/sr) in room A stands 0.4 m from its far wall, 2 m up,
+/// and points through the doorway at room B's floor 1.2 m behind the partition: room B gets
+/// direct light only through the opening the door leaves, and its bounces. The camera stands
+/// in room B's far corner looking back at the door.
+fn door_room(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene {
+    let dims = DOOR_ROOM;
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.75);
+    let floor = grey(&mut b, "floor", 0.6);
+    let door_mat = b.material(Material::lambert("door", Vec3::new(0.6, 0.45, 0.3)));
+    let (x, h, d) = (dims.length_a, dims.height, dims.depth);
+    room(
+        &mut b,
+        Vec3::ZERO,
+        Vec3::new(x + dims.length_b, h, d),
+        [white, white, floor, white, white, white],
+        max_edge,
+    );
+    let (z0, z1) = dims.doorway_z;
+    let door_h = dims.doorway_height;
+    let mut wall = MeshBuilder::new("partition", white);
+    let facing = Vec3::new(0.0, 1.0, 1.0);
+    let q = |y0: f32, y1: f32, za: f32, zb: f32| {
+        [
+            Vec3::new(x, y0, za),
+            Vec3::new(x, y0, zb),
+            Vec3::new(x, y1, zb),
+            Vec3::new(x, y1, za),
+        ]
+    };
+    for [p0, p1, p2, p3] in [q(0.0, h, 0.0, z0), q(0.0, h, z1, d), q(door_h, h, z0, z1)] {
+        wall.add_quad(p0, p1, p2, p3, facing, max_edge);
+    }
+    b.object("partition", wall.build(), Trs::default());
+    let mut door = MeshBuilder::new("door", door_mat);
+    let w = z1 - z0;
+    door.add_quad(
+        Vec3::ZERO,
+        Vec3::new(0.0, 0.0, w),
+        Vec3::new(0.0, door_h, w),
+        Vec3::new(0.0, door_h, 0.0),
+        Vec3::new(-1.0, 0.0, w * 0.5),
+        max_edge,
+    );
+    let swing = |deg: f32| Quat::from_rotation_y(deg.to_radians());
+    b.object(
+        "door",
+        door.build(),
+        Trs {
+            translation: Vec3::new(x, 0.0, z0),
+            rotation: swing(door_degrees),
+            ..Trs::default()
+        },
+    );
+    b.light_along(
+        "spot",
+        dims.spot,
+        dims.spot_target - dims.spot,
+        LightKind::Spot {
+            inner_cone_angle: 15f32.to_radians(),
+            outer_cone_angle: 22f32.to_radians(),
+        },
+        8.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(x + dims.length_b - 0.3, 1.6, d - 0.3),
+        Vec3::new(x, 0.9, z0),
+        70.0,
     );
     let mut scene = b.scene;
     if moving {
