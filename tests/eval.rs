@@ -342,7 +342,7 @@ fn bunny_from_ply_or_a_named_stand_in() {
     // Malformed files are errors that name the file and the problem.
     for (name, text, needle) in [
         ("magic.ply", "plx\n", "not a PLY"),
-        ("binary.ply", "ply\nformat binary_little_endian 1.0\nend_header\n", "ASCII"),
+        ("binary.ply", "ply\nformat binary_little_endian 1.0\nend_header\n", "no vertex element"),
         (
             "short.ply",
             "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",

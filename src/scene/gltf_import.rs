@@ -12,9 +12,11 @@
 //! KHR_lights_punctual lights, perspective cameras and TRS animations. Lights keep the file's
 //! numbers: `intensity × color` is taken as W/sr or W/m² (DESIGN §3), no photometric conversion.
 
+use super::files::{self, ReadPolicy};
 use super::mesh::{
     compute_normals, compute_tangents, remove_degenerate_triangles, validate_positions,
 };
+use super::sanitize;
 use super::{
     Animation, Camera, Channel, ColorSpace, Instance, Interpolation, Light, LightKind, Material,
     Mesh, Node, Property, Scene, SceneError, Texture, Trs,
@@ -33,20 +35,23 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_specular",
 ];
 
-/// Loads a `.gltf` or `.glb` file. External buffers and images resolve relative to the file's
-/// folder. The scene is named after the file stem.
+/// Most elements an accessor without a buffer view (zeros plus sparse substitutions) may
+/// declare: its memory is not backed by the file, so the count alone would size the
+/// allocation (2²⁴ VEC4 floats are 256 MiB).
+pub const MAX_VIEWLESS_ELEMENTS: usize = 1 << 24;
+
+/// Loads a `.gltf` or `.glb` file with the default [`ReadPolicy`]: external buffers and
+/// images must be regular files inside the file's folder. The scene is named after the file
+/// stem.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let display = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Gltf {
-        path: display.clone(),
-        message: if e.kind() == std::io::ErrorKind::NotFound {
-            "file not found".to_string()
-        } else {
-            format!("cannot read file: {e}")
-        },
-    })?;
-    let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    load_from_slice(&bytes, Some(&base_dir), &display)
+    load_with(path, ReadPolicy::default())
+}
+
+/// Loads a `.gltf` or `.glb` file; external buffers and images resolve relative to the file's
+/// folder under `policy`.
+pub fn load_with(path: &Path, policy: ReadPolicy) -> Result<Scene, SceneError> {
+    let file = files::read_scene_file(path, |path, message| SceneError::Gltf { path, message })?;
+    load_from_slice_with(&file.bytes, Some(&file.base_dir), &file.display, policy)
 }
 
 /// Loads glTF from memory. `base_dir` resolves relative buffer / image URIs (`None`: only
@@ -57,9 +62,21 @@ pub fn load_from_slice(
     base_dir: Option<&Path>,
     display_path: &str,
 ) -> Result<Scene, SceneError> {
+    load_from_slice_with(bytes, base_dir, display_path, ReadPolicy::default())
+}
+
+/// [`load_from_slice`] with an explicit policy for external references.
+pub fn load_from_slice_with(
+    bytes: &[u8],
+    base_dir: Option<&Path>,
+    display_path: &str,
+    policy: ReadPolicy,
+) -> Result<Scene, SceneError> {
     let mut importer = Importer::new(bytes, base_dir, display_path)?;
+    importer.policy = policy;
     importer.import()?;
     let mut scene = importer.scene;
+    sanitize::sanitize(&mut scene, display_path);
     scene.warnings = collapse_repeats(std::mem::take(&mut scene.warnings));
     Ok(scene)
 }
@@ -202,6 +219,7 @@ fn slot_color_space(srgb: bool) -> ColorSpace {
 struct Importer<'a> {
     display: String,
     base_dir: Option<PathBuf>,
+    policy: ReadPolicy,
     raw: Value,
     document: gltf::Document,
     bin: Option<&'a [u8]>,
@@ -353,6 +371,7 @@ impl<'a> Importer<'a> {
         Ok(Self {
             display: display.to_string(),
             base_dir: base_dir.map(Path::to_path_buf),
+            policy: ReadPolicy::default(),
             raw,
             document,
             bin,
@@ -411,6 +430,7 @@ impl<'a> Importer<'a> {
                 })?,
                 gltf::buffer::Source::Uri(uri) => self.read_uri(uri, "buffer")?,
             };
+            let mut data = data;
             if data.len() < buffer.length() {
                 return Err(self.err(format!(
                     "buffer {index} has {} bytes but declares byteLength {}",
@@ -418,6 +438,8 @@ impl<'a> Importer<'a> {
                     buffer.length()
                 )));
             }
+            // Bytes past byteLength are not part of the buffer (GLB pads its chunk).
+            data.truncate(buffer.length());
             buffers.push(data);
         }
         self.buffers = buffers;
@@ -439,17 +461,7 @@ impl<'a> Importer<'a> {
                 "external {kind} file '{uri}' cannot be resolved without a base folder"
             )));
         };
-        let path = base.join(relative);
-        std::fs::read(&path).map_err(|e| {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                self.err(format!(
-                    "missing {kind} file '{uri}' (looked for {})",
-                    path.display()
-                ))
-            } else {
-                self.err(format!("cannot read {kind} file '{}': {e}", path.display()))
-            }
-        })
+        files::read_reference(base, relative, kind, self.policy).map_err(|m| self.err(m))
     }
 
     // ----- accessors -------------------------------------------------------------------------
@@ -577,7 +589,8 @@ impl<'a> Importer<'a> {
 
     /// Checks, before anything is allocated, that the accessor's dense data lies inside its
     /// buffer view, so a corrupt `count` fails with a message instead of a huge allocation.
-    /// View-less accessors (all zeros plus sparse values) are capped at 2²⁷ elements.
+    /// View-less accessors (all zeros plus sparse values) are capped at
+    /// [`MAX_VIEWLESS_ELEMENTS`].
     fn check_extent(
         &self,
         accessor: &gltf::Accessor,
@@ -608,7 +621,7 @@ impl<'a> Importer<'a> {
                     ))),
                 }
             }
-            None if count <= 1 << 27 => Ok(()),
+            None if count <= MAX_VIEWLESS_ELEMENTS => Ok(()),
             None => Err(self.err(format!(
                 "accessor {index} ({what}) has no bufferView and an implausible count {count}"
             ))),
@@ -833,11 +846,10 @@ impl<'a> Importer<'a> {
         } else {
             return Err("image has neither a uri nor a bufferView".into());
         };
-        let decoded = image::load_from_memory(&encoded)
-            .map_err(|e| format!("cannot decode '{name}': {e}"))?;
-        // `to_rgba8` converts every pixel format (grey, grey-alpha, RGB, 16-bit, float with
+        // `decode_rgba8` converts every pixel format (grey, grey-alpha, RGB, 16-bit, float with
         // clamping) to 8-bit RGBA, which is all the GPU side samples.
-        let rgba = decoded.to_rgba8();
+        let rgba =
+            files::decode_rgba8(&encoded).map_err(|e| format!("cannot decode '{name}': {e}"))?;
         Ok(Texture {
             name,
             width: rgba.width(),

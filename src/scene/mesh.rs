@@ -5,7 +5,7 @@
 //! and the light atlas downstream divide by normals and areas, so a single bad vertex would
 //! poison a whole frame.
 
-use super::Mesh;
+use super::{Mesh, Scene};
 use glam::{Vec2, Vec3, Vec4};
 use std::collections::HashMap;
 
@@ -156,15 +156,16 @@ pub fn validate_positions(positions: &[Vec3]) -> Result<(), String> {
 ///
 /// All vertex attributes are interpolated: positions and UVs linearly, normals and tangent
 /// directions renormalized. Refinement stops with a warning before the mesh would exceed
-/// [`MAX_TESSELLATED_TRIANGLES`].
-pub fn tessellate(mesh: &mut Mesh, max_edge: f32) {
+/// [`MAX_TESSELLATED_TRIANGLES`]. Returns whether every edge now is at most `max_edge`.
+pub fn tessellate(mesh: &mut Mesh, max_edge: f32) -> bool {
     if !(max_edge.is_finite() && max_edge > 0.0) {
         log::warn!(
             "tessellate {}: ignoring invalid max_edge {max_edge}",
             mesh.name
         );
-        return;
+        return false;
     }
+    let mut complete = true;
     let max2 = max_edge * max_edge;
     let vertex_count = mesh.positions.len();
     let has_normals = mesh.normals.len() == vertex_count;
@@ -211,10 +212,12 @@ pub fn tessellate(mesh: &mut Mesh, max_edge: f32) {
                 mesh.name,
                 tris.len()
             );
+            complete = false;
             break;
         }
         if mesh.positions.len() + midpoints.len() > u32::MAX as usize {
             log::warn!("tessellate {}: vertex count would overflow u32", mesh.name);
+            complete = false;
             break;
         }
         // Create midpoint vertices in a deterministic order (sorted edge keys) so the result
@@ -255,6 +258,88 @@ pub fn tessellate(mesh: &mut Mesh, max_edge: f32) {
         tris = next;
     }
     mesh.indices = tris.into_iter().flatten().collect();
+    complete
+}
+
+/// Triangle budget of [`tessellate_instanced`] over all of a scene's meshes.
+pub const MAX_IMPORTED_TRIANGLES: usize = 2_000_000;
+
+/// Refines every instanced mesh of `scene` so that no edge is longer than `max_edge` metres in
+/// world space (at the rest pose): a mesh placed with scale s is tessellated to `max_edge / s`
+/// in its model space, s being the largest axis scale of any instance of it. When the refined
+/// scene would exceed [`MAX_IMPORTED_TRIANGLES`] (estimated from the world-space areas and edge
+/// lengths before any work), the edge length is raised to fit and a warning says so. Returns
+/// the warnings, each prefixed with `source`.
+pub fn tessellate_instanced(scene: &mut Scene, max_edge: f32, source: &str) -> Vec<String> {
+    let mut warnings = Vec::new();
+    if !(max_edge.is_finite() && max_edge > 0.0) {
+        warnings.push(format!(
+            "{source}: max_edge {max_edge} is not a positive length; meshes not tessellated"
+        ));
+        return warnings;
+    }
+    let world = scene.world_from_node();
+    let mut scale = vec![0.0f32; scene.meshes.len()];
+    for inst in &scene.instances {
+        let (Some(m), Some(s)) = (world.get(inst.node), scale.get_mut(inst.mesh)) else {
+            continue;
+        };
+        let axes = [m.x_axis, m.y_axis, m.z_axis].map(|a| a.truncate().length());
+        let largest = axes[0].max(axes[1]).max(axes[2]);
+        if largest.is_finite() {
+            *s = s.max(largest);
+        }
+    }
+    // Midpoint refinement to edges ≤ L leaves triangles with edges in (L/2, L]; 0.2 L² is a
+    // typical area among them, and a sliver needs about (longest edge / L) pieces.
+    let estimate = |edge: f64| -> f64 {
+        let mut total = 0.0f64;
+        for (mesh, &s) in scene.meshes.iter().zip(&scale) {
+            if s <= 0.0 {
+                continue;
+            }
+            let s = s as f64;
+            for t in mesh.indices.chunks_exact(3) {
+                let Some([a, b, c]) = triangle(t, mesh.positions.len()) else {
+                    continue;
+                };
+                let (pa, pb, pc) = (mesh.positions[a], mesh.positions[b], mesh.positions[c]);
+                let area = 0.5 * (pb - pa).cross(pc - pa).length() as f64 * s * s;
+                let longest = (pb - pa)
+                    .length()
+                    .max((pc - pb).length())
+                    .max((pa - pc).length()) as f64
+                    * s;
+                total += (area / (0.2 * edge * edge)).max(longest / edge).max(1.0);
+            }
+        }
+        total
+    };
+    let mut edge = max_edge as f64;
+    let predicted = estimate(edge);
+    if predicted > MAX_IMPORTED_TRIANGLES as f64 {
+        edge *= (predicted / MAX_IMPORTED_TRIANGLES as f64).sqrt();
+        warnings.push(format!(
+            "{source}: --max-edge {max_edge} m would refine the meshes to about {predicted:.0} \
+             triangles (budget {MAX_IMPORTED_TRIANGLES}); using {edge:.3} m instead"
+        ));
+    }
+    let mut incomplete = Vec::new();
+    for (mesh, &s) in scene.meshes.iter_mut().zip(&scale) {
+        if s <= 0.0 {
+            continue;
+        }
+        if !tessellate(mesh, (edge / s as f64) as f32) {
+            incomplete.push(mesh.name.clone());
+        }
+    }
+    if !incomplete.is_empty() {
+        warnings.push(format!(
+            "{source}: mesh(es) {} keep edges longer than {edge:.3} m (triangle cap reached)",
+            incomplete.join(", ")
+        ));
+    }
+    warnings
 }
 
 /// Re-triangulates triangle `t` whose edges k = (t[k], t[k+1]) have midpoints `m[k]` where

@@ -7,9 +7,14 @@
 
 pub mod animation;
 pub mod builtin;
+pub mod files;
 pub mod gltf_import;
 pub mod merge;
 pub mod mesh;
+pub mod mitsuba;
+pub mod obj;
+pub mod ply;
+pub mod sanitize;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 
@@ -559,22 +564,99 @@ fn default_camera(bounds: &Aabb, radius: f32, aspect: f32) -> CameraView {
     }
 }
 
-/// Loads a scene from a spec: a path ending in `.gltf` / `.glb` (any case) is imported from
-/// disk, anything else names a built-in scene (see [`builtin::names`]).
-pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneError> {
-    let lower = spec.to_ascii_lowercase();
-    if lower.ends_with(".gltf") || lower.ends_with(".glb") {
-        let path = std::path::Path::new(spec);
-        if !path.is_file() {
-            return Err(SceneError::Gltf {
-                path: spec.to_string(),
-                message: "file not found".into(),
-            });
+/// Scene file formats [`load`] reads, by extension (any case), as listed in its errors.
+pub const SUPPORTED_FORMATS: &str =
+    ".gltf, .glb (glTF 2.0), .obj (Wavefront with its MTL), .ply (ASCII or binary), \
+     .xml (Mitsuba 0.5 scene subset)";
+
+/// What [`load`] needs besides the spec.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LoadParams {
+    /// Longest triangle edge in world space, metres, for built-in and imported meshes alike.
+    pub max_edge: f32,
+    /// Admit buffer, image and mesh references outside the scene file's folder (absolute
+    /// paths, `..`); device files and other non-regular files stay refused either way.
+    pub allow_external_paths: bool,
+}
+
+impl Default for LoadParams {
+    fn default() -> Self {
+        Self {
+            max_edge: builtin::BuiltinParams::default().max_edge,
+            allow_external_paths: false,
         }
-        gltf_import::load(path)
-    } else {
-        builtin::load(spec, params)
     }
+}
+
+impl From<&builtin::BuiltinParams> for LoadParams {
+    fn from(params: &builtin::BuiltinParams) -> Self {
+        Self {
+            max_edge: params.max_edge,
+            ..Self::default()
+        }
+    }
+}
+
+impl LoadParams {
+    fn policy(&self) -> files::ReadPolicy {
+        files::ReadPolicy {
+            allow_external_paths: self.allow_external_paths,
+        }
+    }
+}
+
+/// Loads a scene from a spec with the default [`LoadParams`] except `max_edge` (see
+/// [`load_with`]).
+pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneError> {
+    load_with(spec, &LoadParams::from(params))
+}
+
+/// Loads a scene from a spec: a path with a scene-file extension (see [`SUPPORTED_FORMATS`],
+/// any case) is imported from disk and its meshes are tessellated to `max_edge`; a bare name
+/// without extension or folder names a built-in scene (see [`builtin::names`]). A path with any
+/// other extension is an error that lists the supported formats.
+pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
+    let path = std::path::Path::new(spec);
+    let extension = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let is_path = extension.is_some() || spec.contains('/') || spec.contains('\\');
+    if !is_path {
+        return builtin::load(
+            spec,
+            &builtin::BuiltinParams {
+                max_edge: params.max_edge,
+            },
+        );
+    }
+    let policy = params.policy();
+    let mut scene = match extension.as_deref() {
+        Some("gltf" | "glb") => {
+            if !path.is_file() {
+                return Err(SceneError::Gltf {
+                    path: spec.to_string(),
+                    message: "file not found".into(),
+                });
+            }
+            gltf_import::load_with(path, policy)?
+        }
+        Some("obj") => obj::load(path, policy)?,
+        Some("ply") => ply::load(path)?,
+        Some("xml") => mitsuba::load(path, policy)?,
+        other => {
+            return Err(SceneError::Other {
+                path: spec.to_string(),
+                message: format!(
+                    "unsupported scene format {}; supported: {SUPPORTED_FORMATS}, or a built-in \
+                     scene name (run `valgi scenes`)",
+                    other.map_or("(no extension)".to_string(), |e| format!("'.{e}'"))
+                ),
+            })
+        }
+    };
+    let warnings = mesh::tessellate_instanced(&mut scene, params.max_edge, spec);
+    scene.warnings.extend(warnings);
+    Ok(scene)
 }
 
 #[cfg(test)]
