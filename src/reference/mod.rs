@@ -3,8 +3,10 @@
 //! (`crate::shading::WorldLight`) as the GPU methods, and an exact bounce count. See README.md
 //! beside this file for the estimators.
 
-pub mod rt;
-pub mod sampling;
+/// The scene's ray tracer and the seeded sampler live in the base layer (the bakers use them
+/// too); the path tracer's names for them stay.
+pub use crate::sampling;
+pub use crate::trace as rt;
 
 use std::fmt;
 use std::io::IsTerminal;
@@ -19,9 +21,9 @@ use crate::gpu::{GpuContext, Passes};
 use crate::image_io::Image;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{RenderError, RenderSettings};
+use crate::sampling::{cosine_hemisphere, sample_brdf, Rng};
 use crate::scene::{CameraView, Scene};
-pub use rt::{Hit, Tracer};
-use sampling::{cosine_hemisphere, sample_brdf, Rng};
+pub use crate::trace::{Hit, Tracer};
 
 /// How many indirect bounces a path may take: `Limited(0)` is direct light only,
 /// `Limited(1)` adds one bounce, …; `Unbounded` ends paths by Russian roulette.

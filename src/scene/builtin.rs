@@ -626,7 +626,7 @@ mod tests {
         let params = BuiltinParams { max_edge: 0.5 };
         let room_b_direct = |name: &str| {
             let scene = load(name, &params).unwrap();
-            let tracer = crate::reference::Tracer::new(&scene, &scene.world_from_node());
+            let tracer = crate::trace::Tracer::new(&scene, &scene.world_from_node());
             let mut sum = 0.0f64;
             for i in 0..40 {
                 for k in 0..30 {
@@ -649,7 +649,7 @@ mod tests {
         assert!(at_wall.z > dims.doorway_z.0 && at_wall.z < dims.doorway_z.1);
         // Room A's far half, behind the spot, gets no direct light (the beam points away).
         let scene = load("door-room", &params).unwrap();
-        let tracer = crate::reference::Tracer::new(&scene, &scene.world_from_node());
+        let tracer = crate::trace::Tracer::new(&scene, &scene.world_from_node());
         let behind = tracer.direct_irradiance(Vec3::new(0.2, 0.0, 1.5), Vec3::Y);
         assert_eq!(behind, Vec3::ZERO);
         for bad in ["door-room5", "door-room95", "door-roomx"] {

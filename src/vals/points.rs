@@ -15,6 +15,7 @@ use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
 
 use super::math::link_weights;
+use crate::sampling::Rng;
 use crate::scene::{Mesh, Scene};
 
 /// Links per vertex.
@@ -89,24 +90,6 @@ fn triangle_area(mesh: &Mesh, t: &[u32]) -> f32 {
     0.5 * (b - a).cross(c - a).length()
 }
 
-/// Deterministic SplitMix64 stream: the placement must not change between runs or machines.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
-
 /// Places `count` points on `mesh` and links its vertices. Meshes without area get none.
 pub fn place(mesh: &Mesh, count: usize, seed: u64) -> MeshPoints {
     let triangles: Vec<&[u32]> = mesh.indices.chunks_exact(3).collect();
@@ -124,7 +107,8 @@ pub fn place(mesh: &Mesh, count: usize, seed: u64) -> MeshPoints {
     }
 
     // Area-uniform candidates.
-    let mut rng = SplitMix(seed ^ 0x5EED_5EED_5EED_5EED);
+    // A fixed stream per seed: the placement must not change between runs or machines.
+    let mut rng = Rng::from_state(seed ^ 0x5EED_5EED_5EED_5EED);
     let candidate_count = count * CANDIDATES_PER_POINT;
     let mut candidates = Vec::with_capacity(candidate_count);
     let mut candidate_normals = Vec::with_capacity(candidate_count);

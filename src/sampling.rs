@@ -1,4 +1,6 @@
-//! Deterministic random numbers and the BRDF importance sampler.
+//! The one seeded generator (SplitMix64) every part of valgi draws from — sparse-point
+//! placement, the bakers, the path tracer — plus the path tracer's and bakers' direction
+//! samplers (cosine hemisphere, BRDF importance sampling).
 
 use std::f32::consts::PI;
 
@@ -12,6 +14,12 @@ use crate::shading::{brdf, reflect};
 pub struct Rng(u64);
 
 impl Rng {
+    /// The raw stream whose state starts at `state` (the first number is that of state +
+    /// the golden-ratio increment).
+    pub fn from_state(state: u64) -> Self {
+        Rng(state)
+    }
+
     pub fn new(seed: u64, stream: u64, index: u64) -> Self {
         let mut rng = Rng(seed ^ mix(stream.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ mix(index)));
         rng.next_u64();
