@@ -40,7 +40,7 @@ pub struct BenchRequest {
     pub out: PathBuf,
 }
 
-/// `FmaParams` in `shaders/bench_fma.wgsl`.
+/// `FmaParams` in `shaders/bench/bench_fma.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct FmaParams {

@@ -21,3 +21,4 @@ pub mod shaders;
 pub mod shading;
 pub mod trace;
 pub mod vals;
+pub mod views_bench;

@@ -157,6 +157,24 @@ struct BenchArgs {
     /// Skip the brute-force run (slow on software drivers).
     #[arg(long)]
     no_brute: bool,
+    /// Instead of the Table 1 grid: time frames with these numbers of views (grid rig) per
+    /// method, plus one view at --large, and the mid-eye glossy error; writes views.csv,
+    /// views.png and glossy_eye.csv.
+    #[arg(long, value_delimiter = ',')]
+    views: Vec<usize>,
+    /// Methods of the views benchmark.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "sparse,brute,lpv,holpv,atlas"
+    )]
+    methods: Vec<String>,
+    /// Size of the views benchmark's resolution-independence row, WxH.
+    #[arg(long, default_value = "3840x2160")]
+    large: String,
+    /// Size of each eye in the views benchmark's glossy-eye comparison.
+    #[arg(long, default_value_t = 256)]
+    glossy_size: u32,
     #[arg(long, default_value = "out/bench")]
     out: PathBuf,
 }
@@ -394,6 +412,37 @@ fn main() -> ExitCode {
             match app::render(&request) {
                 Ok(report) => {
                     println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Bench(args) if !args.views.is_empty() => {
+            let large = args
+                .large
+                .split_once('x')
+                .and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)))
+                .filter(|&(w, h): &(u32, u32)| w > 0 && h > 0);
+            let Some(large) = large else {
+                eprintln!("error: --large {}: expected WIDTHxHEIGHT", args.large);
+                return ExitCode::FAILURE;
+            };
+            let request = valgi::views_bench::ViewsBenchRequest {
+                scene: args.scene,
+                views: args.views,
+                methods: args.methods,
+                width: args.width,
+                height: args.height,
+                large,
+                glossy_size: args.glossy_size,
+                out: args.out,
+            };
+            match valgi::views_bench::run(&request) {
+                Ok(path) => {
+                    println!("wrote {}", path.display());
                     ExitCode::SUCCESS
                 }
                 Err(e) => {

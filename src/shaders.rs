@@ -1,81 +1,89 @@
-//! The WGSL sources in `shaders/`, embedded in the binary. A line `#include "file.wgsl"` is
-//! replaced by that file's text (once per shader), because WGSL has no include of its own;
-//! tests validate every resolved shader with naga.
+//! The WGSL sources, embedded in the binary. They live under `shaders/<part>/`, one folder
+//! per part that owns them (base, light, vals, brute, lpv, atlas, bench), and are named by
+//! file name. A line `#include "file.wgsl"` is replaced by that file's text (once per
+//! shader), because WGSL has no include of its own; tests validate every resolved shader
+//! with naga.
 
 /// Every shader file, by name.
 pub const FILES: &[(&str, &str)] = &[
-    ("common.wgsl", include_str!("../shaders/common.wgsl")),
+    ("common.wgsl", include_str!("../shaders/base/common.wgsl")),
     (
         "shadow_depth.wgsl",
-        include_str!("../shaders/shadow_depth.wgsl"),
+        include_str!("../shaders/base/shadow_depth.wgsl"),
     ),
-    ("gbuffer.wgsl", include_str!("../shaders/gbuffer.wgsl")),
+    ("gbuffer.wgsl", include_str!("../shaders/base/gbuffer.wgsl")),
     (
         "direct_light.wgsl",
-        include_str!("../shaders/direct_light.wgsl"),
+        include_str!("../shaders/base/direct_light.wgsl"),
     ),
-    ("resolve.wgsl", include_str!("../shaders/resolve.wgsl")),
+    ("resolve.wgsl", include_str!("../shaders/base/resolve.wgsl")),
     (
         "vals_common.wgsl",
-        include_str!("../shaders/vals_common.wgsl"),
+        include_str!("../shaders/vals/vals_common.wgsl"),
     ),
-    ("vals_rsm.wgsl", include_str!("../shaders/vals_rsm.wgsl")),
+    (
+        "vals_rsm.wgsl",
+        include_str!("../shaders/light/vals_rsm.wgsl"),
+    ),
     (
         "vals_from_rsm.wgsl",
-        include_str!("../shaders/vals_from_rsm.wgsl"),
+        include_str!("../shaders/light/vals_from_rsm.wgsl"),
     ),
     (
         "vals_gather.wgsl",
-        include_str!("../shaders/vals_gather.wgsl"),
+        include_str!("../shaders/vals/vals_gather.wgsl"),
     ),
     (
         "vals_renormalize.wgsl",
-        include_str!("../shaders/vals_renormalize.wgsl"),
+        include_str!("../shaders/vals/vals_renormalize.wgsl"),
     ),
     (
         "vals_occlusion.wgsl",
-        include_str!("../shaders/vals_occlusion.wgsl"),
+        include_str!("../shaders/vals/vals_occlusion.wgsl"),
     ),
     (
         "vals_interpolate.wgsl",
-        include_str!("../shaders/vals_interpolate.wgsl"),
+        include_str!("../shaders/vals/vals_interpolate.wgsl"),
     ),
     (
         "vals_apply.wgsl",
-        include_str!("../shaders/vals_apply.wgsl"),
+        include_str!("../shaders/vals/vals_apply.wgsl"),
     ),
     (
         "brute_vals.wgsl",
-        include_str!("../shaders/brute_vals.wgsl"),
+        include_str!("../shaders/brute/brute_vals.wgsl"),
     ),
-    ("bench_fma.wgsl", include_str!("../shaders/bench_fma.wgsl")),
+    (
+        "bench_fma.wgsl",
+        include_str!("../shaders/bench/bench_fma.wgsl"),
+    ),
     (
         "atlas_render.wgsl",
-        include_str!("../shaders/atlas_render.wgsl"),
+        include_str!("../shaders/atlas/atlas_render.wgsl"),
     ),
     (
         "atlas_apply.wgsl",
-        include_str!("../shaders/atlas_apply.wgsl"),
+        include_str!("../shaders/atlas/atlas_apply.wgsl"),
     ),
     (
         "lpv_common.wgsl",
-        include_str!("../shaders/lpv_common.wgsl"),
+        include_str!("../shaders/lpv/lpv_common.wgsl"),
     ),
     (
         "lpv_inject.wgsl",
-        include_str!("../shaders/lpv_inject.wgsl"),
+        include_str!("../shaders/lpv/lpv_inject.wgsl"),
     ),
     (
         "lpv_geometry.wgsl",
-        include_str!("../shaders/lpv_geometry.wgsl"),
+        include_str!("../shaders/lpv/lpv_geometry.wgsl"),
     ),
     (
         "lpv_propagate.wgsl",
-        include_str!("../shaders/lpv_propagate.wgsl"),
+        include_str!("../shaders/lpv/lpv_propagate.wgsl"),
     ),
     (
         "lpv_lookup.wgsl",
-        include_str!("../shaders/lpv_lookup.wgsl"),
+        include_str!("../shaders/lpv/lpv_lookup.wgsl"),
     ),
 ];
 

@@ -1,5 +1,5 @@
-//! The material and light model of DESIGN §3 on the CPU: the twin of `shaders/common.wgsl`
-//! and of the per-light loop in `shaders/direct_light.wgsl`. Tests evaluate it next to GPU
+//! The material and light model of DESIGN §3 on the CPU: the twin of `shaders/base/common.wgsl`
+//! and of the per-light loop in `shaders/base/direct_light.wgsl`. Tests evaluate it next to GPU
 //! images; the reference path tracer uses the same functions, so every method shares one
 //! definition of the physics.
 

@@ -2,7 +2,7 @@
 //! crate's compressed wide BVH; flat regions merged by [`crate::scene::merge`], the same
 //! surface and attributes with far fewer triangles), closest-hit and shadow queries, and the
 //! material at a hit reduced to DESIGN §3's (ρ_d, ρ_s, k, emission) exactly as
-//! `shaders/gbuffer.wgsl` does it (base colour, metallic-roughness, normal and emissive
+//! `shaders/base/gbuffer.wgsl` does it (base colour, metallic-roughness, normal and emissive
 //! textures; back faces shade with the flipped normal).
 
 use std::time::Duration;

@@ -17,20 +17,36 @@ fn every_wgsl_file_validates() {
 
 #[test]
 fn every_shader_in_the_folder_is_listed() {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
-    for entry in std::fs::read_dir(&dir).expect("shaders folder") {
-        let name = entry
-            .expect("entry")
-            .file_name()
-            .to_string_lossy()
-            .to_string();
-        if name.ends_with(".wgsl") {
-            assert!(
-                shaders::FILES.iter().any(|(n, _)| *n == name),
-                "shaders/{name} is not in shaders::FILES, so it is neither embedded nor validated"
-            );
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("shaders");
+    let mut found = 0;
+    // One folder per part that owns shaders (shaders/<part>/<name>.wgsl).
+    for folder in std::fs::read_dir(&root).expect("shaders folder") {
+        let folder = folder.expect("entry").path();
+        let files: Vec<std::path::PathBuf> = if folder.is_dir() {
+            std::fs::read_dir(&folder)
+                .expect("shader part folder")
+                .map(|e| e.expect("entry").path())
+                .collect()
+        } else {
+            vec![folder]
+        };
+        for file in files {
+            let name = file.file_name().unwrap().to_string_lossy().to_string();
+            if name.ends_with(".wgsl") {
+                found += 1;
+                assert!(
+                    shaders::FILES.iter().any(|(n, _)| *n == name),
+                    "{} is not in shaders::FILES, so it is neither embedded nor validated",
+                    file.display()
+                );
+            }
         }
     }
+    assert_eq!(
+        found,
+        shaders::FILES.len(),
+        "shader files on disk and in shaders::FILES"
+    );
 }
 
 #[test]

@@ -6,7 +6,7 @@
 //!
 //! The layout finds those contact lines (triangle–plane intersections, in world space), maps
 //! them into the atlas's UV space and keeps, per texel, up to [`CUTS_PER_TEXEL`] pieces of
-//! them clipped to the texel's square. The lookup (`shaders/atlas_render.wgsl`, CPU twin
+//! them clipped to the texel's square. The lookup (`shaders/atlas/atlas_render.wgsl`, CPU twin
 //! [`lookup`]) leaves out every bilinear tap whose centre the pixel cannot reach in a
 //! straight line without crossing a cut stored in one of the four taps' texels (a straight
 //! path from the pixel to a tap centre stays inside those four squares), and renormalizes the
@@ -85,7 +85,7 @@ pub fn path_crosses(p: Vec2, q: Vec2, a: Vec2, b: Vec2) -> bool {
 
 /// The atlas lookup with cuts: bilinear over the four texels around `uv` (texel centres at
 /// (i + ½)/R, clamped at the border), leaving out taps the pixel cannot reach without
-/// crossing a cut. CPU twin of `fs_main` in `shaders/atlas_render.wgsl`.
+/// crossing a cut. CPU twin of `fs_main` in `shaders/atlas/atlas_render.wgsl`.
 pub fn lookup(image: &Image, cuts: &ContactCuts, uv: Vec2) -> [f32; 3] {
     let (w, h) = (image.width as i64, image.height as i64);
     let p = uv * Vec2::new(w as f32, h as f32) - Vec2::splat(0.5);

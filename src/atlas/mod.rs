@@ -113,7 +113,7 @@ pub fn bake_to_file(
     Ok(summary)
 }
 
-/// Mirrors `AtlasFrame` in `shaders/atlas_render.wgsl`.
+/// Mirrors `AtlasFrame` in `shaders/atlas/atlas_render.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct AtlasFrame {
@@ -122,7 +122,7 @@ pub struct AtlasFrame {
     pub pad: [u32; 2],
 }
 
-/// Mirrors `ApplyParams` in `shaders/atlas_apply.wgsl`.
+/// Mirrors `ApplyParams` in `shaders/atlas/atlas_apply.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct ApplyParams {

@@ -139,7 +139,7 @@ pub fn pareto_chart(path: &Path, title: &str, points: &[ParetoPoint]) -> Result<
     save_rgb(path, width, height, buffer)
 }
 
-fn save_rgb(path: &Path, width: u32, height: u32, buffer: Vec<u8>) -> Result<(), EvalError> {
+pub fn save_rgb(path: &Path, width: u32, height: u32, buffer: Vec<u8>) -> Result<(), EvalError> {
     if let Some(parent) = path.parent() {
         std::fs::create_dir_all(parent).map_err(|e| plot_error(path, e))?;
     }

@@ -26,7 +26,7 @@ impl Val {
     }
 }
 
-/// `SparseParams` in `shaders/vals_common.wgsl`: what a VAL gather is told (the eye of its
+/// `SparseParams` in `shaders/vals/vals_common.wgsl`: what a VAL gather is told (the eye of its
 /// glossy lobes, counts, flags, the workgroup tile).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]

@@ -21,7 +21,7 @@ use crate::scene::{Aabb, LightKind, Scene};
 
 use super::Val;
 
-/// One VAL as the shaders store it (`Val` in `shaders/vals_common.wgsl`).
+/// One VAL as the shaders store it (`Val` in `shaders/vals/vals_common.wgsl`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct GpuVal {
@@ -43,7 +43,7 @@ impl GpuVal {
     }
 }
 
-/// `RsmView` in `shaders/vals_rsm.wgsl`.
+/// `RsmView` in `shaders/light/vals_rsm.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct RsmView {
@@ -56,7 +56,7 @@ pub struct RsmView {
     pub texel_area: f32,
 }
 
-/// `RsmSize` in `shaders/vals_from_rsm.wgsl`.
+/// `RsmSize` in `shaders/light/vals_from_rsm.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct RsmSize {

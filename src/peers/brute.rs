@@ -1,6 +1,6 @@
 //! Brute-force VALs: every pixel sums every VAL from the same RSMs with the same disc
 //! irradiance and BRDF as the sparse method, without interpolation or occlusion
-//! (`shaders/brute_vals.wgsl`; CPU twin [`crate::vals::math::brute_force`]). Its image is what
+//! (`shaders/brute/brute_vals.wgsl`; CPU twin [`crate::vals::math::brute_force`]). Its image is what
 //! the sparse method would give with a receiver point at every pixel, so the difference between
 //! the two is the sparse method's interpolation error alone.
 

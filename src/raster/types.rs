@@ -1,4 +1,4 @@
-//! `#[repr(C)]` mirrors of the WGSL structs in `shaders/common.wgsl` and `shaders/resolve.wgsl`.
+//! `#[repr(C)]` mirrors of the WGSL structs in `shaders/base/common.wgsl` and `shaders/base/resolve.wgsl`.
 //! `tests/shader_layout.rs` checks every size and field offset against naga's reflection.
 
 use bytemuck::{Pod, Zeroable};

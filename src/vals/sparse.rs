@@ -29,7 +29,7 @@ pub use crate::light::{
     ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY,
 };
 
-/// `InstanceRange` in `shaders/vals_common.wgsl`.
+/// `InstanceRange` in `shaders/vals/vals_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct InstanceRange {

@@ -24,7 +24,7 @@ use crate::scene::Scene;
 
 use math::{Face, Grid, Volume};
 
-/// `LpvParams` in `shaders/lpv_common.wgsl`.
+/// `LpvParams` in `shaders/lpv/lpv_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct LpvParams {
@@ -36,7 +36,7 @@ pub struct LpvParams {
     pub pad: u32,
 }
 
-/// `LpvFace` in `shaders/lpv_common.wgsl`.
+/// `LpvFace` in `shaders/lpv/lpv_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct LpvFace {
