@@ -104,10 +104,17 @@ impl VirtualLight {
     }
 
     /// Unshadowed irradiance per watt at `(p, n)`; `eps` and `max_shift` are the corner
-    /// shift's (world units).
-    pub fn transfer(&self, p: Vec3, n: Vec3, eps: f32, max_shift: f32) -> f64 {
+    /// shift's (world units), `clear` confirms a shift (see [`polygon_irradiance`]).
+    pub fn transfer(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        eps: f32,
+        max_shift: f32,
+        clear: &dyn Fn(Vec3, Vec3) -> bool,
+    ) -> f64 {
         match &self.shape {
-            Shape::Polygon(l) => polygon_irradiance(l, p, n, eps, max_shift),
+            Shape::Polygon(l) => polygon_irradiance(l, p, n, eps, max_shift, clear),
             Shape::Sphere(s) => sphere_irradiance(s, p, n),
         }
     }
@@ -275,10 +282,17 @@ impl Baker for PolygonBaker {
         // --- Accumulation -------------------------------------------------------------
         let texel = ctx.texel_size();
         let (eps, max_shift) = (ps.epsilon_texels * texel, ps.max_shift_texels * texel);
+        let tracer = &ctx.tracer;
         let (irradiance, covered) = ctx.fill(bounces, progress, cancel, |block, out| {
             for (i, l) in lights.iter().enumerate() {
                 for (k, t) in block.iter().enumerate() {
-                    let f = l.transfer(t.position, t.normal, eps, max_shift);
+                    let clear = |from: Vec3, to: Vec3| {
+                        let origin = from + t.normal * tracer.epsilon;
+                        let d = to + t.normal * tracer.epsilon - origin;
+                        let len = d.length();
+                        len <= tracer.epsilon || tracer.unoccluded(origin, d / len, len)
+                    };
+                    let f = l.transfer(t.position, t.normal, eps, max_shift, &clear);
                     if f <= 0.0 {
                         continue;
                     }
