@@ -262,6 +262,31 @@ impl DepthCube {
         )
     }
 
+    /// The surface point the texel the direction `d` falls in stores, at the texel centre's
+    /// own direction (exact for a plane drawn into it); `None` where nothing was drawn.
+    pub fn surface_toward(&self, d: Vec3) -> Option<Vec3> {
+        let face = major_face(d);
+        let l = face_local(face, d);
+        if l.z <= 0.0 {
+            return None;
+        }
+        let half = self.res as f32 * 0.5;
+        let x = (((l.x / l.z + 1.0) * half) as i64).clamp(0, self.res as i64 - 1);
+        let y = (((l.y / l.z + 1.0) * half) as i64).clamp(0, self.res as i64 - 1);
+        let depth = self.depth[face * self.res * self.res + y as usize * self.res + x as usize];
+        depth.is_finite().then(|| {
+            self.origin
+                + face_world(
+                    face,
+                    Vec3::new(
+                        ((x as f32 + 0.5) / half - 1.0) * depth,
+                        ((y as f32 + 0.5) / half - 1.0) * depth,
+                        depth,
+                    ),
+                )
+        })
+    }
+
     /// The centre tap's answer for `p`, whether its 3×3 neighbourhood agrees, and how far in
     /// front of the receiver the centre tap's surface lies (see [`ShadowTest`]). `n` is the
     /// receiver's normal: the point is pushed off its surface by about one texel footprint

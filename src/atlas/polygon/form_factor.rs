@@ -108,21 +108,38 @@ pub struct SphereLight {
 /// receiver facing the light's centre whose height above the light's plane is within `eps`
 /// slides in its tangent plane until it is `eps` above (at most `max_shift`), so texels at a
 /// concave corner (whose centres may lie on or just below the other surface's plane) see the
-/// light the surface next to them sees. The shifted point is used for the form factor only.
-pub fn polygon_irradiance(light: &PolygonLight, p: Vec3, n: Vec3, eps: f32, max_shift: f32) -> f64 {
+/// light the surface next to them sees. The shifted point is used for the form factor only,
+/// and only where `clear(p, p′)` says the slide crosses no geometry (with coarse texels the
+/// ε-region reaches through walls: a door's face beside its hinge would slide through the
+/// partition and take the light of the partition's far side).
+pub fn polygon_irradiance(
+    light: &PolygonLight,
+    p: Vec3,
+    n: Vec3,
+    eps: f32,
+    max_shift: f32,
+    clear: &dyn Fn(Vec3, Vec3) -> bool,
+) -> f64 {
     let (nl, c) = (light.normal.as_dvec3(), light.centre.as_dvec3());
     let (mut p, n) = (p.as_dvec3(), n.as_dvec3());
     let h = nl.dot(p - c);
     let eps = eps as f64;
-    if n.dot(c - p) > 0.0 && h.abs() < eps {
+    if h.abs() < eps {
+        // Only a receiver meeting the light's plane at an angle (a concave corner) slides; one
+        // parallel to it within the ε-region is on the light's own surface or on the back of
+        // the same sheet (a door's other face, whose fitted plane may be tilted by 10⁻⁵ and put
+        // the receiver a micrometre "in front"), and gets nothing.
         let u = nl - n * nl.dot(n);
-        if let Some(u) = u.try_normalize() {
-            let along = nl.dot(u);
-            if along > 1e-3 {
-                let shift = ((eps - h) / along).min(max_shift as f64);
-                p += u * shift;
-            }
+        let along = u.length();
+        if n.dot(c - p) <= 0.0 || nl.dot(n).abs() > 0.9 || along < 1e-3 {
+            return 0.0;
         }
+        let shift = ((eps - h) / along).min(max_shift as f64);
+        let shifted = p + u / along * shift;
+        if !clear(p.as_vec3(), shifted.as_vec3()) {
+            return 0.0;
+        }
+        p = shifted;
     }
     // Early exits: behind the emitting side, or the whole polygon below the horizon.
     if nl.dot(p - c) <= 0.0 {

@@ -61,13 +61,17 @@ impl Default for PolygonSettings {
             planes: true,
             plane_search: PlaneSearch::default(),
             per_bounce: true,
-            cube_res: 64,
+            cube_res: 128,
             shadows: true,
             epsilon_texels: 0.5,
             max_shift_texels: 2.0,
         }
     }
 }
+
+/// Height of a light's depth cube above its surface, in depth-map near planes (as the patch
+/// baker's).
+const CUBE_LIFT: f32 = 10.0;
 
 /// Upper bound of the photon paths of one bake.
 pub const MAX_PATHS: usize = 50_000_000;
@@ -104,10 +108,17 @@ impl VirtualLight {
     }
 
     /// Unshadowed irradiance per watt at `(p, n)`; `eps` and `max_shift` are the corner
-    /// shift's (world units).
-    pub fn transfer(&self, p: Vec3, n: Vec3, eps: f32, max_shift: f32) -> f64 {
+    /// shift's (world units), `clear` confirms a shift (see [`polygon_irradiance`]).
+    pub fn transfer(
+        &self,
+        p: Vec3,
+        n: Vec3,
+        eps: f32,
+        max_shift: f32,
+        clear: &dyn Fn(Vec3, Vec3) -> bool,
+    ) -> f64 {
         match &self.shape {
-            Shape::Polygon(l) => polygon_irradiance(l, p, n, eps, max_shift),
+            Shape::Polygon(l) => polygon_irradiance(l, p, n, eps, max_shift, clear),
             Shape::Sphere(s) => sphere_irradiance(s, p, n),
         }
     }
@@ -258,8 +269,8 @@ impl Baker for PolygonBaker {
                     return None;
                 }
                 let lift = match &l.shape {
-                    Shape::Polygon(p) => p.normal * (ctx.eps * 10.0),
-                    Shape::Sphere(s) => s.normal.unwrap_or(Vec3::ZERO) * (ctx.eps * 10.0),
+                    Shape::Polygon(p) => p.normal * (ctx.eps * CUBE_LIFT),
+                    Shape::Sphere(s) => s.normal.unwrap_or(Vec3::ZERO) * (ctx.eps * CUBE_LIFT),
                 };
                 let cube = DepthCube::new(l.centre() + lift, ps.cube_res, ctx.eps, &ctx.occluders);
                 let d = done.fetch_add(1, Ordering::Relaxed) + 1;
@@ -275,17 +286,27 @@ impl Baker for PolygonBaker {
         // --- Accumulation -------------------------------------------------------------
         let texel = ctx.texel_size();
         let (eps, max_shift) = (ps.epsilon_texels * texel, ps.max_shift_texels * texel);
+        let tracer = &ctx.tracer;
+        // The cube sits CUBE_LIFT·eps above its polygon; stored surfaces within 3× that of the
+        // light's plane are the surface it lies on.
+        let lift = 3.0 * CUBE_LIFT * ctx.eps;
         let (irradiance, covered) = ctx.fill(bounces, progress, cancel, |block, out| {
             for (i, l) in lights.iter().enumerate() {
                 for (k, t) in block.iter().enumerate() {
-                    let f = l.transfer(t.position, t.normal, eps, max_shift);
+                    let clear = |from: Vec3, to: Vec3| {
+                        let origin = from + t.normal * tracer.epsilon;
+                        let d = to + t.normal * tracer.epsilon - origin;
+                        let len = d.length();
+                        len <= tracer.epsilon || tracer.unoccluded(origin, d / len, len)
+                    };
+                    let f = l.transfer(t.position, t.normal, eps, max_shift, &clear);
                     if f <= 0.0 {
                         continue;
                     }
                     let v = match &cubes[i] {
                         Some(cube) => {
                             let emitter = match &l.shape {
-                                Shape::Polygon(p) => Some((p.centre, p.normal)),
+                                Shape::Polygon(p) => Some((p.centre, p.normal, lift)),
                                 Shape::Sphere(_) => None,
                             };
                             pcss::pcss_visibility(cube, t.position, t.normal, l.size(), emitter)

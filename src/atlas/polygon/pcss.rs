@@ -8,8 +8,8 @@
 //!   from the light, at least one depth texel;
 //! - each tap compares the stored depth with the receiver's *plane* along the tap's
 //!   direction (receiver-plane depth), so a tilted receiver does not shadow itself, with a
-//!   bias of one depth texel plus the tap's lateral offset (a surface meeting the receiver at
-//!   a concave edge can stand that far in front of its plane there);
+//!   bias of one depth texel plus the tap's lateral offset, at most two texels more (a surface
+//!   meeting the receiver at a concave edge can stand that far in front of its plane there);
 //! - a polygon light's own plane is no blocker: what the cube stores at or behind it is the
 //!   surface the light lies on, which a tap grazing the plane hits first.
 
@@ -22,18 +22,23 @@ pub const SEARCH_TAPS: usize = 5;
 /// Filter taps (a Vogel disc).
 pub const FILTER_TAPS: usize = 8;
 
+/// The lateral-offset part of a tap's bias is capped at this many depth texels (beyond it, a
+/// wall just behind a doorway's edge would stop shadowing the room it hides).
+const SLOPE_TEXELS: f32 = 2.0;
+
 /// Largest tap angle (radians) off the direction to the receiver.
 const MAX_ANGLE: f32 = 1.0;
 
 /// Visibility in [0, 1] of the light of size `light_size` (world units) whose depth cube is
-/// `cube`, from the receiver `(p, n)`. `emitter` is a polygon light's plane (its centre and
-/// normal), `None` for a sphere.
+/// `cube`, from the receiver `(p, n)`. `emitter` is a polygon light's plane (its centre,
+/// normal, and the height above it below which a stored surface counts as the plane itself),
+/// `None` for a sphere.
 pub fn pcss_visibility(
     cube: &DepthCube,
     p: Vec3,
     n: Vec3,
     light_size: f32,
-    emitter: Option<(Vec3, Vec3)>,
+    emitter: Option<(Vec3, Vec3, f32)>,
 ) -> f32 {
     let texel = 2.0 / cube.res as f32;
     let dist0 = (p - cube.origin).length();
@@ -70,14 +75,16 @@ pub fn pcss_visibility(
             return None;
         }
         let r = receiver_along(s) * along_axis;
-        let bias = r * (texel + angle.min(MAX_ANGLE)) + 1e-5;
+        let bias = r * (texel + angle.min(SLOPE_TEXELS * texel)) + 1e-5;
         if stored >= r - bias {
             return None;
         }
         let blocker = stored / along_axis;
-        if let Some((c, nl)) = emitter {
-            let height = nl.dot(cube.origin + s * blocker - c);
-            if height <= blocker * texel * 2.0 {
+        if let Some((c, nl, tolerance)) = emitter {
+            let on_plane = cube
+                .surface_toward(s)
+                .is_some_and(|q| nl.dot(q - c) <= tolerance);
+            if on_plane {
                 return None;
             }
         }
