@@ -840,9 +840,9 @@ impl<'a> Importer<'a> {
                 .views()
                 .nth(view_index as usize)
                 .ok_or_else(|| format!("bufferView {view_index} does not exist"))?;
-            self.view_bytes(&view).map_err(|e| e.to_string())?.to_vec()
+            self.view_bytes(&view).map_err(problem)?.to_vec()
         } else if let Some(uri) = json["uri"].as_str() {
-            self.read_uri(uri, "image").map_err(|e| e.to_string())?
+            self.read_uri(uri, "image").map_err(problem)?
         } else {
             return Err("image has neither a uri nor a bufferView".into());
         };
@@ -1386,6 +1386,15 @@ impl<'a> Importer<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// The problem in an importer error without the file name, for messages nested in a warning
+/// that already names the file.
+fn problem(e: SceneError) -> String {
+    match e {
+        SceneError::Gltf { message, .. } => message,
+        other => other.to_string(),
     }
 }
 

@@ -601,15 +601,15 @@ impl Reader<'_> {
                     }
                     Err(m) => return Err(self.err(format!("{at}: {m}"))),
                 };
-                let shown = path.display().to_string();
+                // A referenced mesh's own error is reported inside this file's, at its shape.
+                let nested = |e: SceneError| self.err(format!("{at}: {e}"));
                 if kind == "ply" {
-                    vec![super::ply::load_mesh(&path)?]
+                    vec![super::ply::load_mesh(&path).map_err(nested)?]
                 } else {
-                    let bytes = files::read_regular_file(&path).map_err(|m| SceneError::Other {
-                        path: shown.clone(),
-                        message: m,
-                    })?;
-                    let geometry = super::obj::read_geometry(&bytes, &shown)?;
+                    let shown = path.display().to_string();
+                    let bytes = files::read_regular_file(&path)
+                        .map_err(|m| self.err(format!("{at}: {shown}: {m}")))?;
+                    let geometry = super::obj::read_geometry(&bytes, &shown).map_err(nested)?;
                     self.scene.warnings.extend(geometry.warnings);
                     geometry.meshes.into_iter().map(|(_, m)| m).collect()
                 }
