@@ -1434,11 +1434,16 @@ fn fan_to_list(fan: &[u32]) -> Vec<u32> {
 /// Identical warnings (one per primitive of a large file, say) become one line with a count,
 /// in first-seen order.
 fn collapse_repeats(warnings: Vec<String>) -> Vec<String> {
+    // Indexed so that a file with many distinct warnings stays linear.
     let mut counts: Vec<(String, usize)> = Vec::new();
+    let mut index: HashMap<String, usize> = HashMap::new();
     for w in warnings {
-        match counts.iter_mut().find(|(seen, _)| *seen == w) {
-            Some((_, n)) => *n += 1,
-            None => counts.push((w, 1)),
+        match index.get(&w) {
+            Some(&i) => counts[i].1 += 1,
+            None => {
+                index.insert(w.clone(), counts.len());
+                counts.push((w, 1));
+            }
         }
     }
     counts
