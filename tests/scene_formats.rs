@@ -176,39 +176,16 @@ fn binary_ply_reads_the_same_bunny_as_ascii() {
     };
     let ascii = scene::ply::load_mesh(&path).unwrap();
     for big in [false, true] {
-        let order = if big { "big" } else { "little" };
-        let mut bytes = format!(
-            "ply\nformat binary_{order}_endian 1.0\nelement vertex {}\nproperty float x\n\
-             property float y\nproperty float z\nelement face {}\n\
-             property list uchar uint vertex_indices\nend_header\n",
-            ascii.positions.len(),
-            ascii.triangle_count()
-        )
-        .into_bytes();
-        for p in &ascii.positions {
-            for v in p.to_array() {
-                bytes.extend(if big {
-                    v.to_be_bytes()
-                } else {
-                    v.to_le_bytes()
-                });
-            }
-        }
-        for t in ascii.indices.chunks_exact(3) {
-            bytes.push(3);
-            for &i in t {
-                bytes.extend(if big {
-                    i.to_be_bytes()
-                } else {
-                    i.to_le_bytes()
-                });
-            }
-        }
-        let file = temp_dir("binary-ply").join(format!("bunny-{order}.ply"));
+        let bytes = scene::ply::to_binary(&ascii, big);
+        let file = temp_dir("binary-ply").join(format!("bunny-{big}.ply"));
         std::fs::write(&file, &bytes).unwrap();
         let binary = scene::ply::load_mesh(&file).unwrap();
         assert_eq!(binary.positions, ascii.positions);
         assert_eq!(binary.indices, ascii.indices);
+        assert_eq!(binary.uv0, ascii.uv0);
+        for (a, b) in ascii.normals.iter().zip(&binary.normals) {
+            assert!((*a - *b).length() < 1e-6);
+        }
     }
 }
 

@@ -840,9 +840,9 @@ impl<'a> Importer<'a> {
                 .views()
                 .nth(view_index as usize)
                 .ok_or_else(|| format!("bufferView {view_index} does not exist"))?;
-            self.view_bytes(&view).map_err(|e| e.to_string())?.to_vec()
+            self.view_bytes(&view).map_err(problem)?.to_vec()
         } else if let Some(uri) = json["uri"].as_str() {
-            self.read_uri(uri, "image").map_err(|e| e.to_string())?
+            self.read_uri(uri, "image").map_err(problem)?
         } else {
             return Err("image has neither a uri nor a bufferView".into());
         };
@@ -1389,6 +1389,15 @@ impl<'a> Importer<'a> {
     }
 }
 
+/// The problem in an importer error without the file name, for messages nested in a warning
+/// that already names the file.
+fn problem(e: SceneError) -> String {
+    match e {
+        SceneError::Gltf { message, .. } => message,
+        other => other.to_string(),
+    }
+}
+
 fn validation_message(err: &gltf::json::validation::Error) -> &'static str {
     use gltf::json::validation::Error;
     match err {
@@ -1425,11 +1434,16 @@ fn fan_to_list(fan: &[u32]) -> Vec<u32> {
 /// Identical warnings (one per primitive of a large file, say) become one line with a count,
 /// in first-seen order.
 fn collapse_repeats(warnings: Vec<String>) -> Vec<String> {
+    // Indexed so that a file with many distinct warnings stays linear.
     let mut counts: Vec<(String, usize)> = Vec::new();
+    let mut index: HashMap<String, usize> = HashMap::new();
     for w in warnings {
-        match counts.iter_mut().find(|(seen, _)| *seen == w) {
-            Some((_, n)) => *n += 1,
-            None => counts.push((w, 1)),
+        match index.get(&w) {
+            Some(&i) => counts[i].1 += 1,
+            None => {
+                index.insert(w.clone(), counts.len());
+                counts.push((w, 1));
+            }
         }
     }
     counts

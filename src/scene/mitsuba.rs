@@ -35,6 +35,9 @@ use roxmltree::Node as XmlNode;
 use std::collections::HashMap;
 use std::path::Path;
 
+/// Most triangles the shapes of one scene file may place (each shape bakes its own copy).
+pub const MAX_SCENE_TRIANGLES: usize = 1 << 26;
+
 /// Most XML nodes a scene file may hold.
 const MAX_XML_NODES: u32 = 1_000_000;
 
@@ -88,6 +91,8 @@ pub fn parse(
         },
         bsdfs: HashMap::new(),
         textures: HashMap::new(),
+        mesh_files: HashMap::new(),
+        triangles: 0,
     };
     reader.scene.nodes.push(Node {
         name: "world".into(),
@@ -125,6 +130,11 @@ struct Reader<'a> {
     bsdfs: HashMap<String, Material>,
     /// Bitmap file name → texture index (None: could not be loaded).
     textures: HashMap<String, Option<usize>>,
+    /// Mesh files already read, by canonical path: a file is parsed once however many shapes
+    /// place it.
+    mesh_files: HashMap<std::path::PathBuf, Vec<Mesh>>,
+    /// Triangles placed so far, against [`MAX_SCENE_TRIANGLES`].
+    triangles: usize,
 }
 
 /// The child element `<tag name="name" …>` of `node`.
@@ -601,17 +611,24 @@ impl Reader<'_> {
                     }
                     Err(m) => return Err(self.err(format!("{at}: {m}"))),
                 };
-                let shown = path.display().to_string();
-                if kind == "ply" {
-                    vec![super::ply::load_mesh(&path)?]
+                if let Some(known) = self.mesh_files.get(&path) {
+                    known.clone()
                 } else {
-                    let bytes = files::read_regular_file(&path).map_err(|m| SceneError::Other {
-                        path: shown.clone(),
-                        message: m,
-                    })?;
-                    let geometry = super::obj::read_geometry(&bytes, &shown)?;
-                    self.scene.warnings.extend(geometry.warnings);
-                    geometry.meshes.into_iter().map(|(_, m)| m).collect()
+                    // A referenced mesh's own error is reported inside this file's, at its
+                    // shape.
+                    let nested = |e: SceneError| self.err(format!("{at}: {e}"));
+                    let loaded: Vec<Mesh> = if kind == "ply" {
+                        vec![super::ply::load_mesh(&path).map_err(nested)?]
+                    } else {
+                        let shown = path.display().to_string();
+                        let bytes = files::read_regular_file(&path)
+                            .map_err(|m| self.err(format!("{at}: {shown}: {m}")))?;
+                        let geometry = super::obj::read_geometry(&bytes, &shown).map_err(nested)?;
+                        self.scene.warnings.extend(geometry.warnings);
+                        geometry.meshes.into_iter().map(|(_, m)| m).collect()
+                    };
+                    self.mesh_files.insert(path.clone(), loaded.clone());
+                    loaded
                 }
             }
             "rectangle" => vec![quad_mesh(
@@ -657,6 +674,12 @@ impl Reader<'_> {
             Some(f) => f.to_string(),
             None => kind.to_string(),
         };
+        self.triangles += meshes.iter().map(Mesh::triangle_count).sum::<usize>();
+        if self.triangles > MAX_SCENE_TRIANGLES {
+            return Err(self.err(format!(
+                "{at}: the shapes place more than {MAX_SCENE_TRIANGLES} triangles"
+            )));
+        }
         for mut mesh in meshes.drain(..) {
             bake_transform(&mut mesh, world_from_model, face_normals);
             if mesh.indices.is_empty() {

@@ -28,6 +28,9 @@ use std::path::Path;
 /// Most triangles one OBJ file may produce after fanning its polygons.
 pub const MAX_TRIANGLES: usize = 1 << 28;
 
+/// Most distinct `mtllib` files one OBJ file may name.
+pub const MAX_MATERIAL_LIBRARIES: usize = 256;
+
 /// Albedo of surfaces whose material is missing or names no `Kd`.
 pub const DEFAULT_ALBEDO: f32 = 0.8;
 
@@ -151,6 +154,7 @@ pub fn read_geometry(bytes: &[u8], display: &str) -> Result<Geometry, SceneError
     let mut normals: Vec<Vec3> = Vec::new();
     let mut out = Geometry::default();
     let mut builders: Vec<(Option<String>, Builder)> = Vec::new();
+    let mut builder_of: HashMap<Option<String>, usize> = HashMap::new();
     let mut current: Option<usize> = None;
     let mut current_name: Option<String> = None;
     let mut triangles = 0usize;
@@ -201,6 +205,7 @@ pub fn read_geometry(bytes: &[u8], display: &str) -> Result<Geometry, SceneError
                     Some(b) => b,
                     None => {
                         builders.push((current_name.clone(), Builder::default()));
+                        builder_of.insert(current_name.clone(), builders.len() - 1);
                         current = Some(builders.len() - 1);
                         builders.len() - 1
                     }
@@ -233,10 +238,21 @@ pub fn read_geometry(bytes: &[u8], display: &str) -> Result<Geometry, SceneError
             "usemtl" => {
                 let name = line["usemtl".len()..].trim().to_string();
                 current_name = Some(name);
-                current = builders.iter().position(|(n, _)| *n == current_name);
+                current = builder_of.get(&current_name).copied();
             }
             "mtllib" => {
-                out.mtllibs.extend(words.map(str::to_string));
+                for name in words {
+                    if out.mtllibs.iter().any(|m| m == name) {
+                        continue;
+                    }
+                    if out.mtllibs.len() >= MAX_MATERIAL_LIBRARIES {
+                        return Err(fail(
+                            line_no,
+                            format!("more than {MAX_MATERIAL_LIBRARIES} material libraries"),
+                        ));
+                    }
+                    out.mtllibs.push(name.to_string());
+                }
             }
             "o" | "g" | "s" | "mg" => {}
             other => *skipped.entry(other.chars().take(16).collect()).or_default() += 1,

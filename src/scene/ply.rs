@@ -361,6 +361,42 @@ pub fn parse(bytes: &[u8], display: &str) -> Result<Mesh, SceneError> {
     })
 }
 
+/// Writes `mesh` as binary PLY (positions, normals, uvs in valgi's top-left convention, and
+/// triangles), little- or big-endian. [`parse`] reads it back.
+pub fn to_binary(mesh: &Mesh, big_endian: bool) -> Vec<u8> {
+    let order = if big_endian { "big" } else { "little" };
+    let mut out = format!(
+        "ply\nformat binary_{order}_endian 1.0\nelement vertex {}\nproperty float x\n\
+         property float y\nproperty float z\nproperty float nx\nproperty float ny\n\
+         property float nz\nproperty float u\nproperty float v\nelement face {}\n\
+         property list uchar uint vertex_indices\nend_header\n",
+        mesh.positions.len(),
+        mesh.triangle_count()
+    )
+    .into_bytes();
+    let put = |out: &mut Vec<u8>, bytes: [u8; 4]| {
+        out.extend(if big_endian {
+            [bytes[3], bytes[2], bytes[1], bytes[0]]
+        } else {
+            bytes
+        })
+    };
+    for (i, p) in mesh.positions.iter().enumerate() {
+        let n = mesh.normals.get(i).copied().unwrap_or(Vec3::Y);
+        let uv = mesh.uv0.get(i).copied().unwrap_or(Vec2::ZERO);
+        for v in [p.x, p.y, p.z, n.x, n.y, n.z, uv.x, uv.y] {
+            put(&mut out, v.to_le_bytes());
+        }
+    }
+    for t in mesh.indices.chunks_exact(3) {
+        out.push(3);
+        for &i in t {
+            put(&mut out, i.to_le_bytes());
+        }
+    }
+    out
+}
+
 /// Splits at the line `end_header`, returning the header text (after the magic line) and the
 /// body bytes.
 fn split_header(bytes: &[u8]) -> Result<(&str, &[u8]), String> {
