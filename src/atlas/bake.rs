@@ -22,9 +22,9 @@ use rayon::prelude::*;
 use super::depth::ShadowTest;
 use super::layout::{self, AtlasLayout, Texel};
 use crate::image_io::{Image, ImageError};
-use crate::reference::Tracer;
 use crate::scene::{LightKind, Material, Scene};
 use crate::shading::{spot_attenuation, WorldLight};
+use crate::trace::Tracer;
 
 pub use super::patches::{
     near_field, patch_transfer, patch_transfer_pair, transfer, Patch, PatchBaker, SampleLookup,
@@ -252,22 +252,8 @@ pub struct Bake {
 /// Progress reports: (stage, done, total).
 pub type Progress<'a> = &'a (dyn Fn(&str, usize, usize) + Sync);
 
-/// splitmix64, the bakers' own stream (fixed per seed).
-pub(crate) struct Rng(pub(crate) u64);
-
-impl Rng {
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        // splitmix64
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    pub(crate) fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-}
+/// The bakers draw from the project's one seeded generator.
+pub(crate) use crate::sampling::Rng;
 
 pub(crate) fn check(cancel: &AtomicBool) -> Result<(), BakeError> {
     if cancel.load(Ordering::Relaxed) {
@@ -477,9 +463,9 @@ impl<'a> BakeScene<'a> {
         }
         (0..count)
             .map(|k| {
-                let u = (k as f64 + rng.f32() as f64) / count as f64;
+                let u = (k as f64 + rng.next_f32() as f64) / count as f64;
                 let ti = cdf.partition_point(|&c| c < u).min(triangles.len() - 1);
-                let (r1, r2) = (rng.f32().sqrt(), rng.f32());
+                let (r1, r2) = (rng.next_f32().sqrt(), rng.next_f32());
                 let w = Vec3::new(1.0 - r1, r1 * (1.0 - r2), r1 * r2);
                 let t = triangles[ti];
                 let p = t[0] * w.x + t[1] * w.y + t[2] * w.z;

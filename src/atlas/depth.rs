@@ -644,7 +644,7 @@ mod tests {
     fn merged_walls_draw_the_cube_the_tessellated_walls_draw() {
         let (scene, world) = built_in("corridor");
         let fine = scene.world_triangles(&world);
-        let merged = crate::reference::Tracer::new(&scene, &world).world_triangles();
+        let merged = crate::trace::Tracer::new(&scene, &world).world_triangles();
         assert!(
             merged.len() * 100 < fine.len(),
             "{} of {}",

@@ -17,9 +17,9 @@ use super::bake::{
     BakeSettings, Baker, EnergyAccount, Progress, Rng, Stages, SurfaceSample,
 };
 use super::depth::{DepthCube, DepthOrtho};
-use crate::reference::sampling::{cosine_hemisphere, Rng as SampleRng};
-use crate::reference::Tracer;
+use crate::sampling::{cosine_hemisphere, Rng as SampleRng};
 use crate::scene::{LightKind, Scene};
+use crate::trace::Tracer;
 
 /// One VPL patch: the VPL and the sample points that make up its area.
 #[derive(Clone, Debug)]
@@ -294,7 +294,7 @@ fn bake_patches(
 
     // --- Discretize ---------------------------------------------------------------------
     let sample_count = settings.vpls * settings.samples_per_vpl;
-    let mut rng = Rng(settings.seed);
+    let mut rng = Rng::from_state(settings.seed);
     let raw = ctx.sample_surfaces(sample_count, &mut rng);
     // One VPL site per stratum of samples (strata follow the area CDF).
     let spv = settings.samples_per_vpl;

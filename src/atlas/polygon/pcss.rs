@@ -50,7 +50,7 @@ pub fn pcss_visibility(
     let to = p - cube.origin;
     let dist = to.length();
     let w = to / dist;
-    let (t, b) = crate::reference::sampling::basis(w);
+    let (t, b) = crate::sampling::basis(w);
     let plane = n.dot(p - cube.origin);
     // Distance from the origin along `s` to the receiver's plane (or to p when grazing).
     let receiver_along = |s: Vec3| {

@@ -11,10 +11,10 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::atlas::bake::{light_power, EnergyAccount};
-use crate::reference::sampling::{cosine_hemisphere, Rng};
-use crate::reference::Tracer;
+use crate::sampling::{cosine_hemisphere, Rng};
 use crate::scene::LightKind;
 use crate::shading::{spot_attenuation, WorldLight};
+use crate::trace::Tracer;
 
 /// A virtual point light left by a photon.
 #[derive(Clone, Copy, Debug)]
@@ -182,7 +182,7 @@ fn emission(
     u3: f32,
     u4: f32,
 ) -> (Vec3, Vec3, f64) {
-    let (b0, b1) = crate::reference::sampling::basis(light.direction);
+    let (b0, b1) = crate::sampling::basis(light.direction);
     let phi = 2.0 * std::f32::consts::PI * u2;
     let around = |cos: f32| {
         let sin = (1.0 - cos * cos).max(0.0).sqrt();

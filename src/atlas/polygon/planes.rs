@@ -82,7 +82,7 @@ pub fn find_planes(
         .max(3);
     let mut remaining: Vec<usize> = (0..n).collect();
     let mut segments = Vec::new();
-    let mut rng = Rng(seed ^ 0x0A45_5AC0);
+    let mut rng = Rng::from_state(seed ^ 0x0A45_5AC0);
     let mut draws_since_accept = 0usize;
     let inliers = |origin: Vec3, normal: Vec3, among: &[usize]| -> Vec<usize> {
         among
@@ -216,7 +216,7 @@ fn plane_frame(origin: Vec3, normal: Vec3, positions: &[Vec3], members: &[usize]
         u[(a + 1) % 3] = 1.0;
         u
     } else {
-        let (b0, b1) = crate::reference::sampling::basis(normal);
+        let (b0, b1) = crate::sampling::basis(normal);
         let (mut sxx, mut sxy, mut syy) = (0.0f64, 0.0f64, 0.0f64);
         for &i in members {
             let d = positions[i] - origin;
