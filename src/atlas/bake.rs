@@ -327,6 +327,9 @@ pub fn confirmed_visibility(
     }
 }
 
+/// The fill's result: `irradiance[b][texel]` and the covered texels.
+pub(crate) type Filled = (Vec<Vec<[f32; 3]>>, Vec<bool>);
+
 /// Stage timer: (stage, milliseconds) in order.
 pub(crate) struct Stages {
     clock: Instant,
@@ -495,7 +498,7 @@ impl<'a> BakeScene<'a> {
         progress: Progress,
         cancel: &AtomicBool,
         block: impl Fn(&[Texel], &mut [[f32; 3]]) + Sync,
-    ) -> Result<(Vec<Vec<[f32; 3]>>, Vec<bool>), BakeError> {
+    ) -> Result<Filled, BakeError> {
         let texels = &self.layout.texels;
         let done = AtomicUsize::new(0);
         let chunk = 256;

@@ -301,7 +301,7 @@ fn bake_patches(
     let sites: Vec<usize> = (0..settings.vpls)
         .map(|j| j * spv + (rng.next_u64() as usize % spv))
         .collect();
-    let owner = assign_samples(&raw, &sites, total_area, settings.vpls, &tracer);
+    let owner = assign_samples(&raw, &sites, total_area, settings.vpls, tracer);
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); sites.len()];
     for (s, &o) in owner.iter().enumerate() {
         members[o].push(s);
@@ -341,7 +341,7 @@ fn bake_patches(
                     bounds.center(),
                     scene_size * 0.5 + eps,
                     settings.light_map_res * 4,
-                    &occluders,
+                    occluders,
                 );
                 let far = light.direction * (-2.0 * scene_size);
                 let tracer = &tracer;
@@ -350,7 +350,7 @@ fn bake_patches(
                 })
             }
             _ => {
-                let cube = DepthCube::new(light.position, settings.light_map_res, eps, &occluders);
+                let cube = DepthCube::new(light.position, settings.light_map_res, eps, occluders);
                 let tracer = &tracer;
                 let at = light.position;
                 Box::new(move |p: Vec3, n: Vec3| {
@@ -438,7 +438,7 @@ fn bake_patches(
                 p.position + p.normal * eps * 10.0,
                 settings.cube_res,
                 eps,
-                &occluders,
+                occluders,
             );
             let d = done.fetch_add(1, Ordering::Relaxed) + 1;
             if d.is_multiple_of(64) || d == n {
@@ -469,7 +469,7 @@ fn bake_patches(
                             let v = cubes[i].shadow_test(s.position, s.normal);
                             sum += t * confirmed_visibility(
                                 v,
-                                &tracer,
+                                tracer,
                                 cubes[i].origin,
                                 s.position,
                                 s.normal,
@@ -628,7 +628,7 @@ fn bake_patches(
                 }
                 let v = confirmed_visibility(
                     cubes[i].shadow_test(t.position, t.normal),
-                    &tracer,
+                    tracer,
                     cubes[i].origin,
                     t.position,
                     t.normal,
@@ -652,7 +652,7 @@ fn bake_patches(
                 first.fill(Vec3::ZERO);
                 let gather = |rays: u32, stream: u64, into: &mut [Vec3]| {
                     near_field(
-                        &tracer,
+                        tracer,
                         &lookup,
                         &samples,
                         &total_irr,

@@ -176,10 +176,8 @@ impl Baker for PolygonBaker {
                 ps.cluster_size, settings.vpls
             )));
         }
-        if !(4..=MAX_CUBE_RES).contains(&ps.cube_res)
-            || !(ps.gap_rho > 0.0)
-            || !(ps.epsilon_texels >= 0.0 && ps.max_shift_texels >= 0.0)
-        {
+        let positive = ps.gap_rho > 0.0 && ps.epsilon_texels >= 0.0 && ps.max_shift_texels >= 0.0;
+        if !(4..=MAX_CUBE_RES).contains(&ps.cube_res) || !positive {
             return Err(BakeError::Settings(format!(
                 "polygon lights: the cube resolution must be 4..={MAX_CUBE_RES} (got {}), the \
                  gap weight positive and the corner shift non-negative",
@@ -387,8 +385,8 @@ pub fn cluster_lights(
     let per_bounce = |members: &[usize]| {
         let mut p = vec![[0.0f64; 3]; bounces];
         for &i in members {
-            for c in 0..3 {
-                p[bounce_of[i]][c] += vpls[i].power[c];
+            for (sum, v) in p[bounce_of[i]].iter_mut().zip(vpls[i].power) {
+                *sum += v;
             }
         }
         p

@@ -89,9 +89,7 @@ pub fn trace(
             })
             .collect();
         let weight_sum: f64 = emitted.iter().map(|e| e.2).sum();
-        for c in 0..3 {
-            energy.emitted[c] += powers[li][c];
-        }
+        energy.emitted = add(energy.emitted, powers[li]);
         if weight_sum <= 0.0 {
             energy.escaped = add(energy.escaped, powers[li]);
             vpls.push(vec![Vec::new(); bounces]);
@@ -113,7 +111,7 @@ pub fn trace(
                     let mut rng = Rng::new(seed, 0xB0B0 + li as u64, i as u64);
                     let mut power = powers[li] * (w / weight_sum);
                     let (mut origin, mut dir) = (origin, dir);
-                    for b in 0..bounces {
+                    for (b, left) in out.iter_mut().enumerate() {
                         let Some(hit) = tracer.intersect(origin, dir, f32::INFINITY) else {
                             acc[1] += power;
                             break;
@@ -132,7 +130,7 @@ pub fn trace(
                         if reflected == DVec3::ZERO {
                             break;
                         }
-                        out[b].push(Vpl {
+                        left.push(Vpl {
                             position: hit.position,
                             normal,
                             power: reflected.to_array(),
