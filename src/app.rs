@@ -51,6 +51,8 @@ pub struct RenderRequest {
     pub fps: f32,
     /// The views of each frame (mono, stereo, a CAVE, a grid).
     pub views: ViewRig,
+    /// Let the scene file reference files outside its folder (absolute paths, `..`).
+    pub allow_external_paths: bool,
 }
 
 impl Default for RenderRequest {
@@ -69,6 +71,7 @@ impl Default for RenderRequest {
             frames: None,
             fps: 30.0,
             views: ViewRig::Mono,
+            allow_external_paths: false,
         }
     }
 }
@@ -189,10 +192,11 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     for path in &first_outputs {
         prepare_output(path)?;
     }
-    let scene = scene::load(
+    let scene = scene::load_with(
         &request.scene,
-        &BuiltinParams {
+        &scene::LoadParams {
             max_edge: request.max_edge,
+            allow_external_paths: request.allow_external_paths,
         },
     )?;
     for warning in &scene.warnings {

@@ -99,6 +99,10 @@ struct RenderArgs {
     /// wall). One image per view, <stem>_<view>.exr/.png, plus a side-by-side PNG.
     #[arg(long, default_value = "mono")]
     views: String,
+    /// Let the scene file reference buffers, images and meshes outside its own folder
+    /// (absolute paths, `..`); device files stay refused.
+    #[arg(long)]
+    allow_external_paths: bool,
 }
 
 #[derive(clap::Args)]
@@ -408,6 +412,7 @@ fn main() -> ExitCode {
                 frames: args.frames,
                 fps: args.fps,
                 views,
+                allow_external_paths: args.allow_external_paths,
             };
             match app::render(&request) {
                 Ok(report) => {
