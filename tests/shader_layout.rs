@@ -87,3 +87,32 @@ fn rust_structs_match_naga_layout() {
         }
     }
 }
+
+/// The dispatch sizes the Rust side computes match the workgroup sizes the WGSL declares.
+#[test]
+fn workgroup_sizes_match_the_dispatches() {
+    let tile = valgi::frame::PIXEL_TILE;
+    let group = valgi::vals::sparse::POINT_GROUP;
+    let expected: &[(&str, &str, [u32; 3])] = &[
+        ("direct_light.wgsl", "cs_main", [tile, tile, 1]),
+        ("resolve.wgsl", "cs_main", [tile, tile, 1]),
+        ("brute_vals.wgsl", "cs_main", [tile, tile, 1]),
+        ("lpv_lookup.wgsl", "cs_main", [tile, tile, 1]),
+        ("lpv_geometry.wgsl", "cs_camera", [tile, tile, 1]),
+        ("atlas_apply.wgsl", "cs_main", [tile, tile, 1]),
+        ("atlas_apply.wgsl", "cs_add", [tile, tile, 1]),
+        ("vals_gather.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_interpolate.wgsl", "cs_main", [group, 1, 1]),
+    ];
+    for (file, entry, size) in expected {
+        let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let point = module
+            .entry_points
+            .iter()
+            .find(|p| p.name == *entry)
+            .unwrap_or_else(|| panic!("{file} has no entry point {entry}"));
+        assert_eq!(point.workgroup_size, *size, "{file}::{entry}");
+    }
+}

@@ -85,6 +85,10 @@ impl FrameTargets {
 
 static NEXT_VIEW_ID: AtomicU64 = AtomicU64::new(1);
 
+/// Side of the square workgroup of every per-pixel compute pass (`@workgroup_size(8, 8, 1)`
+/// in their WGSL; `tests/shader_layout.rs` checks each entry point against it with naga).
+pub const PIXEL_TILE: u32 = 8;
+
 /// One camera's share of a frame: its camera, targets and frame uniform.
 pub struct View {
     id: u64,
@@ -207,7 +211,7 @@ impl View {
         passes.compute("resolve", |pass| {
             pass.set_pipeline(&self.resolve_pipeline);
             pass.set_bind_group(0, &self.resolve_group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            pass.dispatch_workgroups(w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
         })
     }
 
@@ -223,7 +227,7 @@ impl View {
         passes.compute(label, |pass| {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, group, &[]);
-            pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
+            pass.dispatch_workgroups(w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
         })
     }
 

@@ -29,6 +29,11 @@ pub use crate::light::{
     ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY,
 };
 
+/// Invocations per workgroup of the solution kernels (gather, renormalize, occlusion,
+/// interpolation: `@workgroup_size(64, 1, 1)`, checked against naga by
+/// `tests/shader_layout.rs`).
+pub const POINT_GROUP: u32 = 64;
+
 /// `InstanceRange` in `shaders/vals/vals_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -541,7 +546,7 @@ impl SparseGpu {
         last: Stage,
         [gather, renormalize, occlusion, interpolate]: [&wgpu::BindGroup; 4],
     ) -> Result<(), GpuError> {
-        let points = self.point_count.div_ceil(64);
+        let points = self.point_count.div_ceil(POINT_GROUP);
         let mut compute = |kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
             passes.compute(kernel.label, |pass| {
                 pass.set_pipeline(&kernel.pipeline);
@@ -560,7 +565,7 @@ impl SparseGpu {
             compute(
                 &self.interpolate,
                 interpolate,
-                self.vertex_count.div_ceil(64),
+                self.vertex_count.div_ceil(POINT_GROUP),
             )?;
         }
         Ok(())

@@ -12,7 +12,7 @@ pub mod math;
 use bytemuck::{Pod, Zeroable};
 use glam::UVec3;
 
-use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::frame::{FrameInput, Method, View, ViewResult, PIXEL_TILE};
 use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::Rsm;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
@@ -557,7 +557,7 @@ impl Method for LpvMethod {
                 pass.set_pipeline(&self.geometry_rsm);
                 pass.dispatch_workgroups(val_groups.0, val_groups.1, 1);
                 pass.set_pipeline(&self.geometry_camera);
-                pass.dispatch_workgroups(sx.div_ceil(8), sy.div_ceil(8), 1);
+                pass.dispatch_workgroups(sx.div_ceil(PIXEL_TILE), sy.div_ceil(PIXEL_TILE), 1);
             })?;
         }
         let volume_size = self.volumes[0].size();
