@@ -294,6 +294,89 @@ fn cornell_moving(name: &str, max_edge: f32) -> Scene {
 /// into the second room. A spot in the first room points down with a 30° cone that cannot
 /// reach the doorway, so the second room is lit by bounced light only. The camera stands in
 /// the second room looking back at the door.
+/// A partition across a room at `x` (height, depth) with a doorway over `z`, up to
+/// `door_height`, and its door: a panel hinged at (x, 0, z.0) that turns about y into +x.
+struct Doorway {
+    x: f32,
+    height: f32,
+    depth: f32,
+    z: (f32, f32),
+    door_height: f32,
+}
+
+impl Doorway {
+    /// The door's turn about its hinge when open by `degrees`.
+    fn opening(degrees: f32) -> Quat {
+        Quat::from_rotation_y(degrees.to_radians())
+    }
+
+    /// The `-moving` variants: the door swings 10° → 90° → 10°.
+    fn swing(scene: &mut Scene) {
+        let door_node = node_named(scene, "door");
+        add_animation(
+            scene,
+            "door swing",
+            vec![channel(
+                door_node,
+                Property::Rotation,
+                rotations(&[
+                    Self::opening(10.0),
+                    Self::opening(90.0),
+                    Self::opening(10.0),
+                ]),
+            )],
+        );
+    }
+
+    /// Adds the objects `partition` and `door` (the door open by `door_degrees`).
+    fn build(
+        &self,
+        b: &mut SceneBuilder,
+        wall_material: usize,
+        door_material: usize,
+        door_degrees: f32,
+        max_edge: f32,
+    ) {
+        let (x, h, d, (z0, z1), door_h) =
+            (self.x, self.height, self.depth, self.z, self.door_height);
+        let mut wall = MeshBuilder::new("partition", wall_material);
+        let facing = Vec3::new(0.0, 1.0, 1.0);
+        let q = |y0: f32, y1: f32, za: f32, zb: f32| {
+            [
+                Vec3::new(x, y0, za),
+                Vec3::new(x, y0, zb),
+                Vec3::new(x, y1, zb),
+                Vec3::new(x, y1, za),
+            ]
+        };
+        for [p0, p1, p2, p3] in [q(0.0, h, 0.0, z0), q(0.0, h, z1, d), q(door_h, h, z0, z1)] {
+            wall.add_quad(p0, p1, p2, p3, facing, max_edge);
+        }
+        b.object("partition", wall.build(), Trs::default());
+        // The door panel in model space spans z ∈ [0, width] at x = 0; its node sits on the
+        // hinge.
+        let mut door = MeshBuilder::new("door", door_material);
+        let w = z1 - z0;
+        door.add_quad(
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.0, w),
+            Vec3::new(0.0, door_h, w),
+            Vec3::new(0.0, door_h, 0.0),
+            Vec3::new(-1.0, 0.0, w * 0.5),
+            max_edge,
+        );
+        b.object(
+            "door",
+            door.build(),
+            Trs {
+                translation: Vec3::new(x, 0.0, z0),
+                rotation: Self::opening(door_degrees),
+                ..Trs::default()
+            },
+        );
+    }
+}
+
 fn corridor(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene {
     let mut b = SceneBuilder::new(name);
     let white = grey(&mut b, "white", 0.75);
@@ -309,43 +392,14 @@ fn corridor(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene
     );
     let x = 2.1;
     let (z0, z1, door_h) = (0.6, 1.4, 1.9);
-    let mut wall = MeshBuilder::new("partition", white);
-    let facing = Vec3::new(0.0, 1.0, 1.0);
-    let q = |y0: f32, y1: f32, za: f32, zb: f32| {
-        [
-            Vec3::new(x, y0, za),
-            Vec3::new(x, y0, zb),
-            Vec3::new(x, y1, zb),
-            Vec3::new(x, y1, za),
-        ]
+    let door = Doorway {
+        x,
+        height: h,
+        depth: d,
+        z: (z0, z1),
+        door_height: door_h,
     };
-    for [p0, p1, p2, p3] in [q(0.0, h, 0.0, z0), q(0.0, h, z1, d), q(door_h, h, z0, z1)] {
-        wall.add_quad(p0, p1, p2, p3, facing, max_edge);
-    }
-    b.object("partition", wall.build(), Trs::default());
-    // The door panel in model space spans z ∈ [0, 0.8] at x = 0; its node sits on the hinge
-    // and turns about y, swinging into the second room (+x).
-    let mut door = MeshBuilder::new("door", door_mat);
-    let w = z1 - z0;
-    door.add_quad(
-        Vec3::ZERO,
-        Vec3::new(0.0, 0.0, w),
-        Vec3::new(0.0, door_h, w),
-        Vec3::new(0.0, door_h, 0.0),
-        Vec3::new(-1.0, 0.0, w * 0.5),
-        max_edge,
-    );
-    let hinge = Vec3::new(x, 0.0, z0);
-    let swing = |deg: f32| Quat::from_rotation_y(deg.to_radians());
-    b.object(
-        "door",
-        door.build(),
-        Trs {
-            translation: hinge,
-            rotation: swing(door_degrees),
-            ..Trs::default()
-        },
-    );
+    door.build(&mut b, white, door_mat, door_degrees, max_edge);
     b.light(
         "spot",
         Vec3::new(0.5, 2.3, 1.0),
@@ -363,16 +417,7 @@ fn corridor(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scene
     );
     let mut scene = b.scene;
     if moving {
-        let door_node = node_named(&scene, "door");
-        add_animation(
-            &mut scene,
-            "door swing",
-            vec![channel(
-                door_node,
-                Property::Rotation,
-                rotations(&[swing(10.0), swing(90.0), swing(10.0)]),
-            )],
-        );
+        Doorway::swing(&mut scene);
     }
     scene
 }
@@ -429,42 +474,15 @@ fn door_room(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scen
         [white, white, floor, white, white, white],
         max_edge,
     );
-    let (z0, z1) = dims.doorway_z;
-    let door_h = dims.doorway_height;
-    let mut wall = MeshBuilder::new("partition", white);
-    let facing = Vec3::new(0.0, 1.0, 1.0);
-    let q = |y0: f32, y1: f32, za: f32, zb: f32| {
-        [
-            Vec3::new(x, y0, za),
-            Vec3::new(x, y0, zb),
-            Vec3::new(x, y1, zb),
-            Vec3::new(x, y1, za),
-        ]
+    let z0 = dims.doorway_z.0;
+    let door = Doorway {
+        x,
+        height: h,
+        depth: d,
+        z: dims.doorway_z,
+        door_height: dims.doorway_height,
     };
-    for [p0, p1, p2, p3] in [q(0.0, h, 0.0, z0), q(0.0, h, z1, d), q(door_h, h, z0, z1)] {
-        wall.add_quad(p0, p1, p2, p3, facing, max_edge);
-    }
-    b.object("partition", wall.build(), Trs::default());
-    let mut door = MeshBuilder::new("door", door_mat);
-    let w = z1 - z0;
-    door.add_quad(
-        Vec3::ZERO,
-        Vec3::new(0.0, 0.0, w),
-        Vec3::new(0.0, door_h, w),
-        Vec3::new(0.0, door_h, 0.0),
-        Vec3::new(-1.0, 0.0, w * 0.5),
-        max_edge,
-    );
-    let swing = |deg: f32| Quat::from_rotation_y(deg.to_radians());
-    b.object(
-        "door",
-        door.build(),
-        Trs {
-            translation: Vec3::new(x, 0.0, z0),
-            rotation: swing(door_degrees),
-            ..Trs::default()
-        },
-    );
+    door.build(&mut b, white, door_mat, door_degrees, max_edge);
     b.light_along(
         "spot",
         dims.spot,
@@ -483,16 +501,7 @@ fn door_room(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scen
     );
     let mut scene = b.scene;
     if moving {
-        let door_node = node_named(&scene, "door");
-        add_animation(
-            &mut scene,
-            "door swing",
-            vec![channel(
-                door_node,
-                Property::Rotation,
-                rotations(&[swing(10.0), swing(90.0), swing(10.0)]),
-            )],
-        );
+        Doorway::swing(&mut scene);
     }
     scene
 }
