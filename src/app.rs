@@ -5,7 +5,8 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use crate::frame::{record_frame, View, ViewRig};
+use crate::frame::memory::{self, MemorySample};
+use crate::frame::{record_frame, Method, View, ViewResult, ViewRig};
 use crate::gpu::timing::round3;
 use crate::gpu::{GpuContext, GpuError};
 use crate::image_io::{prepare_output, ImageError};
@@ -53,6 +54,10 @@ pub struct RenderRequest {
     pub views: ViewRig,
     /// Let the scene file reference files outside its folder (absolute paths, `..`).
     pub allow_external_paths: bool,
+    /// Write the images (false: render and time the frames only, as a soak run does).
+    pub write_images: bool,
+    /// Sample the resident set and the GPU bytes every this many frames (0: never).
+    pub memory_every: u32,
 }
 
 impl Default for RenderRequest {
@@ -72,6 +77,8 @@ impl Default for RenderRequest {
             fps: 30.0,
             views: ViewRig::Mono,
             allow_external_paths: false,
+            write_images: true,
+            memory_every: 0,
         }
     }
 }
@@ -188,9 +195,10 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     }
     let multi_view = request.views != ViewRig::Mono;
     // Fail on an unwritable output before spending time on the scene and the GPU.
-    let first_outputs = output_paths(request, 0, "main", false);
-    for path in &first_outputs {
-        prepare_output(path)?;
+    if request.write_images {
+        for path in &output_paths(request, 0, "main", false) {
+            prepare_output(path)?;
+        }
     }
     let scene = scene::load_with(
         &request.scene,
@@ -230,6 +238,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let mut last = None;
     let mut written = Vec::new();
     let mut last_images = Vec::new();
+    let mut memory = Vec::new();
     for index in 0..frames {
         let time = request.time + index as f32 / request.fps;
         let world_from_node = scene.world_from_node_at(time);
@@ -241,7 +250,8 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         }
         let frame = record_frame(method.as_mut(), &ctx, &scene, &world_from_node, &views)?;
         last_images.clear();
-        for (view, result) in views.iter().zip(&frame.results) {
+        let write = request.write_images;
+        for (view, result) in views.iter().zip(&frame.results).filter(|_| write) {
             let (direct, indirect) = view.read(&ctx, result.has_indirect())?;
             let mut image = if request.indirect_only {
                 indirect
@@ -259,13 +269,21 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             last_images.push(image);
         }
         frame_ms.push(round3(frame.timings.merged().total_ms()));
+        let done = index + 1;
+        if request.memory_every > 0 && (index == 0 || done % request.memory_every == 0) {
+            memory.push(MemorySample {
+                frame: done,
+                resident_bytes: memory::resident_bytes(),
+                gpu_bytes: owned_gpu_bytes(method.as_ref(), &views, &frame.results),
+            });
+        }
         last = Some(frame);
     }
     if non_finite > 0 {
         log::warn!("{non_finite} pixels had non-finite radiance; written as black");
     }
     let frame = last.expect("at least one frame");
-    if multi_view && request.frames.is_none() {
+    if multi_view && request.frames.is_none() && request.write_images {
         if let Some(first) = request.outputs.first() {
             let sheet = with_stem_suffix(first, "_views").with_extension("png");
             prepare_output(&sheet)?;
@@ -273,18 +291,13 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             written.push(sheet.display().to_string());
         }
     }
-    let variance_outputs = if multi_view || request.frames.is_some() {
+    let variance_outputs = if multi_view || request.frames.is_some() || !request.write_images {
         vec![]
     } else {
         write_variance(method.as_ref(), request)?
     };
     let merged = frame.timings.merged();
-    let gpu_bytes = method.gpu_bytes()
-        + views
-            .iter()
-            .zip(&frame.results)
-            .map(|(v, r)| r.view_bytes(v))
-            .sum::<u64>();
+    let gpu_bytes = owned_gpu_bytes(method.as_ref(), &views, &frame.results);
     let mut report = serde_json::json!({
         "scene": scene.name,
         "method": method.name(),
@@ -321,6 +334,19 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     if !variance_outputs.is_empty() {
         report["variance_outputs"] = serde_json::json!(variance_outputs);
     }
+    if !memory.is_empty() {
+        report["memory"] = memory.iter().map(MemorySample::to_json).collect();
+        // Growth over the second half of the run: the first half is warm-up (pipelines,
+        // caches, the allocator's arenas).
+        if let Some(growth) = memory::growth_after(&memory, frames / 2) {
+            report["memory_growth"] = serde_json::json!({
+                "frames": growth.frames,
+                "rss_bytes": growth.resident_bytes,
+                "rss_fraction": growth.resident_fraction,
+                "gpu_bytes": growth.gpu_bytes,
+            });
+        }
+    }
     if let Some(frames) = request.frames {
         let dir = request
             .outputs
@@ -348,6 +374,16 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         );
     }
     Ok(report)
+}
+
+/// GPU bytes the method and its views' targets own.
+fn owned_gpu_bytes(method: &dyn Method, views: &[View], results: &[ViewResult]) -> u64 {
+    method.gpu_bytes()
+        + views
+            .iter()
+            .zip(results)
+            .map(|(v, r)| r.view_bytes(v))
+            .sum::<u64>()
 }
 
 /// The views' images next to each other, top-aligned, for people to look at.

@@ -103,6 +103,13 @@ struct RenderArgs {
     /// (absolute paths, `..`); device files stay refused.
     #[arg(long)]
     allow_external_paths: bool,
+    /// Render and time the frames without reading them back or writing images (a soak run).
+    #[arg(long)]
+    no_write: bool,
+    /// Sample the process's resident memory and the method's GPU bytes every N frames into
+    /// the report's "memory" list, with the growth over the run's second half.
+    #[arg(long, default_value_t = 0)]
+    memory_every: u32,
 }
 
 #[derive(clap::Args)]
@@ -413,6 +420,8 @@ fn main() -> ExitCode {
                 fps: args.fps,
                 views,
                 allow_external_paths: args.allow_external_paths,
+                write_images: !args.no_write,
+                memory_every: args.memory_every,
             };
             match app::render(&request) {
                 Ok(report) => {

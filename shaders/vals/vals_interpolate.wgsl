@@ -3,7 +3,7 @@
 // and stored normalized as unorm16 beside a mesh-local point index).
 #include "vals_common.wgsl"
 
-@group(0) @binding(0) var<uniform> params: SparseParams;
+@group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
 @group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
 @group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;

@@ -8,7 +8,7 @@
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
 
-@group(0) @binding(0) var<uniform> params: SparseParams;
+@group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
 @group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
 @group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;

@@ -4,6 +4,7 @@
 //! list of views in one submission; [`View::read`] reads a view back only when a caller wants
 //! the pixels (files, tests), so a window or a second view costs no CPU readback.
 
+pub mod memory;
 pub mod rig;
 
 use std::collections::HashMap;

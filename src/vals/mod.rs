@@ -317,7 +317,7 @@ impl Method for SparseMethod {
             let (params, groups) = self.per_view.get_or_try_insert(view, || {
                 let mut bytes = crate::gpu::GpuBytes::default();
                 let params =
-                    bytes.uniform::<sparse::SparseParams>(&ctx.device, "view sparse params");
+                    bytes.params::<sparse::SparseParams>(&ctx.device, "view sparse params");
                 let groups = sparse.bind_kernels(&ctx.device, &params);
                 Ok((params, groups))
             })?;

@@ -301,20 +301,19 @@ impl SparseGpu {
         let link_bytes = (links.len() * 16) as u64;
         let vertex_lights = empty(&mut bytes, "vertex lights", vertex_light_size);
         let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
-        let params_buffer = bytes.uniform::<SparseParams>(device, "sparse params");
+        let params_buffer = bytes.params::<SparseParams>(device, "sparse params");
 
         let cs = wgpu::ShaderStages::COMPUTE;
         // One kernel per pass: its pipeline, layout and (buffer, writable) list in the
-        // shader's binding order; binding 0 is always the parameter block, so a per-view
-        // parameter block needs only new bind groups.
+        // shader's binding order; binding 0 is always the parameter block (read-only
+        // storage, see `GpuBytes::params`), so a per-view parameter block needs only new
+        // bind groups.
         let make = |name: &'static str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
             let entries: Vec<wgpu::BindGroupLayoutEntry> = list
                 .iter()
                 .enumerate()
                 .map(|(i, (_, rw))| {
-                    if i == 0 {
-                        uniform_entry(0, cs)
-                    } else if *rw {
+                    if *rw {
                         storage_entry_rw(i as u32, cs)
                     } else {
                         storage_entry(i as u32, cs)
