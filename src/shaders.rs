@@ -17,6 +17,11 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/base/direct_light.wgsl"),
     ),
     ("resolve.wgsl", include_str!("../shaders/base/resolve.wgsl")),
+    ("bvh.wgsl", include_str!("../shaders/base/bvh.wgsl")),
+    (
+        "vals_visibility.wgsl",
+        include_str!("../shaders/vals/vals_visibility.wgsl"),
+    ),
     (
         "vals_common.wgsl",
         include_str!("../shaders/vals/vals_common.wgsl"),

@@ -9,7 +9,8 @@ struct RsmSize {
     resolution: u32,
     layers: u32,
     capacity: u32,
-    pad: u32,
+    // Cluster tiles per layer side.
+    tiles: u32,
 }
 
 @group(0) @binding(0) var<uniform> size: RsmSize;
@@ -20,6 +21,31 @@ struct RsmSize {
 @group(0) @binding(5) var<storage, read_write> val_count: array<u32>;
 // Per row (layer-major): its lit-texel count, then its first VAL's index.
 @group(0) @binding(6) var<storage, read_write> row_offsets: array<u32>;
+// Per tile over all layers, CLUSTER_SAMPLE_SIDE² slots: 1 + the VAL at each stratum's centre
+// texel (0: unlit; the buffer is cleared every frame).
+@group(0) @binding(7) var<storage, read_write> cluster_samples: array<u32>;
+
+// `src/light/rsm.rs` holds the same two constants and the CPU twins of the three functions
+// below.
+const MAX_CLUSTERS: u32 = 32u;
+const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+
+fn layer_tile(layer: u32, x: u32, y: u32) -> u32 {
+    let tx = x * size.tiles / size.resolution;
+    let ty = y * size.tiles / size.resolution;
+    return layer * size.tiles * size.tiles + ty * size.tiles + tx;
+}
+
+// The stratum of x in its tile if x is that stratum's centre texel, else CLUSTER_SAMPLE_SIDE.
+fn sample_stratum(x: u32) -> u32 {
+    let t = x * size.tiles / size.resolution;
+    let x0 = t * size.resolution / size.tiles;
+    let x1 = (t + 1u) * size.resolution / size.tiles;
+    let width = max(x1 - x0, 1u);
+    let stratum = (x - x0) * CLUSTER_SAMPLE_SIDE / width;
+    let centre = x0 + (2u * stratum + 1u) * width / (2u * CLUSTER_SAMPLE_SIDE);
+    return select(CLUSTER_SAMPLE_SIDE, stratum, centre == x);
+}
 
 const SCAN_GROUP: u32 = 256u;
 
@@ -85,6 +111,7 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     let layer = i32(row / size.resolution);
     let y = i32(row % size.resolution);
     var slot = row_offsets[row];
+    let stratum_y = sample_stratum(u32(y));
     for (var x = 0u; x < size.resolution; x++) {
         let texel = vec2<i32>(i32(x), y);
         let flux = textureLoad(rsm_flux, texel, layer, 0);
@@ -94,8 +121,15 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
         var val: Val;
         val.position_area = textureLoad(rsm_position_area, texel, layer, 0);
         val.normal = vec4<f32>(normalize(textureLoad(rsm_normal, texel, layer, 0).xyz), 0.0);
-        val.flux = vec4<f32>(flux.rgb, 0.0);
+        // w: the VAL's cluster (a small integer, exact in f32).
+        let tile = layer_tile(u32(layer), x, u32(y));
+        val.flux = vec4<f32>(flux.rgb, f32(tile % MAX_CLUSTERS));
         vals[slot] = val;
+        let stratum_x = sample_stratum(x);
+        if (stratum_x < CLUSTER_SAMPLE_SIDE && stratum_y < CLUSTER_SAMPLE_SIDE) {
+            let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+            cluster_samples[tile * per_tile + stratum_y * CLUSTER_SAMPLE_SIDE + stratum_x] = slot + 1u;
+        }
         slot += 1u;
     }
 }

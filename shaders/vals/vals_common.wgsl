@@ -25,7 +25,8 @@ struct SparseParams {
     occlusion_mode: u32,
     tile: u32,
     vertex_count: u32,
-    pad0: u32,
+    // RSM cluster tiles over all layers (`--occlusion rays`).
+    rsm_tiles: u32,
     pad1: u32,
 }
 
@@ -41,6 +42,8 @@ const FLAG_GLOSSY: u32 = 1u;
 const FLAG_FLUX_WEIGHTS: u32 = 2u;
 // Per-view glossy eye: recompute the glossy half only; the diffuse half stays as it is.
 const FLAG_GLOSSY_ONLY: u32 = 4u;
+// `--occlusion rays`: scale each VAL by its cluster's visibility at the point.
+const FLAG_VISIBILITY: u32 = 8u;
 const POSITION_EPSILON: f32 = 1e-12;
 const COS_MIN: f32 = 1e-2;
 const WEIGHT_EPSILON: f32 = 1e-6;

@@ -17,6 +17,10 @@ const TILE_MAX: u32 = 256u;
 @group(0) @binding(6) var<storage, read_write> point_diffuse: array<vec4<u32>>;
 @group(0) @binding(7) var<storage, read_write> point_glossy: array<vec4<u32>>;
 @group(0) @binding(8) var<storage, read_write> point_extra: array<vec2<u32>>;
+// With FLAG_VISIBILITY: per point, the VAL clusters' visibility V·255, four per word.
+@group(0) @binding(9) var<storage, read> visibility: array<u32>;
+
+const VISIBILITY_WORDS: u32 = 8u;
 
 var<workgroup> tile_vals: array<Val, TILE_MAX>;
 var<workgroup> shared_count: u32;
@@ -46,10 +50,21 @@ struct Sums {
     ms: Moments,
 }
 
-// Adds one VAL's contribution at the point (x, n, k) with mirror direction r.
+// This invocation's point's cluster visibility words (all 255s without FLAG_VISIBILITY).
+var<private> point_visibility: array<u32, VISIBILITY_WORDS>;
+
+// V of the VAL's cluster (`flux.w`) at this invocation's point.
+fn val_visibility(val: Val) -> f32 {
+    let cluster = u32(val.flux.w);
+    let word = point_visibility[(cluster / 4u) % VISIBILITY_WORDS];
+    return f32((word >> (8u * (cluster % 4u))) & 255u) / 255.0;
+}
+
+// Adds one VAL's contribution at the point (x, n, k) with mirror direction r, scaled by its
+// cluster's visibility there.
 fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: Val, glossy_on: bool, flux_weights: bool) {
     let gw = disc_geometry(point.position, point.normal, val);
-    let g = gw.x;
+    let g = gw.x * val_visibility(val);
     let e = val.flux.rgb * (g / PI);
     var strength = val.position_area.w * g;
     if (flux_weights) {
@@ -88,6 +103,13 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocat
 
     var point: WorldPoint;
     var r = vec3<f32>(0.0);
+    let use_visibility = (params.flags & FLAG_VISIBILITY) != 0u;
+    for (var w = 0u; w < VISIBILITY_WORDS; w++) {
+        point_visibility[w] = 0xffffffffu;
+        if (use_visibility && is_active) {
+            point_visibility[w] = visibility[index * VISIBILITY_WORDS + w];
+        }
+    }
     if (is_active) {
         let point_meta = points_meta[index];
         point = world_point(points_model[index], point_meta, instances[point_meta.y]);

@@ -2,6 +2,7 @@
 //! ([`rsm`]), the VAL record itself, and the parameter block every VAL consumer's shaders
 //! read. `sparse`, `brute`, `lpv`/`holpv` all start from [`rsm::Rsm`]; none of them owns it.
 
+pub mod bvh;
 pub mod rsm;
 
 use std::f32::consts::PI;
@@ -38,7 +39,8 @@ pub struct ValParams {
     pub occlusion_mode: u32,
     pub tile: u32,
     pub vertex_count: u32,
-    pub pad0: u32,
+    /// RSM cluster tiles over all layers (`--occlusion rays`).
+    pub rsm_tiles: u32,
     pub pad1: u32,
 }
 
@@ -49,11 +51,14 @@ pub const FLAG_FLUX_WEIGHTS: u32 = 2;
 /// Recompute only the glossy half of the solution (per-view glossy eye); the diffuse half
 /// of every point stays as the frame's update left it.
 pub const FLAG_GLOSSY_ONLY: u32 = 4;
+/// Scale each VAL by its cluster's visibility at the point (`--occlusion rays`).
+pub const FLAG_VISIBILITY: u32 = 8;
 
 /// The light module's structs shared with WGSL, for the layout test.
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     use crate::raster::types::shared_layout;
-    vec![
+    let mut layouts = bvh::shared_layouts();
+    layouts.extend(vec![
         shared_layout!(
             "Val",
             "vals_common.wgsl",
@@ -76,7 +81,8 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             "RsmSize",
             "vals_from_rsm.wgsl",
             rsm::RsmSize,
-            [resolution, layers, capacity, pad]
+            [resolution, layers, capacity, tiles]
         ),
-    ]
+    ]);
+    layouts
 }

@@ -41,6 +41,11 @@ impl GpuVal {
             area: self.position_area[3],
         }
     }
+
+    /// The VAL's cluster (`flux.w`, see [`texel_cluster`]).
+    pub fn cluster(&self) -> u32 {
+        self.flux[3] as u32
+    }
 }
 
 /// `RsmView` in `shaders/light/vals_rsm.wgsl`.
@@ -63,7 +68,50 @@ pub struct RsmSize {
     pub resolution: u32,
     pub layers: u32,
     pub capacity: u32,
-    pub pad: u32,
+    /// Cluster tiles per layer side ([`cluster_tiles`]).
+    pub tiles: u32,
+}
+
+/// The most VAL clusters a frame has: visibility is kept per (sparse point, cluster), one
+/// byte each.
+pub const MAX_CLUSTERS: u32 = 32;
+
+/// Samples per cluster tile side: each tile has `CLUSTER_SAMPLE_SIDE²` strata whose centre
+/// texels are the VALs visibility rays are shot at.
+pub const CLUSTER_SAMPLE_SIDE: u32 = 4;
+
+/// Cluster tiles per layer side: as many as [`MAX_CLUSTERS`] allows over all layers (a spot
+/// light's one layer is cut 5×5, a point light's six layers 2×2), and at least one sample
+/// stratum a texel wide.
+pub fn cluster_tiles(resolution: u32, layers: u32) -> u32 {
+    let by_budget = ((MAX_CLUSTERS / layers.max(1)) as f32).sqrt().floor() as u32;
+    by_budget.clamp(1, (resolution / CLUSTER_SAMPLE_SIDE).max(1))
+}
+
+/// The cluster of a texel: its tile over all layers, folded into [`MAX_CLUSTERS`] when the
+/// lights have more layers than that (then one cluster holds several whole layers).
+pub fn texel_cluster(resolution: u32, tiles: u32, layer: u32, x: u32, y: u32) -> u32 {
+    (layer_tile(resolution, tiles, layer, x, y)) % MAX_CLUSTERS
+}
+
+/// A texel's tile over all layers: `layer·T² + ty·T + tx`.
+pub fn layer_tile(resolution: u32, tiles: u32, layer: u32, x: u32, y: u32) -> u32 {
+    let tx = x * tiles / resolution;
+    let ty = y * tiles / resolution;
+    layer * tiles * tiles + ty * tiles + tx
+}
+
+/// The stratum of a texel in its tile (one axis), if the texel is that stratum's sample:
+/// strata split the tile's span `[t·R/T, (t+1)·R/T)` into `CLUSTER_SAMPLE_SIDE` parts, and a
+/// stratum's sample is its centre texel.
+pub fn sample_stratum(resolution: u32, tiles: u32, x: u32) -> Option<u32> {
+    let t = x * tiles / resolution;
+    let x0 = t * resolution / tiles;
+    let x1 = (t + 1) * resolution / tiles;
+    let width = (x1 - x0).max(1);
+    let stratum = (x - x0) * CLUSTER_SAMPLE_SIDE / width;
+    let centre = x0 + (2 * stratum + 1) * width / (2 * CLUSTER_SAMPLE_SIDE);
+    (centre == x).then_some(stratum)
 }
 
 const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -79,6 +127,12 @@ pub struct Rsm {
     pub vals_buffer: wgpu::Buffer,
     /// One u32: how many VALs this frame produced.
     pub val_count_buffer: wgpu::Buffer,
+    /// Cluster tiles per layer side ([`cluster_tiles`]); every VAL's `flux.w` holds its
+    /// cluster.
+    pub tiles: u32,
+    /// Per tile over all layers, `CLUSTER_SAMPLE_SIDE²` slots: 1 + the index of the VAL at
+    /// the stratum's centre texel, or 0 where that texel is unlit.
+    pub cluster_samples: wgpu::Buffer,
     pub bytes: GpuBytes,
     lights_buffer: wgpu::Buffer,
     layer_buffers: Vec<wgpu::Buffer>,
@@ -283,8 +337,19 @@ impl Rsm {
                 crate::raster::storage_entry_rw(4, cs),
                 crate::raster::storage_entry_rw(5, cs),
                 crate::raster::storage_entry_rw(6, cs),
+                crate::raster::storage_entry_rw(7, cs),
             ],
         });
+        let tiles = cluster_tiles(resolution, layer_count);
+        let cluster_samples = bytes.buffer(
+            device,
+            &wgpu::BufferDescriptor {
+                label: Some("rsm cluster samples"),
+                size: (layers as u64 * (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as u64 * 4).max(4),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            },
+        );
         let capacity = texels.min(u32::MAX as u64) as u32;
         let size_buffer = bytes.buffer_init(
             device,
@@ -293,7 +358,7 @@ impl Rsm {
                 resolution,
                 layers: layer_count,
                 capacity,
-                pad: 0,
+                tiles,
             }),
             wgpu::BufferUsages::UNIFORM,
         );
@@ -317,6 +382,7 @@ impl Rsm {
                 buffer_binding(4, &vals_buffer),
                 buffer_binding(5, &val_count_buffer),
                 buffer_binding(6, &row_offsets),
+                buffer_binding(7, &cluster_samples),
             ],
         });
         let module = ctx.shader("vals_from_rsm.wgsl");
@@ -329,6 +395,8 @@ impl Rsm {
             capacity,
             vals_buffer,
             val_count_buffer,
+            tiles,
+            cluster_samples,
             bytes,
             lights_buffer,
             layer_buffers,
@@ -415,6 +483,9 @@ impl Rsm {
             } else {
                 (65535, groups.div_ceil(65535))
             };
+            passes
+                .encoder()
+                .clear_buffer(&self.cluster_samples, 0, None);
             let [count, scan, write] = &self.compact_pipelines;
             for (pipeline, (x, y)) in [(count, (gx, gy)), (scan, (1, 1)), (write, (gx, gy))] {
                 passes.compute("rsm", |pass| {
@@ -439,6 +510,24 @@ impl Rsm {
             .iter()
             .map(GpuVal::to_val)
             .collect())
+    }
+
+    /// The VALs of the last recorded frame as the GPU holds them (with their clusters).
+    pub fn read_gpu_vals(&self, ctx: &GpuContext) -> Result<Vec<GpuVal>, GpuError> {
+        let count = self.read_count(ctx)?.min(self.capacity) as usize;
+        let mut all: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.vals_buffer)?;
+        all.truncate(count);
+        Ok(all)
+    }
+
+    /// The cluster sample slots of the last recorded frame (see [`Rsm::cluster_samples`]).
+    pub fn read_cluster_samples(&self, ctx: &GpuContext) -> Result<Vec<u32>, GpuError> {
+        crate::gpu::read_buffer(ctx, &self.cluster_samples)
+    }
+
+    /// Tiles over all layers (each with `CLUSTER_SAMPLE_SIDE²` sample slots).
+    pub fn tile_count(&self) -> u32 {
+        self.layer_count * self.tiles * self.tiles
     }
 
     pub fn read_count(&self, ctx: &GpuContext) -> Result<u32, GpuError> {

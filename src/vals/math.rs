@@ -145,6 +145,20 @@ pub fn gather(
     weights: Weights,
     glossy: bool,
 ) -> Gathered {
+    gather_visible(receiver, eye, vals, weights, glossy, |_| 1.0)
+}
+
+/// Step 1 with visibility: VAL `j`'s geometry term (its irradiance and its weight in the
+/// averaged positions) scaled by `visibility(j)` ∈ [0, 1], its cluster's visible fraction at
+/// the receiver (`--occlusion rays`).
+pub fn gather_visible(
+    receiver: &Receiver,
+    eye: Vec3,
+    vals: &[Val],
+    weights: Weights,
+    glossy: bool,
+    visibility: impl Fn(usize) -> f32,
+) -> Gathered {
     let x = receiver.position;
     let n = receiver.normal;
     let r = mirror((eye - x).normalize_or_zero(), n);
@@ -152,8 +166,9 @@ pub fn gather(
     let mut glossy_sum = Vec3::ZERO;
     let mut diffuse_moments = Moments::default();
     let mut glossy_moments = Moments::default();
-    for val in vals {
+    for (j, val) in vals.iter().enumerate() {
         let (g, w) = disc_geometry(x, n, val);
+        let g = g * visibility(j);
         let e = val.flux * (g / PI);
         let strength = match weights {
             Weights::Geometric => val.area * g,
@@ -235,6 +250,9 @@ pub enum OcclusionMode {
     Sum,
     /// `o = 1 − Π(1 − o_i)`: independent occluders; never more than `Sum`.
     Union,
+    /// No discs: shadow rays to each VAL cluster's samples weight its VALs in the gather
+    /// ([`crate::vals::visibility`]).
+    Rays,
 }
 
 /// An occluder disc: a sparse point with its Voronoi radius.
@@ -308,7 +326,7 @@ pub fn occlusion(
 ) -> f32 {
     let mut sum = 0.0f32;
     let mut visible = 1.0f32;
-    if mode == OcclusionMode::Off {
+    if matches!(mode, OcclusionMode::Off | OcclusionMode::Rays) {
         return 0.0;
     }
     for (j, disc) in discs.iter().enumerate() {
@@ -322,7 +340,7 @@ pub fn occlusion(
     match mode {
         OcclusionMode::Sum => sum.min(1.0),
         OcclusionMode::Union => 1.0 - visible,
-        OcclusionMode::Off => 0.0,
+        OcclusionMode::Off | OcclusionMode::Rays => 0.0,
     }
 }
 

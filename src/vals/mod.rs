@@ -9,6 +9,7 @@
 pub mod math;
 pub mod points;
 pub mod sparse;
+pub mod visibility;
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -78,9 +79,10 @@ impl SparseSettings {
             options: SparseOptions {
                 tile,
                 glossy: options.choice("glossy", &["on", "off"])? == "on",
-                occlusion: match options.choice("occlusion", &["sum", "union", "off"])? {
+                occlusion: match options.choice("occlusion", &["sum", "union", "off", "rays"])? {
                     "off" => OcclusionMode::Off,
                     "union" => OcclusionMode::Union,
+                    "rays" => OcclusionMode::Rays,
                     _ => OcclusionMode::Sum,
                 },
                 weights: match options.choice("weights", &["geometric", "flux"])? {
@@ -112,7 +114,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 occlusion_mode,
                 tile,
                 vertex_count,
-                pad0,
+                rsm_tiles,
                 pad1
             ]
         ),
@@ -190,9 +192,9 @@ pub const OPTIONS: &[OptionSpec] = &[
     },
     OptionSpec {
         name: "occlusion",
-        kind: OptionKind::Choice(&["sum", "union", "off"]),
+        kind: OptionKind::Choice(&["sum", "union", "off", "rays"]),
         default: "sum",
-        help: "indirect occlusion from the sparse points' discs",
+        help: "indirect occlusion: from the sparse points' discs (sum, union), none, or shadow rays through the scene's BVH to each VAL cluster (rays)",
     },
     OptionSpec {
         name: "weights",
@@ -245,8 +247,7 @@ impl SparseMethod {
             scene,
             &raster.scene_gpu,
             &points,
-            &rsm.vals_buffer,
-            &rsm.val_count_buffer,
+            &rsm,
         )?;
         Ok(Self {
             settings,
@@ -290,6 +291,10 @@ impl Method for SparseMethod {
             .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
         self.rsm.prepare(ctx, frame.scene, frame.world_from_node);
         self.sparse.prepare(ctx, frame.solution_eye, &opts);
+        if opts.occlusion == OcclusionMode::Rays {
+            self.sparse
+                .prepare_bvh(ctx, frame.scene, frame.world_from_node);
+        }
         self.per_view.retain(views);
         if let Some(layer) = &mut self.layer {
             layer.update(ctx, frame, views);

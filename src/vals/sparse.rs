@@ -23,10 +23,12 @@ use crate::raster::{
     buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
     uniform_entry, view_binding, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
 };
+use crate::light::bvh::SceneBvh;
+use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::scene::{Material, Scene};
 
 pub use crate::light::{
-    ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY,
+    ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY, FLAG_VISIBILITY,
 };
 
 /// Invocations per workgroup of the solution kernels (gather, renormalize, occlusion,
@@ -136,7 +138,16 @@ pub struct SparseGpu {
     interpolate: Kernel,
     apply_pipeline: wgpu::RenderPipeline,
     apply_bgl: wgpu::BindGroupLayout,
+    bvh: SceneBvh,
+    visibility_buffer: wgpu::Buffer,
+    visibility_pipeline: wgpu::ComputePipeline,
+    visibility_group: wgpu::BindGroup,
+    /// RSM cluster tiles over all layers.
+    rsm_tiles: u32,
 }
+
+/// Bytes of cluster visibility per sparse point: one per cluster.
+pub const VISIBILITY_BYTES_PER_POINT: u64 = MAX_CLUSTERS as u64;
 
 /// One compute pass of the solution: pipeline, layout, and the buffers after the parameter
 /// block in binding order.
@@ -183,9 +194,9 @@ impl SparseGpu {
         scene: &Scene,
         scene_gpu: &SceneGpu,
         points: &[Arc<MeshPoints>],
-        vals_buffer: &wgpu::Buffer,
-        val_count_buffer: &wgpu::Buffer,
+        rsm: &Rsm,
     ) -> Result<Self, RenderError> {
+        let (vals_buffer, val_count_buffer) = (&rsm.vals_buffer, &rsm.val_count_buffer);
         let device = &ctx.device;
         let limits = device.limits();
         // Static model-space data, flattened over instances.
@@ -295,6 +306,12 @@ impl SparseGpu {
         let point_diffuse = empty(&mut bytes, "point diffuse", n * 16);
         let point_glossy = empty(&mut bytes, "point glossy", n * 16);
         let point_extra = empty(&mut bytes, "point extra", n * 8);
+        // One byte per (point, cluster): the VAL clusters' visibility (`--occlusion rays`).
+        let visibility_buffer = empty(
+            &mut bytes,
+            "point cluster visibility",
+            n * VISIBILITY_BYTES_PER_POINT,
+        );
         let point_bytes = bytes.0;
         let ranges_buffer = init(&mut bytes, "instance ranges", bytemuck::cast_slice(&ranges));
         let links_buffer = init(&mut bytes, "vertex links", bytemuck::cast_slice(&links));
@@ -351,6 +368,7 @@ impl SparseGpu {
                 (&point_diffuse, true),
                 (&point_glossy, true),
                 (&point_extra, true),
+                (&visibility_buffer, false),
             ],
         );
         let renormalize = make(
@@ -396,6 +414,65 @@ impl SparseGpu {
                 (&vertex_lights, true),
             ],
         );
+
+        // Visibility: group 0 its buffers, group 1 the scene's BVH.
+        let bvh = SceneBvh::new(ctx, scene);
+        if bvh.max_depth() > crate::light::bvh::STACK_DEPTH {
+            return Err(RenderError::Settings(format!(
+                "scene '{}': a mesh BVH is {} levels deep; the visibility rays' stack holds {}",
+                scene.name,
+                bvh.max_depth(),
+                crate::light::bvh::STACK_DEPTH
+            )));
+        }
+        bytes.add(GpuBytes(bvh.bytes.0));
+        let visibility_list = [
+            (&params_buffer, false),
+            (instances, false),
+            (&points_model_buffer, false),
+            (&points_meta_buffer, false),
+            (vals_buffer, false),
+            (&rsm.cluster_samples, false),
+            (&visibility_buffer, true),
+        ];
+        let visibility_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("visibility"),
+            entries: &visibility_list
+                .iter()
+                .enumerate()
+                .map(|(i, (_, rw))| {
+                    if *rw {
+                        storage_entry_rw(i as u32, cs)
+                    } else {
+                        storage_entry(i as u32, cs)
+                    }
+                })
+                .collect::<Vec<_>>(),
+        });
+        let visibility_pipeline = {
+            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("visibility"),
+                bind_group_layouts: &[Some(&visibility_bgl), Some(&bvh.layout)],
+                immediate_size: 0,
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some("visibility"),
+                layout: Some(&layout),
+                module: &ctx.shader("vals_visibility.wgsl"),
+                entry_point: Some("cs_main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let visibility_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("visibility"),
+            layout: &visibility_bgl,
+            entries: &visibility_list
+                .iter()
+                .enumerate()
+                .map(|(i, (b, _))| buffer_binding(i as u32, b))
+                .collect::<Vec<_>>(),
+        });
 
         // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
         let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
@@ -456,7 +533,28 @@ impl SparseGpu {
             interpolate,
             apply_pipeline,
             apply_bgl,
+            bvh,
+            visibility_buffer,
+            visibility_pipeline,
+            visibility_group,
+            rsm_tiles: rsm.tile_count(),
         })
+    }
+
+    /// Places the BVH's instances for this frame (rays of `--occlusion rays`).
+    pub fn prepare_bvh(&mut self, ctx: &GpuContext, scene: &Scene, world_from_node: &[Mat4]) {
+        self.bvh.update(ctx, scene, world_from_node);
+    }
+
+    /// The scene BVH the visibility rays trace (its CPU twin answers the same queries).
+    pub fn bvh(&self) -> &SceneBvh {
+        &self.bvh
+    }
+
+    /// The per-(point, cluster) visibility of the last recorded frame, V·255 per byte.
+    pub fn read_visibility(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
+        let words: Vec<u32> = crate::gpu::read_buffer(ctx, &self.visibility_buffer)?;
+        Ok(bytemuck::cast_slice(&words).to_vec())
     }
 
     /// The parameter block for `eye` and the options (`glossy_only`: the per-view glossy
@@ -465,6 +563,9 @@ impl SparseGpu {
         let mut flags = 0;
         if options.glossy {
             flags |= FLAG_GLOSSY;
+        }
+        if options.occlusion == OcclusionMode::Rays {
+            flags |= FLAG_VISIBILITY;
         }
         if options.weights == Weights::Flux {
             flags |= FLAG_FLUX_WEIGHTS;
@@ -478,13 +579,13 @@ impl SparseGpu {
             instance_count: self.instance_count,
             flags,
             occlusion_mode: match options.occlusion {
-                OcclusionMode::Off => 0,
+                OcclusionMode::Off | OcclusionMode::Rays => 0,
                 OcclusionMode::Sum => 1,
                 OcclusionMode::Union => 2,
             },
             tile: options.tile,
             vertex_count: self.vertex_count,
-            pad0: 0,
+            rsm_tiles: self.rsm_tiles,
             pad1: 0,
         }
     }
@@ -515,6 +616,16 @@ impl SparseGpu {
         last: Stage,
     ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
+        if options.occlusion == OcclusionMode::Rays {
+            passes.encoder().clear_buffer(&self.visibility_buffer, 0, None);
+            let clusters = self.rsm_tiles.clamp(1, MAX_CLUSTERS);
+            passes.compute("visibility", |pass| {
+                pass.set_pipeline(&self.visibility_pipeline);
+                pass.set_bind_group(0, &self.visibility_group, &[]);
+                pass.set_bind_group(1, &self.bvh.group, &[]);
+                pass.dispatch_workgroups(self.point_count.div_ceil(POINT_GROUP).max(1), clusters, 1);
+            })?;
+        }
         let groups = [
             self.gather.group.as_ref(),
             self.renormalize.group.as_ref(),
@@ -557,7 +668,8 @@ impl SparseGpu {
         if last >= Stage::Renormalize {
             compute(&self.renormalize, renormalize, points)?;
         }
-        if last >= Stage::Occlusion && options.occlusion != OcclusionMode::Off {
+        let disc_occlusion = matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union);
+        if last >= Stage::Occlusion && disc_occlusion {
             compute(&self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {

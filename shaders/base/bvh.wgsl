@@ -1,0 +1,116 @@
+// Shadow rays against the scene's two-level BVH (`src/light/bvh.rs`, whose `SceneBvh::occluded`
+// is the CPU twin): a loop over instances, each tested against its world box, then the ray in
+// the instance's model space through its mesh's binary BVH. The BVH is bind group 1 of every
+// includer (`SceneBvh::bind_group_layout`).
+
+struct BvhNode {
+    min: vec3<f32>,
+    // > 0: a leaf with this many triangles from `first`; 0: children `first`, `first + 1`.
+    prim_count: u32,
+    max: vec3<f32>,
+    first: u32,
+}
+
+struct BvhTriangle {
+    v0: vec4<f32>,
+    e1: vec4<f32>,
+    e2: vec4<f32>,
+}
+
+struct BvhInstance {
+    model_from_world: mat4x4<f32>,
+    // w: bits of the mesh's first node.
+    world_min: vec4<f32>,
+    // w: bits of the mesh's first triangle.
+    world_max: vec4<f32>,
+}
+
+@group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
+@group(1) @binding(1) var<storage, read> bvh_triangles: array<BvhTriangle>;
+@group(1) @binding(2) var<storage, read> bvh_instances: array<BvhInstance>;
+
+const BVH_STACK_DEPTH: u32 = 64u;
+
+fn bvh_safe_inverse(d: vec3<f32>) -> vec3<f32> {
+    let tiny = abs(d) < vec3<f32>(1e-20);
+    let huge = select(vec3<f32>(-1e20), vec3<f32>(1e20), d >= vec3<f32>(0.0));
+    return select(1.0 / d, huge, tiny);
+}
+
+fn bvh_ray_box(origin: vec3<f32>, inv_dir: vec3<f32>, t_max: f32, lo: vec3<f32>, hi: vec3<f32>) -> bool {
+    let t0 = (lo - origin) * inv_dir;
+    let t1 = (hi - origin) * inv_dir;
+    let a = min(t0, t1);
+    let b = max(t0, t1);
+    let near = max(max(max(a.x, a.y), a.z), 0.0);
+    let far = min(min(min(b.x, b.y), b.z), t_max);
+    return near <= far;
+}
+
+// Möller–Trumbore, both faces: true for a hit at t in (0, t_max).
+fn bvh_ray_triangle(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, tri: BvhTriangle) -> bool {
+    let e1 = tri.e1.xyz;
+    let e2 = tri.e2.xyz;
+    let p = cross(dir, e2);
+    let det = dot(e1, p);
+    if (abs(det) < 1e-12) {
+        return false;
+    }
+    let inv = 1.0 / det;
+    let s = origin - tri.v0.xyz;
+    let u = dot(s, p) * inv;
+    if (u < 0.0 || u > 1.0) {
+        return false;
+    }
+    let q = cross(s, e1);
+    let v = dot(dir, q) * inv;
+    if (v < 0.0 || u + v > 1.0) {
+        return false;
+    }
+    let t = dot(e2, q) * inv;
+    return t > 0.0 && t < t_max;
+}
+
+fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
+    let inv = bvh_safe_inverse(dir);
+    var stack: array<u32, BVH_STACK_DEPTH>;
+    var top = 1u;
+    stack[0] = 0u;
+    while (top > 0u) {
+        top -= 1u;
+        let node = bvh_nodes[first_node + stack[top]];
+        if (!bvh_ray_box(origin, inv, 1.0, node.min, node.max)) {
+            continue;
+        }
+        if (node.prim_count > 0u) {
+            for (var i = 0u; i < node.prim_count; i++) {
+                if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + i])) {
+                    return true;
+                }
+            }
+        } else if (top + 2u <= BVH_STACK_DEPTH) {
+            stack[top] = node.first;
+            stack[top + 1u] = node.first + 1u;
+            top += 2u;
+        }
+    }
+    return false;
+}
+
+// True when a triangle lies on the segment from `start` to `end` (t in (0, 1)).
+fn segment_occluded(start: vec3<f32>, end: vec3<f32>, instance_count: u32) -> bool {
+    let d = end - start;
+    let inv = bvh_safe_inverse(d);
+    for (var i = 0u; i < instance_count; i++) {
+        let inst = bvh_instances[i];
+        if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
+            continue;
+        }
+        let origin = (inst.model_from_world * vec4<f32>(start, 1.0)).xyz;
+        let dir = (inst.model_from_world * vec4<f32>(d, 0.0)).xyz;
+        if (bvh_mesh_hit(origin, dir, bitcast<u32>(inst.world_min.w), bitcast<u32>(inst.world_max.w))) {
+            return true;
+        }
+    }
+    return false;
+}

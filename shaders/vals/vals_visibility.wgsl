@@ -1,0 +1,72 @@
+// Visibility of the VAL clusters at the sparse points (`--occlusion rays`): for each point and
+// cluster, shadow rays through the scene's BVH to the VALs at the cluster's sample strata,
+// weighted by what each would contribute (flux · disc geometry), give the visible fraction
+// V ∈ [0, 1], stored as one byte. The gather then scales every VAL by its cluster's V, so a
+// point sees the light that reaches it through a doorway and not the light behind the wall.
+// CPU twin: `vals::visibility::cluster_visibility`.
+#include "vals_common.wgsl"
+#include "bvh.wgsl"
+
+const MAX_CLUSTERS: u32 = 32u;
+const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+// Ray ends are pulled off both surfaces by this fraction of the segment's length.
+const RAY_OFFSET: f32 = 2e-3;
+
+@group(0) @binding(0) var<storage, read> params: SparseParams;
+@group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
+@group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
+@group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read> vals: array<Val>;
+@group(0) @binding(5) var<storage, read> cluster_samples: array<u32>;
+// Per point MAX_CLUSTERS / 4 words, four clusters' V·255 per word (low byte first); cleared
+// before the pass, each invocation ORs in its byte.
+@group(0) @binding(6) var<storage, read_write> visibility: array<atomic<u32>>;
+
+fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
+    let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+    var seen = 0.0;
+    var total = 0.0;
+    for (var tile = cluster; tile < params.rsm_tiles; tile += MAX_CLUSTERS) {
+        for (var s = 0u; s < per_tile; s++) {
+            let slot = cluster_samples[tile * per_tile + s];
+            if (slot == 0u) {
+                continue;
+            }
+            let val = vals[slot - 1u];
+            let g = disc_geometry(point.position, point.normal, val).x;
+            let weight = g * (val.flux.r + val.flux.g + val.flux.b);
+            if (weight <= 0.0) {
+                continue;
+            }
+            let l = val.position_area.xyz;
+            let offset = RAY_OFFSET * length(l - point.position);
+            let start = point.position + point.normal * offset;
+            let end = l + val.normal.xyz * offset;
+            total += weight;
+            if (!segment_occluded(start, end, params.instance_count)) {
+                seen += weight;
+            }
+        }
+    }
+    // A cluster none of whose samples reaches the point keeps V = 1: the rays say nothing
+    // about it, and its VALs contribute little there.
+    if (total <= 0.0) {
+        return 1.0;
+    }
+    return seen / total;
+}
+
+// One invocation per (point, cluster): x = point, y = cluster.
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let index = gid.x;
+    let cluster = gid.y;
+    if (index >= params.point_count || cluster >= MAX_CLUSTERS) {
+        return;
+    }
+    let point_meta = points_meta[index];
+    let point = world_point(points_model[index], point_meta, instances[point_meta.y]);
+    let v = cluster_visibility(point, cluster);
+    let byte = u32(round(clamp(v, 0.0, 1.0) * 255.0));
+    atomicOr(&visibility[index * (MAX_CLUSTERS / 4u) + cluster / 4u], byte << (8u * (cluster % 4u)));
+}

@@ -1,0 +1,387 @@
+//! The scene as a two-level BVH on the GPU, for shadow rays of indirect light
+//! (`shaders/base/bvh.wgsl`): one binary BVH per mesh in model space, built once (the mesh's
+//! flat regions merged, so a tessellated wall is two triangles again), and per frame only the
+//! instances' `model_from_world` matrices and world bounds. Rigid motion therefore costs one
+//! small upload, never a rebuild. [`SceneBvh::occluded`] is the CPU twin of the WGSL query.
+
+use std::time::Duration;
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat4, Vec3};
+use obvhs::bvh2::builder::build_bvh2_from_tris;
+use obvhs::triangle::Triangle;
+use obvhs::BvhBuildParams;
+
+use crate::gpu::resources::GpuBytes;
+use crate::gpu::GpuContext;
+use crate::scene::merge::flat_region_indices;
+use crate::scene::{Material, Scene};
+
+/// One BVH node: a leaf when `prim_count > 0` (triangles `first..first + prim_count` of its
+/// mesh), otherwise an inner node whose children are nodes `first` and `first + 1` of its mesh.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct BvhNode {
+    pub min: [f32; 3],
+    pub prim_count: u32,
+    pub max: [f32; 3],
+    pub first: u32,
+}
+
+/// One model-space triangle as a vertex and two edges (the Möller–Trumbore form).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct BvhTriangle {
+    pub v0: [f32; 4],
+    pub e1: [f32; 4],
+    pub e2: [f32; 4],
+}
+
+/// One instance for the top level: where its mesh's nodes and triangles start, its world
+/// bounds (the ray skips the instance when it misses them) and the matrix into model space.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable, PartialEq)]
+pub struct BvhInstance {
+    pub model_from_world: [[f32; 4]; 4],
+    /// xyz: world-space minimum; w: the first node of the mesh (bits).
+    pub world_min: [f32; 4],
+    /// xyz: world-space maximum; w: the first triangle of the mesh (bits).
+    pub world_max: [f32; 4],
+}
+
+/// Where a mesh's part of the flat arrays starts.
+#[derive(Clone, Copy, Debug, Default)]
+struct MeshRange {
+    first_node: u32,
+    first_triangle: u32,
+    /// Model-space bounds of the mesh's triangles (empty when it has none).
+    min: Vec3,
+    max: Vec3,
+    empty: bool,
+}
+
+/// The per-mesh BVHs of a scene, flattened, and their GPU buffers.
+pub struct SceneBvh {
+    pub nodes: Vec<BvhNode>,
+    pub triangles: Vec<BvhTriangle>,
+    meshes: Vec<MeshRange>,
+    /// Per scene instance, in scene order; written each frame by [`SceneBvh::update`].
+    pub instances: Vec<BvhInstance>,
+    pub node_buffer: wgpu::Buffer,
+    pub triangle_buffer: wgpu::Buffer,
+    pub instance_buffer: wgpu::Buffer,
+    pub bytes: GpuBytes,
+    /// Bind group 1 of the shaders that include `bvh.wgsl`.
+    pub layout: wgpu::BindGroupLayout,
+    pub group: wgpu::BindGroup,
+}
+
+/// Builds one mesh's BVH over its merged triangles; returns its nodes and triangles in leaf
+/// order (so a leaf's triangles are contiguous).
+fn build_mesh(positions: &[Vec3], indices: &[u32]) -> (Vec<BvhNode>, Vec<BvhTriangle>) {
+    let triangles: Vec<Triangle> = indices
+        .chunks_exact(3)
+        .filter_map(|t| {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| positions.get(i as usize).copied());
+            let (a, b, c) = (a?, b?, c?);
+            (a.is_finite() && b.is_finite() && c.is_finite()).then_some(Triangle {
+                v0: a.into(),
+                v1: b.into(),
+                v2: c.into(),
+            })
+        })
+        .collect();
+    if triangles.is_empty() {
+        return (vec![], vec![]);
+    }
+    let bvh = build_bvh2_from_tris(
+        &triangles,
+        BvhBuildParams::medium_build(),
+        &mut Duration::default(),
+    );
+    let nodes = bvh
+        .nodes
+        .iter()
+        .map(|n| BvhNode {
+            min: Vec3::from(n.aabb.min).into(),
+            prim_count: n.prim_count,
+            max: Vec3::from(n.aabb.max).into(),
+            first: n.first_index,
+        })
+        .collect();
+    let ordered = bvh
+        .primitive_indices
+        .iter()
+        .map(|&i| {
+            let t = &triangles[i as usize];
+            let v0 = Vec3::from(t.v0);
+            BvhTriangle {
+                v0: v0.extend(0.0).into(),
+                e1: (Vec3::from(t.v1) - v0).extend(0.0).into(),
+                e2: (Vec3::from(t.v2) - v0).extend(0.0).into(),
+            }
+        })
+        .collect();
+    (nodes, ordered)
+}
+
+/// Möller–Trumbore: the ray parameter of the hit, if the segment's line hits the triangle
+/// (both faces) at t in (0, t_max).
+pub fn ray_triangle(origin: Vec3, dir: Vec3, t_max: f32, tri: &BvhTriangle) -> Option<f32> {
+    let v0 = Vec3::from_slice(&tri.v0[..3]);
+    let e1 = Vec3::from_slice(&tri.e1[..3]);
+    let e2 = Vec3::from_slice(&tri.e2[..3]);
+    let p = dir.cross(e2);
+    let det = e1.dot(p);
+    if det.abs() < 1e-12 {
+        return None;
+    }
+    let inv = 1.0 / det;
+    let s = origin - v0;
+    let u = s.dot(p) * inv;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let q = s.cross(e1);
+    let v = dir.dot(q) * inv;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = e2.dot(q) * inv;
+    (t > 0.0 && t < t_max).then_some(t)
+}
+
+/// Slab test of a ray against a box: true when [0, t_max] overlaps the box's span.
+pub fn ray_box(origin: Vec3, inv_dir: Vec3, t_max: f32, min: Vec3, max: Vec3) -> bool {
+    let t0 = (min - origin) * inv_dir;
+    let t1 = (max - origin) * inv_dir;
+    let near = t0.min(t1).max_element().max(0.0);
+    let far = t0.max(t1).min_element().min(t_max);
+    near <= far
+}
+
+/// `1/d` per axis with zeros replaced by a huge value of the same sign, so the slab test
+/// never meets 0·∞ (the shader does the same).
+pub fn safe_inverse(d: Vec3) -> Vec3 {
+    let f = |x: f32| {
+        if x.abs() < 1e-20 {
+            1e20f32.copysign(x)
+        } else {
+            1.0 / x
+        }
+    };
+    Vec3::new(f(d.x), f(d.y), f(d.z))
+}
+
+/// The deepest BVH the shader's traversal stack holds.
+pub const STACK_DEPTH: usize = 64;
+
+impl SceneBvh {
+    pub fn new(ctx: &GpuContext, scene: &Scene) -> Self {
+        let mut nodes = Vec::new();
+        let mut triangles = Vec::new();
+        let mut meshes = Vec::with_capacity(scene.meshes.len());
+        for mesh in &scene.meshes {
+            let textured = scene
+                .materials
+                .get(mesh.material)
+                .is_some_and(Material::has_textures);
+            let indices = flat_region_indices(mesh, textured);
+            let (mesh_nodes, mesh_triangles) = build_mesh(&mesh.positions, &indices);
+            let range = match mesh_nodes.first() {
+                Some(root) => MeshRange {
+                    first_node: nodes.len() as u32,
+                    first_triangle: triangles.len() as u32,
+                    min: Vec3::from(root.min),
+                    max: Vec3::from(root.max),
+                    empty: false,
+                },
+                None => MeshRange {
+                    empty: true,
+                    ..MeshRange::default()
+                },
+            };
+            meshes.push(range);
+            nodes.extend(mesh_nodes);
+            triangles.extend(mesh_triangles);
+        }
+        // wgpu rejects zero-sized storage bindings: keep one inert record of each.
+        if nodes.is_empty() {
+            nodes.push(BvhNode::default());
+        }
+        if triangles.is_empty() {
+            triangles.push(BvhTriangle::default());
+        }
+        let instances = vec![BvhInstance::default(); scene.instances.len().max(1)];
+        let mut bytes = GpuBytes::default();
+        let init = |bytes: &mut GpuBytes, label: &str, data: &[u8]| {
+            use wgpu::util::DeviceExt;
+            bytes.0 += data.len() as u64;
+            ctx.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: data,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+                })
+        };
+        let node_buffer = init(&mut bytes, "bvh nodes", bytemuck::cast_slice(&nodes));
+        let triangle_buffer = init(&mut bytes, "bvh triangles", bytemuck::cast_slice(&triangles));
+        let instance_buffer = init(&mut bytes, "bvh instances", bytemuck::cast_slice(&instances));
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let layout = ctx
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("scene bvh"),
+                entries: &[0, 1, 2].map(|i| crate::raster::storage_entry(i, cs)),
+            });
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("scene bvh"),
+            layout: &layout,
+            entries: &[
+                crate::raster::buffer_binding(0, &node_buffer),
+                crate::raster::buffer_binding(1, &triangle_buffer),
+                crate::raster::buffer_binding(2, &instance_buffer),
+            ],
+        });
+        Self {
+            nodes,
+            triangles,
+            meshes,
+            instances,
+            node_buffer,
+            triangle_buffer,
+            instance_buffer,
+            bytes,
+            layout,
+            group,
+        }
+    }
+
+    /// Places the instances for this frame (CPU records and their upload).
+    pub fn update(&mut self, ctx: &GpuContext, scene: &Scene, world_from_node: &[Mat4]) {
+        self.instances = scene
+            .instances
+            .iter()
+            .map(|inst| {
+                let range = self.meshes[inst.mesh];
+                let world_from_model = world_from_node[inst.node];
+                // An instance without triangles (or with a singular matrix) gets an empty box
+                // that no ray enters.
+                let invertible = world_from_model.determinant().abs() > 1e-30;
+                if range.empty || !invertible {
+                    return BvhInstance {
+                        model_from_world: Mat4::IDENTITY.to_cols_array_2d(),
+                        world_min: [1.0, 1.0, 1.0, f32::from_bits(range.first_node)],
+                        world_max: [-1.0, -1.0, -1.0, f32::from_bits(range.first_triangle)],
+                    };
+                }
+                let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
+                for corner in 0..8 {
+                    let c = Vec3::new(
+                        if corner & 1 == 0 { range.min.x } else { range.max.x },
+                        if corner & 2 == 0 { range.min.y } else { range.max.y },
+                        if corner & 4 == 0 { range.min.z } else { range.max.z },
+                    );
+                    let w = world_from_model.transform_point3(c);
+                    lo = lo.min(w);
+                    hi = hi.max(w);
+                }
+                BvhInstance {
+                    model_from_world: world_from_model.inverse().to_cols_array_2d(),
+                    world_min: lo.extend(f32::from_bits(range.first_node)).into(),
+                    world_max: hi.extend(f32::from_bits(range.first_triangle)).into(),
+                }
+            })
+            .collect();
+        if self.instances.is_empty() {
+            self.instances.push(BvhInstance::default());
+        }
+        ctx.queue.write_buffer(
+            &self.instance_buffer,
+            0,
+            bytemuck::cast_slice(&self.instances),
+        );
+    }
+
+    /// True when something lies on the segment from `from` to `to` (ends excluded by the
+    /// caller's offsets): the CPU twin of `segment_occluded` in `shaders/base/bvh.wgsl`.
+    pub fn occluded(&self, from: Vec3, to: Vec3, instance_count: usize) -> bool {
+        let d = to - from;
+        for inst in self.instances.iter().take(instance_count) {
+            let world_min = Vec3::from_slice(&inst.world_min[..3]);
+            let world_max = Vec3::from_slice(&inst.world_max[..3]);
+            if !ray_box(from, safe_inverse(d), 1.0, world_min, world_max) {
+                continue;
+            }
+            let m = Mat4::from_cols_array_2d(&inst.model_from_world);
+            let origin = m.transform_point3(from);
+            // Model-space direction of the whole segment: t stays in [0, 1] in both spaces.
+            let dir = m.transform_vector3(d);
+            let first_node = inst.world_min[3].to_bits() as usize;
+            let first_triangle = inst.world_max[3].to_bits() as usize;
+            if self.mesh_hit(origin, dir, first_node, first_triangle) {
+                return true;
+            }
+        }
+        false
+    }
+
+    fn mesh_hit(&self, origin: Vec3, dir: Vec3, first_node: usize, first_triangle: usize) -> bool {
+        let inv = safe_inverse(dir);
+        let mut stack = [0u32; STACK_DEPTH];
+        let mut top = 1usize;
+        stack[0] = 0;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[first_node + stack[top] as usize];
+            if !ray_box(origin, inv, 1.0, node.min.into(), node.max.into()) {
+                continue;
+            }
+            if node.prim_count > 0 {
+                for i in 0..node.prim_count {
+                    let tri = &self.triangles[first_triangle + (node.first + i) as usize];
+                    if ray_triangle(origin, dir, 1.0, tri).is_some() {
+                        return true;
+                    }
+                }
+            } else if top + 2 <= STACK_DEPTH {
+                stack[top] = node.first;
+                stack[top + 1] = node.first + 1;
+                top += 2;
+            }
+        }
+        false
+    }
+
+    /// The deepest path from a mesh root to a leaf (the shader's stack must hold it).
+    pub fn max_depth(&self) -> usize {
+        let mut deepest = 0;
+        for range in self.meshes.iter().filter(|m| !m.empty) {
+            let mut stack = vec![(0u32, 1usize)];
+            while let Some((i, depth)) = stack.pop() {
+                deepest = deepest.max(depth);
+                let node = self.nodes[range.first_node as usize + i as usize];
+                if node.prim_count == 0 {
+                    stack.push((node.first, depth + 1));
+                    stack.push((node.first + 1, depth + 1));
+                }
+            }
+        }
+        deepest
+    }
+}
+
+/// Struct layouts shared with WGSL.
+pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
+    use crate::raster::types::shared_layout;
+    vec![
+        shared_layout!("BvhNode", "bvh.wgsl", BvhNode, [min, prim_count, max, first]),
+        shared_layout!("BvhTriangle", "bvh.wgsl", BvhTriangle, [v0, e1, e2]),
+        shared_layout!(
+            "BvhInstance",
+            "bvh.wgsl",
+            BvhInstance,
+            [model_from_world, world_min, world_max]
+        ),
+    ]
+}

@@ -1,0 +1,79 @@
+//! `--occlusion rays`: visibility of VAL clusters at the sparse points, the CPU twin of
+//! `shaders/vals/vals_visibility.wgsl`.
+//!
+//! The paper's occlusion hides one averaged light sphere behind the sparse points' discs; when
+//! a point's VALs lie on both sides of a wall (light coming through a doorway) that sphere
+//! spans the wall and the light that does arrive is removed with the light that does not.
+//! Here the VALs are grouped into clusters that are tiles of the RSM (spatially coherent, and
+//! fixed to texels, so they move smoothly with the light: `light::rsm::texel_cluster`), and
+//! each (point, cluster) pair gets a visible fraction from shadow rays through the scene's
+//! BVH to the VALs at the cluster's sample strata:
+//!
+//! `V_c(x) = Σ_s w_s·vis(x, l_s) / Σ_s w_s`, `w_s = Φ_s·g(x, n, s)` (flux times the disc
+//! geometry term, so the samples that matter most at x count most), and `V_c = 1` where no
+//! sample reaches x. The gather then scales each VAL's geometry term by `V_c` of its cluster
+//! (`math::gather_visible`), so the renormalized light sits among the VALs the point sees.
+
+use glam::Vec3;
+
+use crate::light::bvh::SceneBvh;
+use crate::light::rsm::{GpuVal, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+use crate::vals::math::disc_geometry;
+
+/// Ray ends are pulled off both surfaces by this fraction of the segment's length.
+pub const RAY_OFFSET: f32 = 2e-3;
+
+/// `V_c(x)` for cluster `cluster` at the point (x, n): `rsm_tiles` RSM tiles over all layers,
+/// `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals` as the GPU
+/// holds them.
+#[allow(clippy::too_many_arguments)]
+pub fn cluster_visibility(
+    bvh: &SceneBvh,
+    instance_count: usize,
+    x: Vec3,
+    n: Vec3,
+    cluster: u32,
+    rsm_tiles: u32,
+    samples: &[u32],
+    vals: &[GpuVal],
+) -> f32 {
+    let per_tile = (CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as usize;
+    let mut seen = 0.0f32;
+    let mut total = 0.0f32;
+    let mut tile = cluster;
+    while tile < rsm_tiles {
+        for s in 0..per_tile {
+            let slot = samples
+                .get(tile as usize * per_tile + s)
+                .copied()
+                .unwrap_or(0);
+            let Some(gpu_val) = slot.checked_sub(1).and_then(|i| vals.get(i as usize)) else {
+                continue;
+            };
+            let val = gpu_val.to_val();
+            let (g, _) = disc_geometry(x, n, &val);
+            let weight = g * (val.flux.x + val.flux.y + val.flux.z);
+            if weight <= 0.0 {
+                continue;
+            }
+            let offset = RAY_OFFSET * (val.position - x).length();
+            let from = x + n * offset;
+            let to = val.position + val.normal * offset;
+            total += weight;
+            if !bvh.occluded(from, to, instance_count) {
+                seen += weight;
+            }
+        }
+        tile += MAX_CLUSTERS;
+    }
+    if total <= 0.0 {
+        1.0
+    } else {
+        seen / total
+    }
+}
+
+/// `V·255` rounded, as the GPU stores it.
+pub fn quantize(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
