@@ -20,17 +20,31 @@ struct VertexOut {
     @location(2) diffuse: vec3<f32>,
     @location(3) glossy_position: vec3<f32>,
     @location(4) glossy: vec3<f32>,
+    // A two-sided sheet's back-face lights (the front ones again for a one-sided mesh).
+    @location(5) back_diffuse_position: vec3<f32>,
+    @location(6) back_diffuse: vec3<f32>,
+    @location(7) back_glossy_position: vec3<f32>,
+    @location(8) back_glossy: vec3<f32>,
 }
 
 @vertex
 fn vs_main(@location(0) position: vec3<f32>, @builtin(vertex_index) vertex: u32, @builtin(instance_index) instance: u32) -> VertexOut {
     let inst = instances[instance];
     let world = inst.world_from_model * vec4<f32>(position, 1.0);
-    let v = ranges[instance].vertex_offset + vertex;
+    let range = ranges[instance];
+    let v = range.vertex_offset + vertex;
     let a = vertex_lights[v * 3u];
     let b = vertex_lights[v * 3u + 1u];
     let c = vertex_lights[v * 3u + 2u];
+    let vb = v + range.back_offset;
+    let ba = vertex_lights[vb * 3u];
+    let bb = vertex_lights[vb * 3u + 1u];
+    let bc = vertex_lights[vb * 3u + 2u];
     var out: VertexOut;
+    out.back_diffuse_position = ba.xyz;
+    out.back_diffuse = vec3<f32>(ba.w, bb.xy);
+    out.back_glossy_position = vec3<f32>(bb.zw, bc.x);
+    out.back_glossy = bc.yzw;
     // The same expression as the G-buffer's, so @invariant gives the same depth.
     out.clip = frame.clip_from_world * (inst.world_from_model * vec4<f32>(position, 1.0));
     out.position_world = world.xyz;
@@ -42,7 +56,12 @@ fn vs_main(@location(0) position: vec3<f32>, @builtin(vertex_index) vertex: u32,
 }
 
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+fn fs_main(in: VertexOut, @builtin(front_facing) front_facing: bool) -> @location(0) vec4<f32> {
+    // The G-buffer holds a back face's flipped normal; its lights are the back ones.
+    let diffuse_position = select(in.back_diffuse_position, in.diffuse_position, front_facing);
+    let diffuse = select(in.back_diffuse, in.diffuse, front_facing);
+    let glossy_position = select(in.back_glossy_position, in.glossy_position, front_facing);
+    let glossy = select(in.back_glossy, in.glossy, front_facing);
     let pixel = vec2<i32>(in.clip.xy);
     let n = normalize(textureLoad(gbuffer_normal, pixel, 0).xyz);
     let diffuse_tex = textureLoad(gbuffer_diffuse, pixel, 0);
@@ -50,11 +69,11 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let k = diffuse_tex.a;
     let rho_s = textureLoad(gbuffer_specular, pixel, 0).rgb;
     let p = in.position_world;
-    var radiance = rho_d / PI * in.diffuse * diffuse_point_factor(p, n, in.diffuse_position);
+    var radiance = rho_d / PI * diffuse * diffuse_point_factor(p, n, diffuse_position);
     if ((params.flags & FLAG_GLOSSY) != 0u) {
         let wo = normalize(frame.camera_position.xyz - p);
         let r = reflect(-wo, n);
-        radiance += rho_s * ((k + 2.0) / (2.0 * PI)) * in.glossy * glossy_point_factor(p, n, r, k, in.glossy_position);
+        radiance += rho_s * ((k + 2.0) / (2.0 * PI)) * glossy * glossy_point_factor(p, n, r, k, glossy_position);
     }
     return vec4<f32>(radiance, 1.0);
 }

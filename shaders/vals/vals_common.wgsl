@@ -33,9 +33,13 @@ struct SparseParams {
 // Where an instance's vertices, points and links start in the flat buffers.
 struct InstanceRange {
     vertex_offset: u32,
+    // The mesh's vertices, twice for a two-sided sheet (front lights, then back lights).
     vertex_count: u32,
     point_offset: u32,
     link_offset: u32,
+    // A two-sided sheet's back-face lights start this many vertices after vertex_offset
+    // (0: one-sided).
+    back_offset: u32,
 }
 
 const FLAG_GLOSSY: u32 = 1u;

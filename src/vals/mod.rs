@@ -122,7 +122,13 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             "InstanceRange",
             "vals_common.wgsl",
             sparse::InstanceRange,
-            [vertex_offset, vertex_count, point_offset, link_offset]
+            [
+                vertex_offset,
+                vertex_count,
+                point_offset,
+                link_offset,
+                back_offset
+            ]
         ),
     ]
 }

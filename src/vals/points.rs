@@ -243,6 +243,26 @@ fn eliminate(candidates: &[Vec3], count: usize, area: f32) -> Vec<usize> {
     (0..candidates.len()).filter(|&i| alive[i]).collect()
 }
 
+/// Both faces of a two-sided sheet (a double-sided material: a partition, a door, a leaf):
+/// the front points again with flipped normals after them, and the vertices' links again
+/// after theirs, pointing at the flipped copies. A vertex `v` of such a mesh has its front
+/// lights at `v` and its back lights at `v + n` (n vertices), and the apply pass picks by the
+/// pixel's facing, so light that reaches the back never shows on the front or the reverse.
+pub fn two_sided(front: &MeshPoints) -> MeshPoints {
+    let count = front.positions.len() as u32;
+    let mut out = front.clone();
+    out.positions.extend_from_slice(&front.positions);
+    out.normals.extend(front.normals.iter().map(|n| -*n));
+    out.disc_radius.extend_from_slice(&front.disc_radius);
+    out.links.extend(front.links.iter().map(|row| {
+        row.map(|l| Link {
+            point: l.point + count,
+            weight: l.weight,
+        })
+    }));
+    out
+}
+
 /// Identity of a mesh's geometry for the cache.
 fn mesh_key(mesh: &Mesh, count: usize, seed: u64) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -265,6 +285,15 @@ fn cache() -> &'static Cache {
     CACHE.get_or_init(|| Mutex::new(HashMap::new()))
 }
 
+/// Whether a mesh is a two-sided sheet: its material says so (glTF `doubleSided`, Mitsuba
+/// `twosided`, OBJ, the built-in partitions and doors).
+pub fn is_two_sided(scene: &Scene, mesh: &Mesh) -> bool {
+    scene
+        .materials
+        .get(mesh.material)
+        .is_some_and(|m| m.double_sided)
+}
+
 /// Points for every mesh of the scene, from the process-wide cache where this mesh was
 /// already processed with the same count and seed. Returns the points and how many meshes
 /// were computed (not cached).
@@ -277,12 +306,14 @@ pub fn scene_points(scene: &Scene, total: usize, seed: u64) -> (Vec<Arc<MeshPoin
         .zip(&counts)
         .enumerate()
         .map(|(mi, (mesh, &count))| {
-            let key = mesh_key(mesh, count, seed);
+            let sides = if is_two_sided(scene, mesh) { 2 } else { 1 };
+            let key = mesh_key(mesh, count, seed).wrapping_add(sides);
             if let Some(hit) = cache().lock().map(|c| c.get(&key).cloned()).ok().flatten() {
                 return hit;
             }
             computed += 1;
-            let placed = Arc::new(place(mesh, count, seed.wrapping_add(mi as u64)));
+            let front = place(mesh, count, seed.wrapping_add(mi as u64));
+            let placed = Arc::new(if sides == 2 { two_sided(&front) } else { front });
             if let Ok(mut c) = cache().lock() {
                 c.insert(key, placed.clone());
             }

@@ -41,9 +41,13 @@ pub const POINT_GROUP: u32 = 64;
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct InstanceRange {
     pub vertex_offset: u32,
+    /// Vertices with lights: the mesh's, twice for a two-sided sheet.
     pub vertex_count: u32,
     pub point_offset: u32,
     pub link_offset: u32,
+    /// Where a two-sided sheet's back-face lights start after `vertex_offset` (its mesh's
+    /// vertex count); 0 for a one-sided mesh.
+    pub back_offset: u32,
 }
 
 /// The knobs of the sparse passes.
@@ -238,13 +242,18 @@ impl SparseGpu {
                 .cloned()
                 .unwrap_or_default();
             let k = Material::phong_exponent(material.roughness);
+            // A two-sided sheet has a link row per vertex and face (`points::two_sided`).
+            let n = mesh.positions.len() as u32;
+            let two_sided = mesh_points.links.len() as u32 == 2 * n && n > 0;
+            let lit_vertices = if two_sided { 2 * n } else { n };
             ranges.push(InstanceRange {
                 vertex_offset,
-                vertex_count: mesh.positions.len() as u32,
+                vertex_count: lit_vertices,
                 point_offset: points_model.len() as u32,
                 link_offset: link_offsets[instance.mesh],
+                back_offset: if two_sided { n } else { 0 },
             });
-            vertex_offset += mesh.positions.len() as u32;
+            vertex_offset += lit_vertices;
             for ((p, n), r) in mesh_points
                 .positions
                 .iter()

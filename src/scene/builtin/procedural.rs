@@ -339,6 +339,15 @@ impl Doorway {
     ) {
         let (x, h, d, (z0, z1), door_h) =
             (self.x, self.height, self.depth, self.z, self.door_height);
+        // Partition and door are zero-thickness sheets seen from both rooms: two-sided.
+        let two_sided = |b: &mut SceneBuilder, m: usize| {
+            let mut material = b.scene.materials[m].clone();
+            material.name = format!("{} (two-sided)", material.name);
+            material.double_sided = true;
+            b.material(material)
+        };
+        let wall_material = two_sided(b, wall_material);
+        let door_material = two_sided(b, door_material);
         let mut wall = MeshBuilder::new("partition", wall_material);
         let facing = Vec3::new(0.0, 1.0, 1.0);
         let q = |y0: f32, y1: f32, za: f32, zb: f32| {
