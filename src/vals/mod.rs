@@ -47,7 +47,7 @@ impl Default for SparseSettings {
             options: SparseOptions {
                 tile: 128,
                 glossy: true,
-                occlusion: OcclusionMode::Sum,
+                occlusion: OcclusionMode::Rays,
                 weights: Weights::Geometric,
             },
             glossy_eye: GlossyEye::Mid,
@@ -79,11 +79,11 @@ impl SparseSettings {
             options: SparseOptions {
                 tile,
                 glossy: options.choice("glossy", &["on", "off"])? == "on",
-                occlusion: match options.choice("occlusion", &["sum", "union", "off", "rays"])? {
+                occlusion: match options.choice("occlusion", &["rays", "sum", "union", "off"])? {
                     "off" => OcclusionMode::Off,
                     "union" => OcclusionMode::Union,
-                    "rays" => OcclusionMode::Rays,
-                    _ => OcclusionMode::Sum,
+                    "sum" => OcclusionMode::Sum,
+                    _ => OcclusionMode::Rays,
                 },
                 weights: match options.choice("weights", &["geometric", "flux"])? {
                     "flux" => Weights::Flux,
@@ -142,6 +142,7 @@ pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
         "direct": round(get("shadow") + get("gbuffer") + get("direct")),
         "gather": round(get("gather")),
         "renormalize": round(get("renormalize")),
+        "visibility": round(get("visibility")),
         "occlusion": round(get("occlusion")),
         "interpolation": round(get("interpolation")),
         "apply": round(get("apply")),
@@ -198,8 +199,8 @@ pub const OPTIONS: &[OptionSpec] = &[
     },
     OptionSpec {
         name: "occlusion",
-        kind: OptionKind::Choice(&["sum", "union", "off", "rays"]),
-        default: "sum",
+        kind: OptionKind::Choice(&["rays", "sum", "union", "off"]),
+        default: "rays",
         help: "indirect occlusion: from the sparse points' discs (sum, union), none, or shadow rays through the scene's BVH to each VAL cluster (rays)",
     },
     OptionSpec {
