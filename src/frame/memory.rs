@@ -58,7 +58,11 @@ pub fn growth_after(samples: &[MemorySample], warmup_frames: u32) -> Option<Grow
         let peak = rest.iter().filter_map(|s| s.resident_bytes).max()?;
         Some((base, peak as i64 - base as i64))
     });
-    let gpu_peak = rest.iter().map(|s| s.gpu_bytes).max().unwrap_or(first.gpu_bytes);
+    let gpu_peak = rest
+        .iter()
+        .map(|s| s.gpu_bytes)
+        .max()
+        .unwrap_or(first.gpu_bytes);
     Some(Growth {
         resident_bytes: resident.map(|(_, d)| d),
         resident_fraction: resident.map(|(base, d)| d as f64 / base.max(1) as f64),

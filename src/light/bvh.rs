@@ -225,8 +225,16 @@ impl SceneBvh {
                 })
         };
         let node_buffer = init(&mut bytes, "bvh nodes", bytemuck::cast_slice(&nodes));
-        let triangle_buffer = init(&mut bytes, "bvh triangles", bytemuck::cast_slice(&triangles));
-        let instance_buffer = init(&mut bytes, "bvh instances", bytemuck::cast_slice(&instances));
+        let triangle_buffer = init(
+            &mut bytes,
+            "bvh triangles",
+            bytemuck::cast_slice(&triangles),
+        );
+        let instance_buffer = init(
+            &mut bytes,
+            "bvh instances",
+            bytemuck::cast_slice(&instances),
+        );
         let cs = wgpu::ShaderStages::COMPUTE;
         let layout = ctx
             .device
@@ -278,9 +286,21 @@ impl SceneBvh {
                 let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
                 for corner in 0..8 {
                     let c = Vec3::new(
-                        if corner & 1 == 0 { range.min.x } else { range.max.x },
-                        if corner & 2 == 0 { range.min.y } else { range.max.y },
-                        if corner & 4 == 0 { range.min.z } else { range.max.z },
+                        if corner & 1 == 0 {
+                            range.min.x
+                        } else {
+                            range.max.x
+                        },
+                        if corner & 2 == 0 {
+                            range.min.y
+                        } else {
+                            range.max.y
+                        },
+                        if corner & 4 == 0 {
+                            range.min.z
+                        } else {
+                            range.max.z
+                        },
                     );
                     let w = world_from_model.transform_point3(c);
                     lo = lo.min(w);
@@ -375,7 +395,12 @@ impl SceneBvh {
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     use crate::raster::types::shared_layout;
     vec![
-        shared_layout!("BvhNode", "bvh.wgsl", BvhNode, [min, prim_count, max, first]),
+        shared_layout!(
+            "BvhNode",
+            "bvh.wgsl",
+            BvhNode,
+            [min, prim_count, max, first]
+        ),
         shared_layout!("BvhTriangle", "bvh.wgsl", BvhTriangle, [v0, e1, e2]),
         shared_layout!(
             "BvhInstance",

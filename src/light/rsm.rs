@@ -350,8 +350,13 @@ impl Rsm {
             device,
             &wgpu::BufferDescriptor {
                 label: Some("rsm cluster samples"),
-                size: (layers as u64 * (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as u64 * 4).max(4),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+                size: (layers as u64
+                    * (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as u64
+                    * 4)
+                .max(4),
+                usage: wgpu::BufferUsages::STORAGE
+                    | wgpu::BufferUsages::COPY_DST
+                    | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             },
         );

@@ -249,13 +249,7 @@ impl SparseMethod {
         let (points, meshes_computed) =
             points::scene_points(scene, settings.sparse_points, settings.seed);
         let preprocess_ms = started.elapsed().as_secs_f64() * 1000.0;
-        let sparse = SparseGpu::new(
-            ctx,
-            scene,
-            &raster.scene_gpu,
-            &points,
-            &rsm,
-        )?;
+        let sparse = SparseGpu::new(ctx, scene, &raster.scene_gpu, &points, &rsm)?;
         Ok(Self {
             settings,
             raster,

@@ -18,13 +18,13 @@ use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::light::bvh::SceneBvh;
+use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
     buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
     uniform_entry, view_binding, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
 };
-use crate::light::bvh::SceneBvh;
-use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::scene::{Material, Scene};
 
 pub use crate::light::{
@@ -626,13 +626,19 @@ impl SparseGpu {
     ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
         if options.occlusion == OcclusionMode::Rays {
-            passes.encoder().clear_buffer(&self.visibility_buffer, 0, None);
+            passes
+                .encoder()
+                .clear_buffer(&self.visibility_buffer, 0, None);
             let clusters = self.rsm_tiles.clamp(1, MAX_CLUSTERS);
             passes.compute("visibility", |pass| {
                 pass.set_pipeline(&self.visibility_pipeline);
                 pass.set_bind_group(0, &self.visibility_group, &[]);
                 pass.set_bind_group(1, &self.bvh.group, &[]);
-                pass.dispatch_workgroups(self.point_count.div_ceil(POINT_GROUP).max(1), clusters, 1);
+                pass.dispatch_workgroups(
+                    self.point_count.div_ceil(POINT_GROUP).max(1),
+                    clusters,
+                    1,
+                );
             })?;
         }
         let groups = [

@@ -1,0 +1,232 @@
+//! `--occlusion rays` on the GPU against its CPU twins: the per-(point, cluster) visibility
+//! from shadow rays through the scene BVH (`vals::visibility`), the visibility-weighted
+//! gather (`math::gather_visible`), the BVH's rigid motion, and the clusters' bookkeeping.
+
+mod common;
+
+use glam::{Mat4, Vec3};
+use valgi::light::rsm::{texel_cluster, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+use valgi::method::Method;
+use valgi::scene::builtin::{self, BuiltinParams};
+use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
+use valgi::vals::sparse::SparseOptions;
+use valgi::vals::{visibility, SparseMethod, SparseSettings, Stage};
+
+fn settings(points: usize) -> SparseSettings {
+    SparseSettings {
+        rsm: 32,
+        sparse_points: points,
+        seed: 5,
+        options: SparseOptions {
+            tile: 64,
+            glossy: true,
+            occlusion: OcclusionMode::Rays,
+            weights: Weights::Geometric,
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
+    let Some(ctx) = common::gpu() else { return };
+    // The corridor: walls, a door and a partition between the VALs and many points.
+    let scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    let mut method = SparseMethod::new(
+        &ctx,
+        &scene,
+        common::small_render_settings(16),
+        settings(600),
+    )
+    .unwrap();
+    method.last_stage = Stage::Gather;
+    method.render(&ctx, &scene, &world, &camera).unwrap();
+    let gpu_vals = method.rsm.read_gpu_vals(&ctx).unwrap();
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let gpu_visibility = method.sparse.read_visibility(&ctx).unwrap();
+    let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+    let tiles = method.rsm.tile_count();
+    let clusters = tiles.min(MAX_CLUSTERS) as usize;
+    assert!(
+        gpu_vals.len() > 300 && clusters > 4,
+        "{} VALs, {clusters} clusters",
+        gpu_vals.len()
+    );
+
+    // Visibility: the same rays on the CPU. A ray that grazes an edge may land on either side
+    // in f32, so a few pairs may differ; the bytes must agree almost everywhere.
+    let bvh = method.sparse.bvh();
+    let per_point = MAX_CLUSTERS as usize;
+    let (mut pairs, mut exact, mut far_off, mut partial) = (0usize, 0usize, 0usize, 0usize);
+    for (i, p) in gathered.points.iter().enumerate() {
+        for c in 0..clusters {
+            let cpu = visibility::cluster_visibility(
+                bvh,
+                scene.instances.len(),
+                p.position,
+                p.normal,
+                c as u32,
+                tiles,
+                &samples,
+                &gpu_vals,
+            );
+            let gpu = gpu_visibility[i * per_point + c];
+            let cpu = visibility::quantize(cpu);
+            pairs += 1;
+            exact += usize::from(gpu.abs_diff(cpu) <= 1);
+            far_off += usize::from(gpu.abs_diff(cpu) > 32);
+            partial += usize::from(cpu > 0 && cpu < 255);
+        }
+    }
+    eprintln!("{pairs} pairs: {exact} within 1/255, {far_off} off by more than 1/8, {partial} partly visible");
+    assert!(
+        exact as f64 >= 0.995 * pairs as f64,
+        "{exact} of {pairs} agree"
+    );
+    assert!(
+        far_off as f64 <= 0.002 * pairs as f64,
+        "{far_off} of {pairs} differ by > 1/8"
+    );
+    // The scene must exercise the rays: some pairs partly hidden, some fully.
+    let hidden = gpu_visibility
+        .chunks(per_point)
+        .take(gathered.points.len())
+        .flat_map(|v| v[..clusters].iter())
+        .filter(|&&v| v == 0)
+        .count();
+    assert!(
+        partial > 50 && hidden > 50,
+        "{partial} partial, {hidden} hidden pairs"
+    );
+
+    // The gather scaled by the GPU's own visibility bytes.
+    let vals: Vec<_> = gpu_vals.iter().map(|v| v.to_val()).collect();
+    let eye = camera.position();
+    for (i, p) in gathered.points.iter().enumerate() {
+        let receiver = Receiver {
+            position: p.position,
+            normal: p.normal,
+            k: p.k,
+        };
+        let v_of = |j: usize| {
+            gpu_visibility[i * per_point + gpu_vals[j].cluster() as usize] as f32 / 255.0
+        };
+        let cpu = math::gather_visible(&receiver, eye, &vals, Weights::Geometric, true, v_of);
+        let gpu = &gathered.lights[i];
+        let tol = 1e-3 * cpu.diffuse.max_element().max(gpu.diffuse.max_element()) + 1e-9;
+        assert!(
+            (gpu.diffuse - cpu.diffuse).abs().max_element() <= tol,
+            "point {i}: E_d {} vs {}",
+            gpu.diffuse,
+            cpu.diffuse
+        );
+        let tol = 1e-3 * cpu.glossy.max_element().max(gpu.glossy.max_element()) + 1e-9;
+        assert!(
+            (gpu.glossy - cpu.glossy).abs().max_element() <= tol,
+            "point {i}: E_s {} vs {}",
+            gpu.glossy,
+            cpu.glossy
+        );
+    }
+}
+
+#[test]
+fn every_val_carries_its_texel_cluster_and_samples_point_at_their_stratum() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    let mut method = SparseMethod::new(
+        &ctx,
+        &scene,
+        common::small_render_settings(16),
+        settings(100),
+    )
+    .unwrap();
+    method.last_stage = Stage::Gather;
+    method.render(&ctx, &scene, &world, &camera).unwrap();
+    let vals = method.rsm.read_gpu_vals(&ctx).unwrap();
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let (res, tiles) = (method.rsm.resolution, method.rsm.tiles);
+    // One spot light: one layer cut into tiles × tiles clusters.
+    assert_eq!(method.rsm.layer_count, 1);
+    assert!(tiles * tiles <= MAX_CLUSTERS && tiles > 1, "{tiles} tiles");
+    let per_tile = (CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as usize;
+    let mut found = 0;
+    for (slot_index, &slot) in samples.iter().enumerate() {
+        if slot == 0 {
+            continue;
+        }
+        found += 1;
+        let tile = (slot_index / per_tile) as u32;
+        let val = &vals[(slot - 1) as usize];
+        assert_eq!(val.cluster(), tile % MAX_CLUSTERS, "sample {slot_index}");
+    }
+    assert!(found > per_tile, "{found} samples");
+    // The clusters over the VAL list are exactly the texel tiles: every cluster id in range,
+    // and most occurring (a spot's round cone leaves the RSM's corners dark).
+    let mut seen = vec![0usize; (tiles * tiles) as usize];
+    for v in &vals {
+        let c = v.cluster() as usize;
+        assert!(c < seen.len(), "cluster {c}");
+        seen[c] += 1;
+    }
+    let occupied = seen.iter().filter(|&&n| n > 0).count();
+    assert!(4 * occupied >= 3 * seen.len(), "{seen:?}");
+    // The CPU rule the shader follows, at the corners of the RSM.
+    assert_eq!(texel_cluster(res, tiles, 0, 0, 0), 0);
+    assert_eq!(
+        texel_cluster(res, tiles, 0, res - 1, res - 1),
+        tiles * tiles - 1
+    );
+}
+
+#[test]
+fn the_bvh_follows_rigid_motion_without_a_rebuild() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
+    let world = scene.world_from_node();
+    bvh.update(&ctx, &scene, &world);
+    let tracer = valgi::trace::Tracer::new(&scene, &world);
+    // Segments across the box: the BVH agrees with the path tracer's BVH.
+    let mut rng = valgi::sampling::Rng::new(7, 0, 0);
+    let bounds = scene.world_bounds(&world);
+    let (lo, hi) = (bounds.min, bounds.max);
+    let mut point = || {
+        Vec3::new(
+            lo.x + (hi.x - lo.x) * rng.next_f32(),
+            lo.y + (hi.y - lo.y) * rng.next_f32(),
+            lo.z + (hi.z - lo.z) * rng.next_f32(),
+        )
+    };
+    let (mut agree, mut blocked) = (0, 0);
+    let n = 2000;
+    for _ in 0..n {
+        let (a, b) = (point(), point());
+        let d = b - a;
+        let ours = bvh.occluded(a, b, scene.instances.len());
+        let theirs = !tracer.unoccluded(a, d.normalize(), d.length());
+        agree += usize::from(ours == theirs);
+        blocked += usize::from(ours);
+    }
+    assert!(
+        agree >= n * 995 / 1000,
+        "{agree} of {n} agree with the tracer"
+    );
+    assert!(blocked > n / 10, "{blocked} blocked");
+    // Moving every instance 10 m up moves what blocks: a segment through the old box is
+    // free, the same segment moved along is blocked as before.
+    let lifted: Vec<Mat4> = world
+        .iter()
+        .map(|m| Mat4::from_translation(Vec3::new(0.0, 10.0, 0.0)) * *m)
+        .collect();
+    bvh.update(&ctx, &scene, &lifted);
+    let centre = bounds.center();
+    let across = (centre - Vec3::X * 10.0, centre + Vec3::X * 10.0);
+    assert!(!bvh.occluded(across.0, across.1, scene.instances.len()));
+    let up = Vec3::new(0.0, 10.0, 0.0);
+    assert!(bvh.occluded(across.0 + up, across.1 + up, scene.instances.len()));
+}
