@@ -65,6 +65,11 @@ const WEIGHT_LITERAL: u32 = 0u;
 const WEIGHT_ARRIVING: u32 = 1u;
 const WEIGHT_PROPAGATION: u32 = 2u;
 
+// A light this close to a point's tangent plane (|cos| below it) counts as in the plane: it
+// adds nothing to E_neg. Positions rebuilt from depth wobble by a fraction of a pixel, which
+// would otherwise put a wall's own lights "behind" it.
+const COPLANAR_COS: f32 = 0.01;
+
 // Negative lights one frame may place (workgroup memory of the selection).
 const MAX_NEGATIVES: u32 = 1024u;
 

@@ -132,7 +132,7 @@ fn positive_terms(point: SurfacePoint) -> PositiveTerms {
         let a = arriving(p, light);
         let cos_p = dot(n, a.to_light);
         e_s += a.rgb * max(0.0, cos_p);
-        let behind = a.rgb * max(0.0, -cos_p);
+        let behind = a.rgb * select(0.0, -cos_p, -cos_p > COPLANAR_COS);
         e_neg += behind;
         if (params.weight_mode == WEIGHT_ARRIVING) {
             dir += luminance(a.rgb) * light.normal.xyz;

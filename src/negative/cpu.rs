@@ -314,6 +314,11 @@ pub struct PositiveTerms {
     pub direction: [f32; 4],
 }
 
+/// |cos| below which a light counts as in a point's tangent plane and adds nothing to E_neg
+/// (`COPLANAR_COS` in `negative_common.wgsl`): positions rebuilt from depth wobble by a
+/// fraction of a pixel, which would otherwise put a wall's own lights behind it.
+pub const COPLANAR_COS: f32 = 0.01;
+
 /// Y of linear Rec. 709 RGB.
 pub fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
@@ -353,7 +358,11 @@ pub fn positive_terms(
         };
         let cos_p = n.dot(t);
         e_s += arriving * cos_p.max(0.0);
-        let behind = arriving * (-cos_p).max(0.0);
+        let behind = if -cos_p > COPLANAR_COS {
+            arriving * -cos_p
+        } else {
+            Vec3::ZERO
+        };
         e_neg += behind;
         dir += match mode {
             WeightMode::Literal => luminance(behind) * light.normal(),
