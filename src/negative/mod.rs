@@ -731,7 +731,7 @@ impl Method for NegativeMethod {
         passes: &mut Passes,
     ) -> Result<ViewResult, RenderError> {
         self.raster.record_view_base(ctx, view, passes)?;
-        if !self.views.get(view).is_some() {
+        if self.views.get(view).is_none() {
             let state = self.make_view_state(ctx, view);
             self.views.get_or_try_insert(view, || Ok(state))?;
         }
