@@ -9,7 +9,7 @@ use valgi::eval::metrics::{flip, rmse};
 use valgi::frame::FrameOutput;
 use valgi::gpu::GpuContext;
 use valgi::method::{Method, MethodOptions};
-use valgi::negative::cpu::{self, IndirectLight, WeightMode};
+use valgi::negative::cpu::{self, Falloff, IndirectLight, WeightMode};
 use valgi::negative::{NegativeMethod, NegativeReadback};
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::{CameraView, Scene};
@@ -59,17 +59,39 @@ fn close(a: Vec3, b: Vec3, rel: f32) -> bool {
 #[test]
 fn gpu_kernels_match_the_cpu_twin() {
     let Some(ctx) = common::gpu() else { return };
+    gpu_matches_cpu(&ctx, "point", "literal");
+}
+
+#[test]
+fn gpu_kernels_match_the_cpu_twin_with_disc_falloff_and_propagation_weights() {
+    let Some(ctx) = common::gpu() else { return };
+    gpu_matches_cpu(&ctx, "disc", "propagation");
+    gpu_matches_cpu(&ctx, "point", "arriving");
+}
+
+fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
     let scene = scene("cornell-bunny");
     let size = 64;
     let (method, frame, rb) = run(
         &ctx,
         &scene,
         size,
-        &[("positive", "64"), ("negative", "24"), ("rsm", "128")],
+        &[
+            ("positive", "64"),
+            ("negative", "24"),
+            ("rsm", "128"),
+            ("falloff", falloff_name),
+            ("weight", weight),
+        ],
     );
     let world = scene.world_from_node();
-    let d2_min = rb.d2_min;
-    let mode = WeightMode::Literal;
+    let falloff = method.falloff();
+    if falloff_name == "point" {
+        assert_eq!(falloff, Falloff::Point { d2_min: rb.d2_min });
+    } else {
+        assert_eq!(falloff, Falloff::Disc);
+    }
+    let mode = WeightMode::parse(weight);
 
     // Positive lights: the raster RSM texel against a ray through the texel centre.
     let tracer = Tracer::new(&scene, &world);
@@ -100,7 +122,7 @@ fn gpu_kernels_match_the_cpu_twin() {
             point.position(),
             point.normal(),
             &rb.positives,
-            d2_min,
+            falloff,
             mode,
         );
         if !point.covered() {
@@ -176,7 +198,7 @@ fn gpu_kernels_match_the_cpu_twin() {
             let p = rb.points[i];
             if flagged(x, y) && p.covered() {
                 let (e_s, _, _) =
-                    cpu::positive_terms(p.position(), p.normal(), &rb.positives, d2_min, mode);
+                    cpu::positive_terms(p.position(), p.normal(), &rb.positives, falloff, mode);
                 assert!(close(e_s, v3(rb.full_terms[i].e_s), 1e-3));
             }
         }
@@ -212,7 +234,8 @@ fn gpu_kernels_match_the_cpu_twin() {
             if !p.covered() {
                 continue;
             }
-            let e_n_cpu = cpu::negative_irradiance(p.position(), p.normal(), &rb.negatives, d2_min);
+            let e_n_cpu =
+                cpu::negative_irradiance(p.position(), p.normal(), &rb.negatives, falloff);
             let e_n = if flagged(x, y) {
                 assert!(close(e_n_cpu, v3(rb.full_en[i]), 1e-3));
                 v3(rb.full_en[i])

@@ -18,7 +18,7 @@ struct PositiveSample {
 struct IndirectLight {
     // xyz: world position; w: 1 when the light exists.
     position: vec4<f32>,
-    // xyz: unit normal of its Lambertian emission.
+    // xyz: unit normal of its Lambertian emission; w: r² of the disc it stands for (m²).
     normal: vec4<f32>,
     // rgb: flux (W).
     flux: vec4<f32>,
@@ -58,7 +58,8 @@ struct NegativeParams {
     // 2·tan(fov_y/2)/H: the pixel footprint at unit distance.
     footprint_scale: f32,
     omega_frustum: f32,
-    pad0: u32,
+    // 0: 1/max(d², d²_min) (point lights); 1: 1/(d² + r²) (each light the disc it stands for).
+    falloff: u32,
 }
 
 const WEIGHT_LITERAL: u32 = 0u;

@@ -33,8 +33,11 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     light.normal = vec4<f32>(0.0);
     light.flux = vec4<f32>(0.0);
     if (flux.a > 0.5) {
-        light.position = vec4<f32>(textureLoad(rsm_position_area, texel, layer, 0).xyz, 1.0);
-        light.normal = vec4<f32>(normalize(textureLoad(rsm_normal, texel, layer, 0).xyz), 0.0);
+        let position_area = textureLoad(rsm_position_area, texel, layer, 0);
+        light.position = vec4<f32>(position_area.xyz, 1.0);
+        // The sample stands for flux_scale texels' worth of area: r² = A·scale/π.
+        let r2 = position_area.w * s.flux_scale / PI;
+        light.normal = vec4<f32>(normalize(textureLoad(rsm_normal, texel, layer, 0).xyz), r2);
         light.flux = vec4<f32>(flux.rgb * s.flux_scale, 0.0);
     }
     positives[i] = light;

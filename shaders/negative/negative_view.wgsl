@@ -93,6 +93,7 @@ fn en_at(pixel: vec2<u32>) -> vec3<f32> {
 }
 
 // Emitter side of a Lambertian point light seen from p: Φ/π·max(0, n_l·t̂_{l→p})/max(d², d²_min)
+// (or /(d² + r²) with the disc falloff)
 // in rgb and t̂_{p→l} in `to_light`; zero for an inactive light.
 struct Arriving {
     rgb: vec3<f32>,
@@ -110,7 +111,11 @@ fn arriving(p: vec3<f32>, light: IndirectLight) -> Arriving {
     }
     out.to_light = d / sqrt(d2);
     let cos_l = max(0.0, dot(light.normal.xyz, -out.to_light));
-    out.rgb = light.flux.rgb / PI * cos_l / max(d2, params.d2_min);
+    var denominator = max(d2, params.d2_min);
+    if (params.falloff == 1u) {
+        denominator = d2 + light.normal.w;
+    }
+    out.rgb = light.flux.rgb / PI * cos_l / denominator;
     return out;
 }
 
@@ -365,7 +370,7 @@ fn select_negatives(@builtin(local_invocation_index) lid: u32) {
         let area = params.omega_frustum / k * dot(to_eye, to_eye);
         var light: IndirectLight;
         light.position = vec4<f32>(point.position.xyz, 1.0);
-        light.normal = vec4<f32>(normalize(t.direction.xyz), 0.0);
+        light.normal = vec4<f32>(normalize(t.direction.xyz), area / PI);
         light.flux = vec4<f32>(t.e_neg.rgb * area, 0.0);
         negatives[m] = light;
     }

@@ -61,7 +61,7 @@ pub struct PositiveSample {
 pub struct IndirectLight {
     /// xyz: world position; w: 1 when the light exists (its sample hit a lit surface).
     pub position: [f32; 4],
-    /// xyz: the unit normal it emits about (Lambertian).
+    /// xyz: the unit normal it emits about (Lambertian); w: r² of the disc it stands for.
     pub normal: [f32; 4],
     /// rgb: flux Φ (W).
     pub flux: [f32; 4],
@@ -237,20 +237,22 @@ pub fn positive_lights_traced(
             if n.dot(wi) <= 0.0 {
                 return IndirectLight::default();
             }
-            let flux = if perspective {
+            let (flux, area) = if perspective {
                 let t = view.texel[0] * r * 0.5;
                 let d2 = (hit.position - light.position).length_squared();
                 let omega = texel_solid_angle(s.texel_x, s.texel_y, resolution, t);
-                hit.rho_d * irradiance * d2 * omega * s.flux_scale
+                (hit.rho_d * irradiance * d2 * omega, omega * d2)
             } else {
-                hit.rho_d * irradiance * view.texel[0] * view.texel[0] * s.flux_scale
+                let area = view.texel[0] * view.texel[0];
+                (hit.rho_d * irradiance * area, area)
             };
+            let flux = flux * s.flux_scale;
             if flux.max_element() <= 0.0 {
                 return IndirectLight::default();
             }
             IndirectLight {
                 position: hit.position.extend(1.0).to_array(),
-                normal: n.extend(0.0).to_array(),
+                normal: n.extend(area * s.flux_scale / PI).to_array(),
                 flux: flux.extend(0.0).to_array(),
             }
         })
@@ -324,10 +326,30 @@ pub fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
 
+/// The distance term of every point light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Falloff {
+    /// 1/max(d², d²_min): the paper's point lights with a tiny guard.
+    Point { d2_min: f32 },
+    /// 1/(d² + r²): each light the disc it stands for (r² in `normal.w`).
+    Disc,
+}
+
+impl Falloff {
+    pub const NAMES: &'static [&'static str] = &["point", "disc"];
+
+    fn denominator(self, d2: f32, r2: f32) -> f32 {
+        match self {
+            Falloff::Point { d2_min } => d2.max(d2_min),
+            Falloff::Disc => d2 + r2,
+        }
+    }
+}
+
 /// Irradiance at (p, n) from a Lambertian point light: Φ/π·max(0, n_l·t̂_{l→p})·max(0,
-/// n·t̂_{p→l})/max(d², d²_min). Returns the emitter factor Φ/π·cos_l/d² and cos at p apart so
-/// that callers can use either side of the tangent plane.
-fn light_terms(p: Vec3, light: &IndirectLight, d2_min: f32) -> Option<(Vec3, Vec3, f32)> {
+/// n·t̂_{p→l}) over the falloff's distance term. Returns the emitter factor and t̂_{p→l} apart
+/// so that callers can use either side of the tangent plane.
+fn light_terms(p: Vec3, light: &IndirectLight, falloff: Falloff) -> Option<(Vec3, Vec3, f32)> {
     if !light.is_active() {
         return None;
     }
@@ -338,7 +360,7 @@ fn light_terms(p: Vec3, light: &IndirectLight, d2_min: f32) -> Option<(Vec3, Vec
     }
     let t = to_light / d2.sqrt();
     let cos_l = light.normal().dot(-t).max(0.0);
-    let arriving = light.flux() / PI * cos_l / d2.max(d2_min);
+    let arriving = light.flux() / PI * cos_l / falloff.denominator(d2, light.normal[3]);
     Some((arriving, t, cos_l))
 }
 
@@ -348,12 +370,12 @@ pub fn positive_terms(
     p: Vec3,
     n: Vec3,
     lights: &[IndirectLight],
-    d2_min: f32,
+    falloff: Falloff,
     mode: WeightMode,
 ) -> (Vec3, Vec3, Vec3) {
     let (mut e_s, mut e_neg, mut dir) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     for light in lights {
-        let Some((arriving, t, _)) = light_terms(p, light, d2_min) else {
+        let Some((arriving, t, _)) = light_terms(p, light, falloff) else {
             continue;
         };
         let cos_p = n.dot(t);
@@ -374,10 +396,15 @@ pub fn positive_terms(
 }
 
 /// The CPU twin of `eval_negative`: E_n at one point from the negative lights (§A.6).
-pub fn negative_irradiance(p: Vec3, n: Vec3, negatives: &[IndirectLight], d2_min: f32) -> Vec3 {
+pub fn negative_irradiance(
+    p: Vec3,
+    n: Vec3,
+    negatives: &[IndirectLight],
+    falloff: Falloff,
+) -> Vec3 {
     let mut e = Vec3::ZERO;
     for light in negatives {
-        if let Some((arriving, t, _)) = light_terms(p, light, d2_min) {
+        if let Some((arriving, t, _)) = light_terms(p, light, falloff) {
             e += arriving * n.dot(t).max(0.0);
         }
     }
@@ -471,7 +498,7 @@ pub fn select_negatives(
             let area = omega_frustum / k * (point.position() - eye).length_squared();
             IndirectLight {
                 position: point.position().extend(1.0).to_array(),
-                normal: dir.extend(0.0).to_array(),
+                normal: dir.extend(area / PI).to_array(),
                 flux: (e_neg * area).extend(0.0).to_array(),
             }
         })

@@ -8,6 +8,7 @@
 //! is discontinuous from its low-resolution parent are recomputed at full resolution through
 //! an indirect dispatch, all on the GPU. See `README.md` for the equations and figures.
 
+pub mod bench;
 pub mod cpu;
 
 use std::cell::Cell;
@@ -24,7 +25,7 @@ use crate::raster::{
 use crate::scene::{Aabb, CameraView, Scene};
 use crate::shading::WorldLight;
 use bytemuck::{Pod, Zeroable};
-pub use cpu::{IndirectLight, PositiveSample, PositiveTerms, SurfacePoint, WeightMode};
+pub use cpu::{Falloff, IndirectLight, PositiveSample, PositiveTerms, SurfacePoint, WeightMode};
 
 const LOWRES: &[&str] = &["on", "off"];
 
@@ -75,6 +76,12 @@ pub static ENTRY: Entry = Entry {
             help: "distance clamp d_min of every point light, as a fraction of the scene diagonal",
         },
         OptionSpec {
+            name: "falloff",
+            kind: OptionKind::Choice(Falloff::NAMES),
+            default: "point",
+            help: "distance term: point (1/max(d², d²_min), the paper) or disc (1/(d² + r²), each light the disc it stands for)",
+        },
+        OptionSpec {
             name: "rsm",
             kind: OptionKind::Int { min: 1, max: 2048 },
             default: "256",
@@ -105,6 +112,8 @@ pub struct NegativeSettings {
     pub threshold_normal: f32,
     pub weight: WeightMode,
     pub dmin: f32,
+    /// 1/(d² + r²) instead of 1/max(d², d²_min).
+    pub disc: bool,
     pub rsm: u32,
 }
 
@@ -131,6 +140,7 @@ impl NegativeSettings {
         )?;
         let dmin = float("dmin", 1e-3, &|v| (0.0..=1.0).contains(&v), "in 0..=1")?;
         let weight = WeightMode::parse(options.choice("weight", WeightMode::NAMES)?);
+        let disc = options.choice("falloff", Falloff::NAMES)? == "disc";
         let rsm: u32 = options.get("rsm", 256)?;
         if !(1..=4096).contains(&positive) || negative > 1024 {
             return Err(RenderError::Settings(format!(
@@ -145,6 +155,7 @@ impl NegativeSettings {
             threshold_normal,
             weight,
             dmin,
+            disc,
             rsm,
         })
     }
@@ -170,7 +181,7 @@ pub struct NegativeParams {
     pub threshold_normal: f32,
     pub footprint_scale: f32,
     pub omega_frustum: f32,
-    pub pad0: u32,
+    pub falloff: u32,
 }
 
 /// `SampleCount` in `shaders/negative/negative_positives.wgsl`.
@@ -232,7 +243,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 threshold_normal,
                 footprint_scale,
                 omega_frustum,
-                pad0
+                falloff
             ]
         ),
         shared_layout!(
@@ -487,9 +498,15 @@ impl NegativeMethod {
         &self.samples
     }
 
-    /// d²_min of every point light.
-    pub fn d2_min(&self) -> f32 {
-        self.d2_min
+    /// The distance term every point light uses.
+    pub fn falloff(&self) -> Falloff {
+        if self.settings.disc {
+            Falloff::Disc
+        } else {
+            Falloff::Point {
+                d2_min: self.d2_min,
+            }
+        }
     }
 
     pub fn stats(&self) -> NegativeStats {
@@ -769,7 +786,7 @@ impl Method for NegativeMethod {
             threshold_normal: s.threshold_normal,
             footprint_scale: (top - bottom) / h as f32,
             omega_frustum,
-            pad0: 0,
+            falloff: s.disc as u32,
         };
         ctx.queue
             .write_buffer(&state.params, 0, bytemuck::bytes_of(&params));
@@ -898,6 +915,10 @@ impl Method for NegativeMethod {
         );
         map.insert("weight".into(), WeightMode::NAMES[s.weight as usize].into());
         map.insert("rsm".into(), self.rsm.resolution.into());
+        map.insert(
+            "falloff".into(),
+            if s.disc { "disc" } else { "point" }.into(),
+        );
         map.insert("positive_lights_active".into(), t.positive_lights.into());
         map.insert("negative_lights".into(), t.negative_lights.into());
         map.insert(
