@@ -7,6 +7,12 @@
 //!   against the full-resolution image (display values in [0, 1], as a percentage) and frame
 //!   time, with the unoptimized full-resolution frame as the 0 % row.
 //!
+//! - Image-space cost: the (100, 50) frame's negative-light passes with the 69,451-triangle
+//!   bunny against the 948-triangle one (`bunny-box-res4`).
+//! - Temporal: the flicker metric of the indirect image over five frames with the camera
+//!   sliding 1 cm per frame and with the bunny turning (`bunny-box-moving`), with and without
+//!   negative lights.
+//!
 //! Each row is the median of the timed frames after one warm-up frame, by GPU timestamps
 //! where the device has them. Writes `table1.csv` and `table2.csv`. Timings are
 //! measurements, never test assertions.
@@ -132,10 +138,11 @@ fn solve3(mut a: [[f64; 3]; 3], mut b: [f64; 3]) -> Option<[f64; 3]> {
         }
         a.swap(col, pivot);
         b.swap(col, pivot);
+        let pivot_row = a[col];
         for row in col + 1..3 {
-            let f = a[row][col] / a[col][col];
-            for k in col..3 {
-                a[row][k] -= f * a[col][k];
+            let f = a[row][col] / pivot_row[col];
+            for (x, p) in a[row].iter_mut().zip(&pivot_row).skip(col) {
+                *x -= f * p;
             }
             b[row] -= f * b[col];
         }
@@ -175,6 +182,8 @@ pub fn display_rms(image: &Image, reference: &Image, exposure: f32) -> f64 {
 
 struct Timed {
     ms: f64,
+    /// The method's own passes (`negative …`), without G-buffer, shadows and RSM.
+    indirect_ms: f64,
     image: Image,
     lowres: f64,
 }
@@ -191,13 +200,24 @@ fn time_method(
     let mut method = NegativeMethod::new(ctx, scene, settings, options)?;
     let mut last = method.render(ctx, scene, world, camera)?;
     let mut times = vec![];
+    let mut indirect = vec![];
     for _ in 0..frames.max(1) {
         last = method.render(ctx, scene, world, camera)?;
         times.push(last.timings.total_ms());
+        indirect.push(
+            last.timings
+                .passes
+                .iter()
+                .filter(|(label, _)| label.starts_with("negative"))
+                .map(|(_, ms)| ms)
+                .sum::<f64>(),
+        );
     }
     times.sort_by(f64::total_cmp);
+    indirect.sort_by(f64::total_cmp);
     Ok(Timed {
         ms: times[times.len() / 2],
+        indirect_ms: indirect[indirect.len() / 2],
         image: last.direct.add(&last.indirect),
         lowres: method.stats().lowres_fraction,
     })
@@ -337,7 +357,85 @@ pub fn run(request: &NegativeBenchRequest) -> Result<PathBuf, AppError> {
         );
     }
     write(&request.out.join("table2.csv"), &text)?;
+
+    if request.scene == "bunny-box" {
+        let coarse = scene::load("bunny-box-res4", &BuiltinParams::default())?;
+        let coarse_world = coarse.world_from_node();
+        let t = time_method(
+            &ctx,
+            &coarse,
+            &coarse_world,
+            &camera,
+            settings,
+            &base,
+            request.frames,
+        )?;
+        let fine = time_method(
+            &ctx,
+            &scene,
+            &world,
+            &camera,
+            settings,
+            &base,
+            request.frames,
+        )?;
+        println!(
+            "image-space cost at (100, 50): negative passes {:.2} ms with {} triangles, {:.2} ms with {} (frame {:.2} vs {:.2} ms)",
+            fine.indirect_ms,
+            scene.triangle_count(),
+            t.indirect_ms,
+            coarse.triangle_count(),
+            fine.ms,
+            t.ms
+        );
+        let moving = scene::load("bunny-box-moving", &BuiltinParams::default())?;
+        for m in [50, 0] {
+            let mut options = base.clone();
+            options.set("negative", m);
+            let camera_flicker =
+                flicker_of(&ctx, &scene, settings, &options, &camera, Motion::Camera)?;
+            let object_flicker =
+                flicker_of(&ctx, &moving, settings, &options, &camera, Motion::Scene)?;
+            println!(
+                "flicker (100, {m}): camera sliding {camera_flicker:.3e}, bunny turning {object_flicker:.3e}"
+            );
+        }
+    }
     Ok(table1_path)
+}
+
+enum Motion {
+    /// The camera slides 1 cm per frame along its right axis; the scene stands still.
+    Camera,
+    /// The scene's animation at 30 frames per second; the camera stands still.
+    Scene,
+}
+
+/// The flicker metric of five indirect frames.
+fn flicker_of(
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: RenderSettings,
+    options: &MethodOptions,
+    camera: &CameraView,
+    motion: Motion,
+) -> Result<f64, AppError> {
+    let mut method = NegativeMethod::new(ctx, scene, settings, options)?;
+    let mut frames = vec![];
+    for f in 0..5 {
+        let (world, cam) = match motion {
+            Motion::Camera => {
+                let mut cam = *camera;
+                let right = cam.world_from_view.x_axis.truncate();
+                cam.world_from_view =
+                    Mat4::from_translation(right * 0.01 * f as f32) * cam.world_from_view;
+                (scene.world_from_node(), cam)
+            }
+            Motion::Scene => (scene.world_from_node_at(f as f32 / 30.0), *camera),
+        };
+        frames.push(method.render(ctx, scene, &world, &cam)?.indirect);
+    }
+    Ok(crate::eval::metrics::flicker(&frames).unwrap_or(0.0))
 }
 
 fn write(path: &Path, text: &str) -> Result<(), AppError> {

@@ -15,7 +15,8 @@
 //!   y ∈ [0, 2.5], z ∈ [−1.5, 1.5]) whose six walls are two triangles each (left red, right
 //!   blue, the rest white, ρ = 0.75), lit by one spot at (0.9, 2.3, 1.1) aimed at the bunny
 //!   (cones 25°/35°); the camera stands inside at (0, 1.25, 1.45) looking at (0, 0.95, 0), 50°
-//!   vertical field of view. `bunny-box-empty` is the same box without the bunny.
+//!   vertical field of view. `bunny-box-empty` is the same box without the bunny,
+//!   `bunny-box-res4` the same with the 948-triangle `bun_zipper_res4.ply`.
 //! - `cornell-bunny`: the Stanford bunny (ASCII PLY from the shared data folder) in the Cornell
 //!   box in place of the short block; a procedural stand-in, named as such, when absent.
 
@@ -93,6 +94,10 @@ pub const NAMES: &[(&str, &str)] = &[
     ),
     ("bunny-box-moving", "bunny-box with the bunny turning"),
     ("bunny-box-empty", "bunny-box without the bunny (a convex empty box)"),
+    (
+        "bunny-box-res4",
+        "bunny-box with the 948-triangle bunny (bun_zipper_res4.ply)",
+    ),
 ];
 
 /// Builds the scene `name` if this module knows it.
@@ -110,8 +115,9 @@ pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
         "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
         "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
         "cornell-bunny" => cornell_bunny(name, moving, max_edge),
-        "bunny-box" => bunny_box(name, true, moving),
-        "bunny-box-empty" => bunny_box(name, false, moving),
+        "bunny-box" => bunny_box(name, Some("bun_zipper.ply"), moving),
+        "bunny-box-res4" => bunny_box(name, Some("bun_zipper_res4.ply"), moving),
+        "bunny-box-empty" => bunny_box(name, None, moving),
         other if other.starts_with("door-room") => {
             let degrees = &other["door-room".len()..];
             match degrees.parse::<f32>() {
@@ -926,9 +932,10 @@ pub fn bunny_candidates() -> Vec<PathBuf> {
     paths
 }
 
-/// Seed 002's scene (dimensions in the module documentation). The bunny is the full
-/// `bun_zipper.ply`; a missing file gives the procedural stand-in and a warning.
-fn bunny_box(name: &str, with_bunny: bool, moving: bool) -> Result<Scene, SceneError> {
+/// Seed 002's scene (dimensions in the module documentation) with the bunny PLY `bunny` of
+/// the shared data folder (none: the empty box); a missing file gives the procedural
+/// stand-in and a warning.
+fn bunny_box(name: &str, bunny: Option<&str>, moving: bool) -> Result<Scene, SceneError> {
     let mut b = SceneBuilder::new(name);
     let white = grey(&mut b, "white", 0.75);
     let red = b.material(Material::lambert("red", Vec3::new(0.75, 0.15, 0.12)));
@@ -987,15 +994,12 @@ fn bunny_box(name: &str, with_bunny: bool, moving: bool) -> Result<Scene, SceneE
         b.object(wall_name, mesh.build(), Trs::default());
     }
     let bunny_at = Vec3::new(0.0, 0.55, 0.0);
-    if with_bunny {
-        let rel = Path::new("../shared/data/bunny/bun_zipper.ply");
-        let candidates = match std::env::var_os("VALGI_BUNNY_FULL") {
-            Some(p) => vec![PathBuf::from(p)],
-            None => vec![
-                rel.to_path_buf(),
-                Path::new(env!("CARGO_MANIFEST_DIR")).join(rel),
-            ],
-        };
+    if let Some(file) = bunny {
+        let rel = Path::new("../shared/data/bunny").join(file);
+        let candidates = vec![
+            rel.clone(),
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(&rel),
+        ];
         let (mut mesh, warning) = bunny_mesh(&candidates)?;
         if let Some(warning) = warning {
             b.scene.warnings.push(format!("{name}: {warning}"));
@@ -1041,7 +1045,7 @@ fn bunny_box(name: &str, with_bunny: bool, moving: bool) -> Result<Scene, SceneE
         50.0,
     );
     let mut scene = b.scene;
-    if moving && with_bunny {
+    if moving && bunny.is_some() {
         let node = node_named(&scene, "bunny");
         let turns: Vec<Quat> = (0..=4)
             .map(|i| Quat::from_rotation_y(i as f32 * std::f32::consts::FRAC_PI_2))
