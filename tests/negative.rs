@@ -525,3 +525,24 @@ fn the_clamp_leaves_no_negative_light_and_reports_what_it_removed() {
         assert!(report.contains_key(key), "report lacks {key}");
     }
 }
+
+#[test]
+fn bunny_box_is_the_papers_scene() {
+    let full = scene("bunny-box");
+    assert!(full.warnings.is_empty(), "{:?}", full.warnings);
+    let bunny = full.meshes.iter().find(|m| m.name == "bunny").unwrap();
+    assert_eq!(bunny.indices.len() / 3, 69_451, "bun_zipper.ply");
+    // Six walls of two triangles each.
+    let walls: Vec<_> = full.meshes.iter().filter(|m| m.name != "bunny").collect();
+    assert_eq!(walls.len(), 6);
+    assert!(walls.iter().all(|m| m.indices.len() == 6));
+    assert_eq!(full.lights.len(), 1);
+    let coarse = scene("bunny-box-res4");
+    let bunny = coarse.meshes.iter().find(|m| m.name == "bunny").unwrap();
+    assert_eq!(bunny.indices.len() / 3, 948, "bun_zipper_res4.ply");
+    let moving = scene("bunny-box-moving");
+    assert!(moving.world_from_node_at(0.0) != moving.world_from_node_at(1.0));
+    assert!(builtin::names()
+        .iter()
+        .any(|(n, _)| *n == "bunny-box-empty"));
+}
