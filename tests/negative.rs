@@ -546,3 +546,97 @@ fn bunny_box_is_the_papers_scene() {
         .iter()
         .any(|(n, _)| *n == "bunny-box-empty"));
 }
+
+#[test]
+fn every_light_gets_its_own_positive_set() {
+    let Some(ctx) = common::gpu() else { return };
+    // bunny-box's spot plus a point light inside the box and a directional light (through
+    // the walls: its RSM sees the box from outside, so the ceiling takes its samples).
+    let mut scene = scene("bunny-box");
+    for (name, kind, at, rotation) in [
+        (
+            "point",
+            valgi::scene::LightKind::Point,
+            Vec3::new(-0.8, 1.8, -0.6),
+            Quat::IDENTITY,
+        ),
+        (
+            "sun",
+            valgi::scene::LightKind::Directional,
+            Vec3::ZERO,
+            Quat::from_rotation_x(-1.2),
+        ),
+    ] {
+        scene.nodes.push(valgi::scene::Node {
+            name: name.into(),
+            parent: None,
+            local: valgi::scene::Trs {
+                translation: at,
+                rotation,
+                ..Default::default()
+            },
+        });
+        scene.lights.push(valgi::scene::Light {
+            name: name.into(),
+            node: scene.nodes.len() - 1,
+            kind,
+            color: Vec3::ONE,
+            intensity: 2.0,
+            range: None,
+        });
+    }
+    let n = 40;
+    let (method, frame, rb) = run(&ctx, &scene, 24, &[("positive", "40"), ("rsm", "128")]);
+    let samples = method.samples();
+    assert_eq!(samples.len(), 3 * n);
+    for light in 0..3u32 {
+        assert_eq!(samples.iter().filter(|s| s.light == light).count(), n);
+    }
+    // The point light's samples spread over the six cube faces.
+    let faces: std::collections::BTreeSet<u32> = samples
+        .iter()
+        .filter(|s| s.light == 1)
+        .map(|s| s.layer)
+        .collect();
+    assert_eq!(faces.len(), 6, "{faces:?}");
+    let world = scene.world_from_node();
+    let tracer = Tracer::new(&scene, &world);
+    let setup = method.rsm.light_setup(&scene, &world);
+    let lights = WorldLight::from_scene(&scene, &world);
+    let traced = cpu::positive_lights_traced(&tracer, &setup, &lights, 128, samples);
+    for light in 0..3u32 {
+        let pairs: Vec<_> = traced
+            .iter()
+            .zip(&rb.positives)
+            .zip(samples)
+            .filter(|(_, s)| s.light == light)
+            .map(|(p, _)| p)
+            .collect();
+        let agree = pairs
+            .iter()
+            .filter(|(c, g)| {
+                c.is_active() == g.is_active()
+                    && (!c.is_active()
+                        || (c.position().distance(g.position()) < 0.01
+                            && close(c.flux(), g.flux(), 0.02)))
+            })
+            .count();
+        assert!(
+            agree * 10 >= pairs.len() * 9,
+            "light {light}: {agree} of {} agree",
+            pairs.len()
+        );
+        assert!(
+            pairs.iter().any(|(_, g)| g.is_active()),
+            "light {light} has no active sample"
+        );
+    }
+    // The point light (all 4π) inside the closed box: every sample on a wall or the bunny.
+    assert!(rb
+        .positives
+        .iter()
+        .zip(samples)
+        .filter(|(_, s)| s.light == 1)
+        .all(|(l, _)| l.is_active()));
+    assert!(frame.indirect.pixels.iter().any(|p| p[1] > 0.0));
+}
