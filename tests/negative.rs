@@ -56,6 +56,20 @@ fn close(a: Vec3, b: Vec3, rel: f32) -> bool {
     (a - b).abs().max_element() <= rel * a.abs().max(b.abs()).max_element() + 1e-9
 }
 
+/// Traced (CPU) and raster (GPU) positive lights that agree: both inactive, or both active
+/// within 1 cm and 2 % in flux.
+fn agreeing(pairs: &[(&IndirectLight, &IndirectLight)]) -> usize {
+    pairs
+        .iter()
+        .filter(|(c, g)| {
+            c.is_active() == g.is_active()
+                && (!c.is_active()
+                    || (c.position().distance(g.position()) < 0.01
+                        && close(c.flux(), g.flux(), 0.02)))
+        })
+        .count()
+}
+
 #[test]
 fn gpu_kernels_match_the_cpu_twin() {
     let Some(ctx) = common::gpu() else { return };
@@ -99,16 +113,8 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
     let lights = WorldLight::from_scene(&scene, &world);
     let traced = cpu::positive_lights_traced(&tracer, &setup, &lights, 128, method.samples());
     assert_eq!(traced.len(), rb.positives.len());
-    let agree = traced
-        .iter()
-        .zip(&rb.positives)
-        .filter(|(c, g)| {
-            c.is_active() == g.is_active()
-                && (!c.is_active()
-                    || (c.position().distance(g.position()) < 0.01
-                        && close(c.flux(), g.flux(), 0.02)))
-        })
-        .count();
+    let pairs: Vec<_> = traced.iter().zip(&rb.positives).collect();
+    let agree = agreeing(&pairs);
     assert!(
         agree * 10 >= traced.len() * 9,
         "{agree} of {} positive lights agree with the traced twin",
@@ -612,15 +618,7 @@ fn every_light_gets_its_own_positive_set() {
             .filter(|(_, s)| s.light == light)
             .map(|(p, _)| p)
             .collect();
-        let agree = pairs
-            .iter()
-            .filter(|(c, g)| {
-                c.is_active() == g.is_active()
-                    && (!c.is_active()
-                        || (c.position().distance(g.position()) < 0.01
-                            && close(c.flux(), g.flux(), 0.02)))
-            })
-            .count();
+        let agree = agreeing(&pairs);
         assert!(
             agree * 10 >= pairs.len() * 9,
             "light {light}: {agree} of {} agree",
