@@ -135,6 +135,8 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
             continue;
         }
         assert!(close(e_s, v3(t.e_s), 1e-3), "E_s {e_s} vs {:?}", t.e_s);
+        let guarded = cpu::distance_clamped(point.position(), &rb.positives, falloff);
+        assert_eq!(guarded as f32, t.e_s[3], "d²_min guard count");
         assert!(
             close(e_neg, v3(t.e_neg), 1e-3),
             "E_neg {e_neg} vs {:?}",
@@ -269,6 +271,12 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
     let stats = method.stats();
     let covered = rb.points.iter().filter(|p| p.covered()).count();
     assert!((stats.clamp_rate - clamped as f64 / covered as f64).abs() < 1e-9);
+    let guarded: f64 = (0..w * h)
+        .filter(|&i| rb.points[i as usize].covered())
+        .map(|i| terms_at(i).1.e_s[3] as f64)
+        .sum();
+    let expected = guarded / (covered * rb.positives.len()) as f64;
+    assert!((stats.distance_clamp_rate - expected).abs() <= 1e-6 * expected.max(1e-9));
     assert!((stats.lowres_fraction - (1.0 - recomputed as f64 / (w * h) as f64)).abs() < 1e-9);
 }
 

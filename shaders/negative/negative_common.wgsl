@@ -32,7 +32,7 @@ struct SurfacePoint {
 }
 
 struct PositiveTerms {
-    // rgb: E_s (all positive lights, no visibility).
+    // rgb: E_s (all positive lights, no visibility); a: lights that hit the d²_min guard.
     e_s: vec4<f32>,
     // rgb: E_neg (the lights behind the tangent plane).
     e_neg: vec4<f32>,

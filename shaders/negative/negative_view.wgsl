@@ -39,7 +39,7 @@
 @group(0) @binding(16) var<storage, read_write> low_en: array<vec4<f32>>;
 @group(0) @binding(17) var<storage, read_write> full_en: array<vec4<f32>>;
 // Per gather workgroup: (clamped pixels, Y removed by the clamp, Y of ρ/π·E_s, covered
-// pixels), (Y of ρ/π·E_n, 0, 0, 0).
+// pixels), (Y of ρ/π·E_n, positive lights that hit the d²_min guard, summed over pixels, 0, 0).
 @group(0) @binding(18) var<storage, read_write> stats: array<vec4<f32>>;
 
 const TILE: u32 = 8u;
@@ -98,12 +98,15 @@ fn en_at(pixel: vec2<u32>) -> vec3<f32> {
 struct Arriving {
     rgb: vec3<f32>,
     to_light: vec3<f32>,
+    // 1 when the point falloff's d²_min guard replaced d².
+    clamped: f32,
 }
 
 fn arriving(p: vec3<f32>, light: IndirectLight) -> Arriving {
     var out: Arriving;
     out.rgb = vec3<f32>(0.0);
     out.to_light = vec3<f32>(0.0, 0.0, 1.0);
+    out.clamped = 0.0;
     let d = light.position.xyz - p;
     let d2 = dot(d, d);
     if (light.position.w < 0.5 || d2 <= 0.0) {
@@ -114,6 +117,8 @@ fn arriving(p: vec3<f32>, light: IndirectLight) -> Arriving {
     var denominator = max(d2, params.d2_min);
     if (params.falloff == 1u) {
         denominator = d2 + light.normal.w;
+    } else if (d2 < params.d2_min) {
+        out.clamped = 1.0;
     }
     out.rgb = light.flux.rgb / PI * cos_l / denominator;
     return out;
@@ -132,9 +137,11 @@ fn positive_terms(point: SurfacePoint) -> PositiveTerms {
     var e_s = vec3<f32>(0.0);
     var e_neg = vec3<f32>(0.0);
     var dir = vec3<f32>(0.0);
+    var clamped = 0.0;
     for (var i = 0u; i < params.positive_count; i++) {
         let light = positives[i];
         let a = arriving(p, light);
+        clamped += a.clamped;
         let cos_p = dot(n, a.to_light);
         e_s += a.rgb * max(0.0, cos_p);
         let behind = a.rgb * select(0.0, -cos_p, -cos_p > COPLANAR_COS);
@@ -147,7 +154,7 @@ fn positive_terms(point: SurfacePoint) -> PositiveTerms {
             dir += luminance(behind) * light.normal.xyz;
         }
     }
-    t.e_s = vec4<f32>(e_s, 0.0);
+    t.e_s = vec4<f32>(e_s, clamped);
     t.e_neg = vec4<f32>(e_neg, 0.0);
     t.direction = vec4<f32>(dir, 0.0);
     return t;
@@ -409,18 +416,21 @@ fn negative_full(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 var<workgroup> partial: array<vec4<f32>, 64>;
-var<workgroup> partial_n: array<f32, 64>;
+var<workgroup> partial_n: array<vec2<f32>, 64>;
 
 @compute @workgroup_size(8, 8, 1)
 fn gather(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     var s = vec4<f32>(0.0);
     var yn = 0.0;
+    var clamped_lights = 0.0;
     if (id.x < params.full_width && id.y < params.full_height) {
         let pixel = vec2<i32>(id.xy);
         var radiance = vec3<f32>(0.0);
         if (points[full_index(id.xy)].position.w > 0.5) {
             let rho = textureLoad(gbuffer_diffuse, pixel, 0).rgb / PI;
-            let positive = rho * terms_at(id.xy).e_s.rgb;
+            let terms = terms_at(id.xy);
+            let positive = rho * terms.e_s.rgb;
+            clamped_lights = terms.e_s.w;
             var negative = vec3<f32>(0.0);
             if (params.negative_target > 0u) {
                 negative = rho * en_at(id.xy);
@@ -434,17 +444,17 @@ fn gather(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocatio
         textureStore(radiance_indirect, pixel, vec4<f32>(radiance, 1.0));
     }
     partial[lid] = s;
-    partial_n[lid] = yn;
+    partial_n[lid] = vec2<f32>(yn, clamped_lights);
     workgroupBarrier();
     if (lid == 0u) {
         var sum = vec4<f32>(0.0);
-        var sum_n = 0.0;
+        var sum_n = vec2<f32>(0.0);
         for (var i = 0u; i < 64u; i++) {
             sum += partial[i];
             sum_n += partial_n[i];
         }
         let slot = (wid.y * groups.x + wid.x) * 2u;
         stats[slot] = sum;
-        stats[slot + 1u] = vec4<f32>(sum_n, 0.0, 0.0, 0.0);
+        stats[slot + 1u] = vec4<f32>(sum_n, 0.0, 0.0);
     }
 }

@@ -308,7 +308,8 @@ impl SurfacePoint {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
 pub struct PositiveTerms {
-    /// rgb: E_s, the irradiance from every positive light without visibility.
+    /// rgb: E_s, the irradiance from every positive light without visibility; a: how many of
+    /// them hit the point falloff's d²_min guard.
     pub e_s: [f32; 4],
     /// rgb: E_neg, the irradiance from the lights behind the tangent plane.
     pub e_neg: [f32; 4],
@@ -364,7 +365,7 @@ fn light_terms(p: Vec3, light: &IndirectLight, falloff: Falloff) -> Option<(Vec3
     Some((arriving, t, cos_l))
 }
 
-/// The CPU twin of `eval_positive` in `negative_view.wgsl` (§A.3, §A.4): E_s, E_neg and the
+/// The CPU twin of `positive_terms` in `negative_view.wgsl` (§A.3, §A.4): E_s, E_neg and the
 /// weighted direction at one point from all positive lights.
 pub fn positive_terms(
     p: Vec3,
@@ -395,7 +396,22 @@ pub fn positive_terms(
     (e_s, e_neg, dir)
 }
 
-/// The CPU twin of `eval_negative`: E_n at one point from the negative lights (§A.6).
+/// How many lights' d² falls below the point falloff's d²_min at p (0 with the disc
+/// falloff): the twin of the count `positive_terms` keeps in `e_s.w`.
+pub fn distance_clamped(p: Vec3, lights: &[IndirectLight], falloff: Falloff) -> u32 {
+    let Falloff::Point { d2_min } = falloff else {
+        return 0;
+    };
+    lights
+        .iter()
+        .filter(|l| {
+            let d2 = (l.position() - p).length_squared();
+            l.is_active() && d2 > 0.0 && d2 < d2_min
+        })
+        .count() as u32
+}
+
+/// The CPU twin of `negative_irradiance`: E_n at one point from the negative lights (§A.6).
 pub fn negative_irradiance(
     p: Vec3,
     n: Vec3,

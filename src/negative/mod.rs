@@ -334,6 +334,8 @@ pub struct NegativeStats {
     pub clamped_energy: f64,
     /// Y of I_n over Y of I_s.
     pub negative_energy: f64,
+    /// (pixel, positive light) pairs whose d² the d²_min guard replaced, over all pairs.
+    pub distance_clamp_rate: f64,
 }
 
 pub struct NegativeMethod {
@@ -862,12 +864,13 @@ impl Method for NegativeMethod {
         let key = state.candidate_key.get().map(|k| k.0).unwrap_or_default();
         let (w, h) = (key[4] as u64, key[5] as u64);
         let groups = (w.div_ceil(PIXEL_TILE as u64) * h.div_ceil(PIXEL_TILE as u64)) as usize;
-        let mut sum = [0f64; 5];
+        let mut sum = [0f64; 6];
         for g in 0..groups.min(stats.len() / 2) {
             for (c, s) in sum.iter_mut().take(4).enumerate() {
                 *s += stats[2 * g][c] as f64;
             }
             sum[4] += stats[2 * g + 1][0] as f64;
+            sum[5] += stats[2 * g + 1][1] as f64;
         }
         let pixels = (w * h).max(1) as f64;
         self.stats = NegativeStats {
@@ -890,6 +893,7 @@ impl Method for NegativeMethod {
             clamp_rate: sum[0] / sum[3].max(1.0),
             clamped_energy: sum[1] / sum[2].max(1e-30),
             negative_energy: sum[4] / sum[2].max(1e-30),
+            distance_clamp_rate: sum[5] / (sum[3] * positives.len() as f64).max(1.0),
         };
         Ok(())
     }
@@ -929,6 +933,7 @@ impl Method for NegativeMethod {
         map.insert("clamp_rate".into(), t.clamp_rate.into());
         map.insert("clamped_energy_fraction".into(), t.clamped_energy.into());
         map.insert("negative_energy_fraction".into(), t.negative_energy.into());
+        map.insert("distance_clamp_rate".into(), t.distance_clamp_rate.into());
         map
     }
 }
