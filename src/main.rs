@@ -36,6 +36,10 @@ enum Command {
     /// with the path tracer's time to the same error; writes DIR/bake.csv,
     /// DIR/reference_convergence.csv and DIR/bake_<scene>.png.
     BakeBench(BakeBenchArgs),
+    /// Seed 002's tables on bunny-box: frame time per (N, M) with the fitted cost model
+    /// (Table 1) and a discontinuity-threshold sweep (Table 2); writes DIR/table1.csv and
+    /// DIR/table2.csv.
+    NegativeBench(NegativeBenchArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -235,6 +239,58 @@ struct BakeArgs {
     /// Polygon lights: face resolution of each light's depth cube.
     #[arg(long, default_value_t = valgi::atlas::bake::PolygonSettings::default().cube_res)]
     polygon_cube_res: usize,
+}
+
+#[derive(clap::Args)]
+struct NegativeBenchArgs {
+    #[arg(long, default_value = "bunny-box")]
+    scene: String,
+    #[arg(long, default_value_t = 640)]
+    width: u32,
+    #[arg(long, default_value_t = 480)]
+    height: u32,
+    /// Table 1 rows, N+M.
+    #[arg(long, default_value = "100+50,150+0,200+100,300+0,300+150,450+0")]
+    rows: String,
+    /// Table 2 sweep at N+M = 100+50, TAU_POS:TAU_NORMAL.
+    #[arg(
+        long,
+        default_value = "1e9:-1,12:0.7,3:0.94,2:0.97,1.5:0.98,1:0.99,0:1"
+    )]
+    thresholds: String,
+    /// Timed frames per row (the median is reported).
+    #[arg(long, default_value_t = 3)]
+    frames: u32,
+    #[arg(long, default_value = "out/negative-bench")]
+    out: PathBuf,
+}
+
+fn negative_bench(args: NegativeBenchArgs) -> ExitCode {
+    use valgi::negative::bench;
+    let request = (|| {
+        Ok::<_, valgi::raster::RenderError>(bench::NegativeBenchRequest {
+            scene: args.scene,
+            width: args.width,
+            height: args.height,
+            rows: bench::parse_rows(&args.rows)?,
+            thresholds: bench::parse_thresholds(&args.thresholds)?,
+            frames: args.frames,
+            out: args.out,
+        })
+    })();
+    match request
+        .map_err(valgi::app::AppError::from)
+        .and_then(|r| bench::run(&r))
+    {
+        Ok(path) => {
+            println!("wrote {}", path.display());
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -490,6 +546,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => run_eval(args),
         Command::Bake(args) => bake(args),
         Command::BakeBench(args) => bake_bench(args),
+        Command::NegativeBench(args) => negative_bench(args),
         Command::Scenes => {
             let names = builtin::names();
             let width = names.iter().map(|(n, _)| n.len()).max().unwrap_or(0);

@@ -22,18 +22,20 @@ pub static REGISTRY: &[&Entry] = &[
     &crate::peers::lpv::LPV_ENTRY,
     &crate::peers::lpv::HOLPV_ENTRY,
     &crate::composite::SPARSE_ATLAS_ENTRY,
+    &crate::negative::ENTRY,
 ];
 
 /// Every struct shared between Rust and WGSL: the base layer's, the light module's and each
 /// technique's own list (checked against naga by `tests/shader_layout.rs`).
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
-    let lists: [fn() -> Vec<crate::raster::types::SharedLayout>; 6] = [
+    let lists: [fn() -> Vec<crate::raster::types::SharedLayout>; 7] = [
         crate::raster::types::shared_layouts,
         crate::light::shared_layouts,
         crate::vals::shared_layouts,
         crate::peers::lpv::shared_layouts,
         crate::atlas::shared_layouts,
         crate::bench::shared_layouts,
+        crate::negative::shared_layouts,
     ];
     lists.iter().flat_map(|list| list()).collect()
 }

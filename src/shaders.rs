@@ -1,5 +1,5 @@
 //! The WGSL sources, embedded in the binary. They live under `shaders/<part>/`, one folder
-//! per part that owns them (base, light, vals, brute, lpv, atlas, bench), and are named by
+//! per part that owns them (base, light, vals, brute, lpv, atlas, bench, negative), and are named by
 //! file name. A line `#include "file.wgsl"` is replaced by that file's text (once per
 //! shader), because WGSL has no include of its own; tests validate every resolved shader
 //! with naga.
@@ -53,6 +53,18 @@ pub const FILES: &[(&str, &str)] = &[
     (
         "vals_apply.wgsl",
         include_str!("../shaders/vals/vals_apply.wgsl"),
+    ),
+    (
+        "negative_common.wgsl",
+        include_str!("../shaders/negative/negative_common.wgsl"),
+    ),
+    (
+        "negative_positives.wgsl",
+        include_str!("../shaders/negative/negative_positives.wgsl"),
+    ),
+    (
+        "negative_view.wgsl",
+        include_str!("../shaders/negative/negative_view.wgsl"),
     ),
     (
         "brute_vals.wgsl",

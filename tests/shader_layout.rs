@@ -106,7 +106,15 @@ fn workgroup_sizes_match_the_dispatches() {
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
         ("vals_interpolate.wgsl", "cs_main", [group, 1, 1]),
     ];
-    for (file, entry, size) in expected {
+    let mut expected = expected.to_vec();
+    for entry in valgi::negative::VIEW_ENTRIES {
+        expected.push(("negative_view.wgsl", entry, [tile, tile, 1]));
+    }
+    let select = valgi::negative::SELECT_GROUP;
+    expected.push(("negative_view.wgsl", "select_negatives", [select, 1, 1]));
+    let positive = valgi::negative::POSITIVE_GROUP;
+    expected.push(("negative_positives.wgsl", "cs_main", [positive, 1, 1]));
+    for (file, entry, size) in &expected {
         let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
         let point = module
             .entry_points

@@ -150,6 +150,9 @@ pub struct Rsm {
     compact_pipelines: [wgpu::ComputePipeline; 3],
     compact_group: wgpu::BindGroup,
     mesh_bounds: Vec<Aabb>,
+    /// Position/area, normal and flux of every layer, as 2-D arrays (read by techniques that
+    /// sample the RSM itself rather than its VAL list).
+    pub array_views: [wgpu::TextureView; 3],
 }
 
 impl Rsm {
@@ -417,14 +420,13 @@ impl Rsm {
             compact_pipelines,
             compact_group,
             mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
+            array_views,
         })
     }
 
     /// Uploads this frame's light records and RSM views.
     pub fn prepare(&self, ctx: &GpuContext, scene: &Scene, world_from_node: &[Mat4]) {
-        let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
-        // No margin: cube faces must meet exactly so that no direction is counted twice.
-        let setup = setup_lights(scene, world_from_node, &bounds, self.resolution, 0.0);
+        let setup = self.light_setup(scene, world_from_node);
         if !setup.lights.is_empty() {
             ctx.queue
                 .write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
@@ -462,6 +464,18 @@ impl Rsm {
                 layer += 1;
             }
         }
+    }
+
+    /// This frame's light records and RSM layer views (layers in light order, six per point
+    /// light), exactly as [`Rsm::prepare`] uploads them.
+    pub fn light_setup(
+        &self,
+        scene: &Scene,
+        world_from_node: &[Mat4],
+    ) -> crate::raster::shadows::LightSetup {
+        let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
+        // No margin: cube faces must meet exactly so that no direction is counted twice.
+        setup_lights(scene, world_from_node, &bounds, self.resolution, 0.0)
     }
 
     /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm").

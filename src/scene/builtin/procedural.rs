@@ -10,6 +10,13 @@
 //! - `aligned-occluders`: two blockers in a row between a lit wall and a receiver.
 //! - `thin-wall`: a 2 cm wall (thinner than any practical LPV cell) with light on one side.
 //! - `glossy-row`: spheres with Phong k = 1, 10, 100, 1000 in a coloured room.
+//! - `bunny-box` (seed 002's test scene): the full-resolution Stanford bunny (`bun_zipper.ply`,
+//!   69,451 triangles) floating 0.8 m tall in a 3 m × 2.5 m × 3 m box (x ∈ [−1.5, 1.5],
+//!   y ∈ [0, 2.5], z ∈ [−1.5, 1.5]) whose six walls are two triangles each (left red, right
+//!   blue, the rest white, ρ = 0.75), lit by one spot at (0.9, 2.3, 1.1) aimed at the bunny
+//!   (cones 25°/35°); the camera stands inside at (0, 1.25, 1.45) looking at (0, 0.95, 0), 50°
+//!   vertical field of view. `bunny-box-empty` is the same box without the bunny,
+//!   `bunny-box-res4` the same with the 948-triangle `bun_zipper_res4.ply`.
 //! - `cornell-bunny`: the Stanford bunny (ASCII PLY from the shared data folder) in the Cornell
 //!   box in place of the short block; a procedural stand-in, named as such, when absent.
 
@@ -81,6 +88,16 @@ pub const NAMES: &[(&str, &str)] = &[
         "Cornell box with the Stanford bunny (../shared/data/bunny; a procedural stand-in when absent)",
     ),
     ("cornell-bunny-moving", "cornell-bunny with the bunny turning"),
+    (
+        "bunny-box",
+        "seed 002's scene: the full Stanford bunny floating in a box of two-triangle walls, one spot",
+    ),
+    ("bunny-box-moving", "bunny-box with the bunny turning"),
+    ("bunny-box-empty", "bunny-box without the bunny (a convex empty box)"),
+    (
+        "bunny-box-res4",
+        "bunny-box with the 948-triangle bunny (bun_zipper_res4.ply)",
+    ),
 ];
 
 /// Builds the scene `name` if this module knows it.
@@ -98,6 +115,9 @@ pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
         "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
         "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
         "cornell-bunny" => cornell_bunny(name, moving, max_edge),
+        "bunny-box" => bunny_box(name, Some("bun_zipper.ply"), moving),
+        "bunny-box-res4" => bunny_box(name, Some("bun_zipper_res4.ply"), moving),
+        "bunny-box-empty" => bunny_box(name, None, moving),
         other if other.starts_with("door-room") => {
             let degrees = &other["door-room".len()..];
             match degrees.parse::<f32>() {
@@ -919,6 +939,133 @@ pub fn bunny_candidates() -> Vec<PathBuf> {
     paths.push(rel.to_path_buf());
     paths.push(Path::new(env!("CARGO_MANIFEST_DIR")).join(rel));
     paths
+}
+
+/// Seed 002's scene (dimensions in the module documentation) with the bunny PLY `bunny` of
+/// the shared data folder (none: the empty box); a missing file gives the procedural
+/// stand-in and a warning.
+fn bunny_box(name: &str, bunny: Option<&str>, moving: bool) -> Result<Scene, SceneError> {
+    let mut b = SceneBuilder::new(name);
+    let white = grey(&mut b, "white", 0.75);
+    let red = b.material(Material::lambert("red", Vec3::new(0.75, 0.15, 0.12)));
+    let blue = b.material(Material::lambert("blue", Vec3::new(0.12, 0.2, 0.75)));
+    let bunny_material = grey(&mut b, "bunny", 0.75);
+    let (lo, hi) = (Vec3::new(-1.5, 0.0, -1.5), Vec3::new(1.5, 2.5, 1.5));
+    let corner = |x: bool, y: bool, z: bool| {
+        Vec3::new(
+            if x { hi.x } else { lo.x },
+            if y { hi.y } else { lo.y },
+            if z { hi.z } else { lo.z },
+        )
+    };
+    let walls = [
+        (
+            "floor",
+            white,
+            [(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)],
+            Vec3::Y,
+        ),
+        (
+            "ceiling",
+            white,
+            [(0, 1, 0), (0, 1, 1), (1, 1, 1), (1, 1, 0)],
+            Vec3::NEG_Y,
+        ),
+        (
+            "left wall",
+            red,
+            [(0, 0, 0), (0, 0, 1), (0, 1, 1), (0, 1, 0)],
+            Vec3::X,
+        ),
+        (
+            "right wall",
+            blue,
+            [(1, 0, 0), (1, 1, 0), (1, 1, 1), (1, 0, 1)],
+            Vec3::NEG_X,
+        ),
+        (
+            "back wall",
+            white,
+            [(0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 0, 0)],
+            Vec3::Z,
+        ),
+        (
+            "front wall",
+            white,
+            [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)],
+            Vec3::NEG_Z,
+        ),
+    ];
+    for (wall_name, material, c, facing) in walls {
+        let mut mesh = MeshBuilder::new(wall_name, material);
+        let p = c.map(|(x, y, z)| corner(x == 1, y == 1, z == 1));
+        mesh.add_quad(p[0], p[1], p[2], p[3], facing, f32::INFINITY);
+        b.object(wall_name, mesh.build(), Trs::default());
+    }
+    let bunny_at = Vec3::new(0.0, 0.55, 0.0);
+    if let Some(file) = bunny {
+        let rel = Path::new("../shared/data/bunny").join(file);
+        let candidates = vec![
+            rel.clone(),
+            Path::new(env!("CARGO_MANIFEST_DIR")).join(&rel),
+        ];
+        let (mut mesh, warning) = bunny_mesh(&candidates)?;
+        if let Some(warning) = warning {
+            b.scene.warnings.push(format!("{name}: {warning}"));
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for p in &mesh.positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        let scale = 0.8 / (hi.y - lo.y).max(1e-6);
+        let centre = Vec3::new((lo.x + hi.x) * 0.5, lo.y, (lo.z + hi.z) * 0.5);
+        for p in &mut mesh.positions {
+            *p = (*p - centre) * scale;
+        }
+        mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
+        if mesh.uv0.len() != mesh.positions.len() {
+            mesh.uv0 = vec![Vec2::ZERO; mesh.positions.len()];
+        }
+        mesh.material = bunny_material;
+        b.object(
+            "bunny",
+            mesh,
+            Trs {
+                translation: bunny_at,
+                ..Trs::default()
+            },
+        );
+    }
+    b.light_along(
+        "spot",
+        Vec3::new(0.9, 2.3, 1.1),
+        bunny_at + Vec3::new(0.0, 0.4, 0.0) - Vec3::new(0.9, 2.3, 1.1),
+        LightKind::Spot {
+            inner_cone_angle: 25f32.to_radians(),
+            outer_cone_angle: 35f32.to_radians(),
+        },
+        8.0,
+    );
+    camera(
+        &mut b,
+        Vec3::new(0.0, 1.25, 1.45),
+        Vec3::new(0.0, 0.95, 0.0),
+        50.0,
+    );
+    let mut scene = b.scene;
+    if moving && bunny.is_some() {
+        let node = node_named(&scene, "bunny");
+        let turns: Vec<Quat> = (0..=4)
+            .map(|i| Quat::from_rotation_y(i as f32 * std::f32::consts::FRAC_PI_2))
+            .collect();
+        add_animation(
+            &mut scene,
+            "bunny turns",
+            vec![channel(node, Property::Rotation, rotations(&turns))],
+        );
+    }
+    Ok(scene)
 }
 
 /// Cornell box with the bunny (0.25 m tall, turned to face the camera) in place of the short
