@@ -178,3 +178,288 @@ fn intrinsics_and_poses_read_from_the_open3d_files() {
     assert!((x - glam::Vec3::Y).length() < 1e-5, "{x}");
     assert_eq!(poses[0].w_axis.truncate(), glam::Vec3::new(1.0, 2.0, 3.0));
 }
+
+use glam::{Mat4, Quat, Vec3};
+use valgi::gpu::{GpuContext, Passes};
+use valgi::light::Val;
+use valgi::mixed_reality::depth_vals::{depth_vals_cpu, DepthValSettings, DepthVals};
+use valgi::mixed_reality::math;
+
+/// A small deterministic frame: a tilted wall with a box in front (a depth edge), a hole
+/// region, sensor-like noise and a colour gradient.
+fn synthetic_frame(
+    width: u32,
+    height: u32,
+    noise_seed: u32,
+    noise: f32,
+) -> (RgbdFrame, Intrinsics) {
+    let k = Intrinsics {
+        width,
+        height,
+        fx: 0.8 * width as f32,
+        fy: 0.8 * width as f32,
+        cx: (width as f32 - 1.0) * 0.5,
+        cy: (height as f32 - 1.0) * 0.5,
+    };
+    let mut depth = Vec::new();
+    let mut color = Vec::new();
+    for y in 0..height {
+        for x in 0..width {
+            let hash = (x.wrapping_mul(73856093)
+                ^ y.wrapping_mul(19349663)
+                ^ noise_seed.wrapping_mul(83492791))
+            .wrapping_mul(2654435761);
+            let jitter = (hash >> 8) as f32 / (1u32 << 24) as f32 - 0.5;
+            let wall = 2.0 + 0.02 * x as f32;
+            let in_box = x > width / 2 && y > height / 3 && y < 2 * height / 3;
+            let hole = x < width / 5 && y < height / 4;
+            let z = if hole {
+                0.0
+            } else if in_box {
+                1.2
+            } else {
+                wall
+            };
+            depth.push(if z > 0.0 { z + noise * jitter } else { 0.0 });
+            color.push([x as f32 / width as f32, 0.5, y as f32 / height as f32]);
+        }
+    }
+    (
+        RgbdFrame {
+            width,
+            height,
+            depth,
+            color,
+        },
+        k,
+    )
+}
+
+fn pose() -> Mat4 {
+    Mat4::from_rotation_translation(Quat::from_rotation_y(0.4), Vec3::new(0.3, 1.1, -0.5))
+}
+
+/// Runs the three passes on the device for one frame.
+fn run_gpu(ctx: &GpuContext, frame: &RgbdFrame, k: Intrinsics, s: DepthValSettings) -> DepthVals {
+    let mut vals = DepthVals::new(ctx, k, s).unwrap();
+    vals.upload(ctx, frame, pose()).unwrap();
+    let mut passes = Passes::new(ctx);
+    vals.record_passes(&mut passes).unwrap();
+    passes.finish().unwrap();
+    vals
+}
+
+fn close(a: Vec3, b: Vec3, rel: f32) -> bool {
+    (a - b).length() <= rel * (1.0 + a.length().max(b.length()))
+}
+
+fn assert_vals_match(gpu: &[Val], cpu: &[Val]) {
+    assert_eq!(gpu.len(), cpu.len());
+    for (i, (g, c)) in gpu.iter().zip(cpu).enumerate() {
+        assert_eq!(g.area > 0.0, c.area > 0.0, "candidate {i}: {g:?} vs {c:?}");
+        if c.area > 0.0 {
+            assert!(
+                (g.area - c.area).abs() <= 1e-4 * c.area,
+                "{i}: {g:?} vs {c:?}"
+            );
+            assert!(close(g.position, c.position, 1e-4), "{i}: {g:?} vs {c:?}");
+            assert!(close(g.normal, c.normal, 2e-3), "{i}: {g:?} vs {c:?}");
+            assert!(close(g.flux, c.flux, 1e-3), "{i}: {g:?} vs {c:?}");
+        }
+    }
+}
+
+#[test]
+fn depth_vals_on_the_device_match_their_cpu_twins() {
+    let Some(ctx) = common::gpu() else { return };
+    let (frame, k) = synthetic_frame(40, 28, 1, 0.01);
+    for real_vals in [None, Some(70)] {
+        let s = DepthValSettings {
+            real_scale: 2.5,
+            real_vals,
+            ..Default::default()
+        };
+        let gpu = run_gpu(&ctx, &frame, k, s);
+        let p = gpu.kernel_params(pose());
+        let filtered_cpu = math::bilateral(&frame.depth, &p);
+        let filtered = gpu.read_filtered(&ctx).unwrap();
+        for (g, c) in filtered.iter().zip(&filtered_cpu) {
+            assert!((g - c).abs() <= 1e-5 * c.max(1.0), "{g} vs {c}");
+        }
+        let surfels_cpu = math::surfels(&filtered_cpu, &frame.color, &p);
+        let surfels = gpu.read_surfels(&ctx).unwrap();
+        let as_vals = |s: &[math::Surfel]| s.iter().map(|s| s.val).collect::<Vec<_>>();
+        assert_vals_match(
+            &as_vals(&surfels[..surfels_cpu.len()]),
+            &as_vals(&surfels_cpu),
+        );
+        let candidates = gpu.read_candidates(&ctx).unwrap();
+        let cpu = depth_vals_cpu(&frame, &p);
+        assert_vals_match(&candidates[..cpu.len()], &cpu);
+        if real_vals.is_some() {
+            assert!(cpu.len() <= 70 && cpu.len() >= 60, "{} blocks", cpu.len());
+        }
+    }
+    // A crop of a real frame, with the crop's principal point.
+    let real = read(
+        "color/00000.jpg",
+        "depth/00000.png",
+        DepthFormat::PrimeSense,
+    );
+    let (x0, y0, w, h) = (300u32, 200u32, 32u32, 24u32);
+    let idx = |x: u32, y: u32| ((y0 + y) * real.width + x0 + x) as usize;
+    let crop = RgbdFrame {
+        width: w,
+        height: h,
+        depth: (0..w * h).map(|i| real.depth[idx(i % w, i / w)]).collect(),
+        color: (0..w * h).map(|i| real.color[idx(i % w, i / w)]).collect(),
+    };
+    let k = Intrinsics {
+        width: w,
+        height: h,
+        cx: 319.5 - x0 as f32,
+        cy: 239.5 - y0 as f32,
+        ..Intrinsics::primesense_default()
+    };
+    let s = DepthValSettings::default();
+    let gpu = run_gpu(&ctx, &crop, k, s);
+    let cpu = depth_vals_cpu(&crop, &gpu.kernel_params(pose()));
+    assert_vals_match(&gpu.read_candidates(&ctx).unwrap()[..cpu.len()], &cpu);
+    assert!(cpu.iter().filter(|v| v.area > 0.0).count() > (w * h / 2) as usize);
+}
+
+#[test]
+fn a_fronto_parallel_wall_emits_pi_k_c_times_its_area() {
+    // Every pixel of a wall facing the sensor at distance z covers exactly z²/(fx·fy) m².
+    let (w, h, z) = (20u32, 14u32, 1.7f32);
+    let k = Intrinsics {
+        width: w,
+        height: h,
+        fx: 30.0,
+        fy: 28.0,
+        cx: 9.5,
+        cy: 6.5,
+    };
+    let c = [0.2f32, 0.4, 0.8];
+    let frame = RgbdFrame {
+        width: w,
+        height: h,
+        depth: vec![z; (w * h) as usize],
+        color: vec![c; (w * h) as usize],
+    };
+    let s = DepthValSettings {
+        real_scale: 3.0,
+        ..Default::default()
+    };
+    let p = s.kernel_params(&k, Mat4::IDENTITY);
+    let vals = depth_vals_cpu(&frame, &p);
+    let flux: Vec3 = vals.iter().map(|v| v.flux).sum();
+    let area = (w * h) as f32 * z * z / (k.fx * k.fy);
+    let expected = std::f32::consts::PI * 3.0 * Vec3::from(c) * area;
+    assert!(close(flux, expected, 1e-4), "{flux} vs {expected}");
+    for v in &vals {
+        // Facing the sensor (−z in its axes) and on the wall.
+        assert!((v.normal - Vec3::NEG_Z).length() < 1e-4, "{:?}", v.normal);
+        assert!((v.position.z - z).abs() < 1e-5);
+    }
+    // The reduction conserves flux and area.
+    let reduced = depth_vals_cpu(
+        &frame,
+        &DepthValSettings {
+            real_vals: Some(16),
+            ..s
+        }
+        .kernel_params(&k, Mat4::IDENTITY),
+    );
+    assert!(reduced.len() <= 16);
+    let reduced_flux: Vec3 = reduced.iter().map(|v| v.flux).sum();
+    assert!(
+        close(reduced_flux, expected, 1e-4),
+        "{reduced_flux} vs {expected}"
+    );
+    let reduced_area: f32 = reduced.iter().map(|v| v.area).sum();
+    let full_area: f32 = vals.iter().map(|v| v.area).sum();
+    assert!((reduced_area - full_area).abs() < 1e-4 * full_area);
+    // The facing footprint is the disc across the ray, smaller off the axis; the true area
+    // of a fronto-parallel wall is the wall.
+    assert!(full_area < area);
+    let true_area: f32 = depth_vals_cpu(
+        &frame,
+        &DepthValSettings {
+            true_area: true,
+            ..s
+        }
+        .kernel_params(&k, Mat4::IDENTITY),
+    )
+    .iter()
+    .map(|v| v.area)
+    .sum();
+    assert!(
+        (true_area - area).abs() < 1e-4 * area,
+        "{true_area} vs {area}"
+    );
+}
+
+#[test]
+fn holes_produce_no_vals() {
+    let (mut frame, k) = synthetic_frame(24, 16, 2, 0.0);
+    // A whole 4×4 block of holes plus scattered single holes.
+    for y in 8..12 {
+        for x in 0..4 {
+            frame.depth[y * 24 + x] = 0.0;
+        }
+    }
+    let s = DepthValSettings {
+        real_vals: Some(24),
+        ..Default::default()
+    };
+    let p = s.kernel_params(&k, pose());
+    assert_eq!((p.grid_width, p.grid_height), (6, 4));
+    let surfels = math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p);
+    for (i, s) in surfels.iter().enumerate() {
+        if frame.depth[i] == 0.0 {
+            assert!(!s.is_valid(), "hole {i} became a surfel");
+        }
+        assert!(s.val.flux.is_finite() && s.val.position.is_finite());
+    }
+    let vals = depth_vals_cpu(&frame, &p);
+    // Block (0, 2) is all holes; the top-left blocks too (the synthetic hole).
+    assert_eq!(vals[2 * 6].area, 0.0);
+    assert_eq!(vals[0].area, 0.0);
+    let mut appended = Vec::new();
+    valgi::light::append_vals(&mut appended, &vals, usize::MAX);
+    assert_eq!(appended.len(), vals.iter().filter(|v| v.area > 0.0).count());
+    assert!(appended.len() < vals.len());
+    assert!(appended.iter().all(|v| v.area > 0.0 && v.flux.is_finite()));
+}
+
+/// Angular spread (radians, RMS over the surface) of the normals of two noisy captures of
+/// the same static wall.
+fn normal_flicker(s: DepthValSettings) -> f32 {
+    let captures: Vec<Vec<math::Surfel>> = (0..2)
+        .map(|seed| {
+            let (frame, k) = synthetic_frame(32, 24, 10 + seed, 0.02);
+            let p = s.kernel_params(&k, Mat4::IDENTITY);
+            math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p)
+        })
+        .collect();
+    let (mut sum, mut n) = (0.0f32, 0);
+    for (a, b) in captures[0].iter().zip(&captures[1]) {
+        if a.is_valid() && b.is_valid() {
+            sum += a.val.normal.angle_between(b.val.normal).powi(2);
+            n += 1;
+        }
+    }
+    (sum / n as f32).sqrt()
+}
+
+#[test]
+fn bilateral_filtering_steadies_the_sensor_normals() {
+    let raw = normal_flicker(DepthValSettings {
+        radius: 0,
+        ..Default::default()
+    });
+    let filtered = normal_flicker(DepthValSettings::default());
+    eprintln!("normal flicker: raw {raw:.4} rad, bilateral {filtered:.4} rad");
+    assert!(filtered < 0.5 * raw, "raw {raw} vs filtered {filtered}");
+}
