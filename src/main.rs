@@ -36,12 +36,85 @@ enum Command {
     /// with the path tracer's time to the same error; writes DIR/bake.csv,
     /// DIR/reference_convergence.csv and DIR/bake_<scene>.png.
     BakeBench(BakeBenchArgs),
+    /// Mixed reality: place a virtual object in the room of RGB-D frames, light it with the
+    /// frames' pixels as virtual area lights, and composite it into the photos; writes
+    /// composite, object (RGBA) and indirect images per frame and prints a JSON report.
+    Mr(MrArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
     Methods,
     /// List the GPU adapters wgpu can see (honours WGPU_BACKEND).
     Adapters,
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct MrArgs {
+    /// An Open3D-style RGB-D folder (color/, depth/, trajectory.log).
+    #[arg(long, conflicts_with_all = ["color", "depth"])]
+    rgbd: Option<PathBuf>,
+    /// One colour frame (with --depth).
+    #[arg(long, requires = "depth")]
+    color: Option<PathBuf>,
+    /// One 16-bit depth frame (with --color).
+    #[arg(long, requires = "color")]
+    depth: Option<PathBuf>,
+    /// Depth layout: primesense (mm), tum (÷5000), nyu (Kinect disparity), sun (rotated mm).
+    #[arg(long, default_value = "primesense")]
+    format: String,
+    /// Intrinsics JSON (width, height, column-major intrinsic_matrix); PrimeSense defaults
+    /// (fx = fy = 525, cx = 319.5, cy = 239.5) without.
+    #[arg(long)]
+    intrinsics: Option<PathBuf>,
+    /// Camera-to-world poses: trajectory.log or TUM `t tx ty tz qx qy qz qw` (default:
+    /// DIR/trajectory.log for --rgbd; identity without).
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+    /// One frame K, or a half-open range A..B.
+    #[arg(long, alias = "frame", default_value = "0")]
+    frames: String,
+    /// `bunny` or a scene file (.glb, .gltf, .ply, .obj).
+    #[arg(long, default_value = "bunny")]
+    object: String,
+    /// Where the object's bottom centre stands: x,y,z[,yaw_degrees[,scale]] in the
+    /// trajectory's world, or `auto` (the horizontal surface nearest the image centre).
+    #[arg(long, default_value = "auto")]
+    place: String,
+    /// A virtual point light, point:x,y,z:intensity[:r,g,b] (W/sr); repeatable.
+    #[arg(long)]
+    light: Vec<String>,
+    /// Radiance (W/(m²·sr)) of a decoded colour value of 1; see src/mixed_reality/README.md.
+    #[arg(long, default_value_t = 1.0)]
+    real_scale: f32,
+    /// At most N real VALs (footprint-weighted, stratified over the image); one per pixel
+    /// without.
+    #[arg(long)]
+    real_vals: Option<u32>,
+    /// The VAL disc area: the facing footprint, or the true (tilted) patch area.
+    #[arg(long, default_value = "facing", value_parser = ["facing", "true"])]
+    real_area: String,
+    /// Bilateral filter half-width in pixels (0: off).
+    #[arg(long, default_value_t = 2)]
+    bilateral_radius: u32,
+    /// Bilateral spatial σ in pixels.
+    #[arg(long, default_value_t = 2.0)]
+    sigma_spatial: f32,
+    /// Bilateral range σ in metres.
+    #[arg(long, default_value_t = 0.03)]
+    sigma_range: f32,
+    /// Sparse receiver points on the virtual object.
+    #[arg(long, default_value_t = 1024)]
+    sparse_points: usize,
+    /// RSM resolution of the virtual lights.
+    #[arg(long, default_value_t = 128)]
+    rsm: u32,
+    /// Rays per real pixel for the object's shadow and bounce on the real surfaces (0: off).
+    #[arg(long, default_value_t = 16)]
+    differential_rays: u32,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -481,6 +554,18 @@ fn main() -> ExitCode {
         Command::Eval(args) => run_eval(args),
         Command::Bake(args) => bake(args),
         Command::BakeBench(args) => bake_bench(args),
+        Command::Mr(args) => {
+            match mr_request(args).and_then(|r| valgi::mixed_reality::run::run(&r)) {
+                Ok(report) => {
+                    println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Command::Scenes => {
             let names = builtin::names();
             let width = names.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
@@ -671,5 +756,62 @@ fn with_method_flags(cli: clap::Command) -> clap::Command {
             );
         }
         render
+    })
+}
+
+/// `valgi mr`'s flags → the library's request.
+fn mr_request(
+    args: MrArgs,
+) -> Result<valgi::mixed_reality::run::MrRequest, valgi::mixed_reality::run::MrError> {
+    use valgi::mixed_reality::run::{self, FrameSource, MrError};
+    use valgi::mixed_reality::{rgbd::DepthFormat, session};
+    let source = match (args.rgbd, args.color, args.depth) {
+        (Some(dir), None, None) => FrameSource::Folder(dir),
+        (None, Some(color), Some(depth)) => FrameSource::Pair { color, depth },
+        _ => {
+            return Err(MrError::Settings(
+                "give --rgbd DIR, or --color FILE and --depth FILE".into(),
+            ))
+        }
+    };
+    let place = match args.place.as_str() {
+        "auto" => None,
+        text => Some(session::Placement::parse(text)?),
+    };
+    let lights = args
+        .light
+        .iter()
+        .map(|l| session::parse_light(l))
+        .collect::<Result<Vec<_>, _>>()?;
+    let depth = run::depth_settings(
+        args.real_scale,
+        args.real_vals,
+        args.bilateral_radius,
+        args.sigma_spatial,
+        args.sigma_range,
+        args.real_area == "true",
+    );
+    depth.check()?;
+    let sparse = valgi::vals::SparseSettings {
+        rsm: args.rsm,
+        sparse_points: args.sparse_points.max(1),
+        ..Default::default()
+    };
+    Ok(run::MrRequest {
+        source,
+        format: DepthFormat::parse(&args.format)?,
+        intrinsics: args.intrinsics,
+        trajectory: args.trajectory,
+        frames: run::parse_frames(&args.frames)?,
+        object: args.object,
+        place,
+        lights,
+        settings: session::MrSettings {
+            depth,
+            sparse,
+            differential_rays: args.differential_rays,
+            ..Default::default()
+        },
+        out: args.out,
     })
 }

@@ -5,10 +5,14 @@
 //! - [`rgbd`]: colour + depth frames in four sensor layouts, intrinsics, poses.
 //! - [`depth_vals`]: the GPU passes depth → VALs, a [`crate::light::ValSource`].
 //! - [`math`]: their CPU twins and the equations.
+//! - [`run`]: `valgi mr`.
+//! - [`session`]: the object placed in the room, lit, and composited into the photo.
 
 pub mod depth_vals;
 pub mod math;
 pub mod rgbd;
+pub mod run;
+pub mod session;
 
 use glam::Mat4;
 
