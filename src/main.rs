@@ -77,10 +77,16 @@ struct MrArgs {
     /// `bunny` or a scene file (.glb, .gltf, .ply, .obj).
     #[arg(long, default_value = "bunny")]
     object: String,
-    /// Where the object's bottom centre stands: x,y,z[,yaw_degrees[,scale]] in the
-    /// trajectory's world, or `auto` (the horizontal surface nearest the image centre).
+    /// Where the object's bottom centre stands: x,y,z in the trajectory's world, or `auto`
+    /// (the horizontal real surface nearest the lower middle of the first frame).
     #[arg(long, default_value = "auto")]
     place: String,
+    /// The object's turn about world +y, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    yaw: f32,
+    /// The object's uniform scale.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f32,
     /// A virtual point light, point:x,y,z:intensity[:r,g,b] (W/sr); repeatable.
     #[arg(long)]
     light: Vec<String>,
@@ -776,7 +782,7 @@ fn mr_request(
     };
     let place = match args.place.as_str() {
         "auto" => None,
-        text => Some(session::Placement::parse(text)?),
+        text => Some(session::parse_point(text)?),
     };
     let lights = args
         .light
@@ -805,6 +811,8 @@ fn mr_request(
         frames: run::parse_frames(&args.frames)?,
         object: args.object,
         place,
+        yaw: args.yaw,
+        scale: args.scale,
         lights,
         settings: session::MrSettings {
             depth,

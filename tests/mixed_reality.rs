@@ -463,3 +463,119 @@ fn bilateral_filtering_steadies_the_sensor_normals() {
     eprintln!("normal flicker: raw {raw:.4} rad, bilateral {filtered:.4} rad");
     assert!(filtered < 0.5 * raw, "raw {raw} vs filtered {filtered}");
 }
+
+use valgi::mixed_reality::session::{self, MixedReality, MrSettings, Placement};
+use valgi::scene::{Instance, Material, Node, Scene, Trs};
+
+/// A white sphere of `radius` centred at `centre` (world), nothing else.
+fn sphere_scene(centre: Vec3, radius: f32) -> Scene {
+    let mut scene = Scene {
+        name: "sphere".into(),
+        ..Scene::default()
+    };
+    scene
+        .materials
+        .push(Material::lambert("white", Vec3::splat(0.8)));
+    scene
+        .meshes
+        .push(valgi::scene::builtin::procedural::icosphere(
+            "sphere",
+            0,
+            radius,
+            radius * 0.3,
+            false,
+        ));
+    scene.nodes.push(Node {
+        name: "sphere".into(),
+        parent: None,
+        local: Trs::default(),
+    });
+    scene.instances.push(Instance { mesh: 0, node: 0 });
+    session::place_object(
+        scene,
+        Placement {
+            base: centre - Vec3::Y * radius,
+            yaw: 0.0,
+            scale: 1.0,
+        },
+        &[],
+    )
+    .unwrap()
+}
+
+fn small_mr_settings(real_scale: f32) -> MrSettings {
+    let mut s = MrSettings {
+        depth: DepthValSettings {
+            real_scale,
+            ..Default::default()
+        },
+        shadow_resolution: 64,
+        differential_rays: 0,
+        ..Default::default()
+    };
+    s.sparse.sparse_points = 64;
+    s.sparse.rsm = 8;
+    s
+}
+
+#[test]
+fn a_real_object_in_front_hides_the_virtual_one_and_the_sensor_vals_light_it() {
+    let Some(ctx) = common::gpu() else { return };
+    let k = Intrinsics {
+        width: 32,
+        height: 24,
+        fx: 30.0,
+        fy: 30.0,
+        cx: 15.5,
+        cy: 11.5,
+    };
+    // A grey wall 3 m away; the left half of the image is a real box 1 m away.
+    let frame = RgbdFrame {
+        width: 32,
+        height: 24,
+        depth: (0..32 * 24)
+            .map(|i| if i % 32 < 16 { 1.0 } else { 3.0 })
+            .collect(),
+        color: vec![[0.5, 0.5, 0.5]; 32 * 24],
+    };
+    let scene = sphere_scene(Vec3::new(0.0, 0.0, 2.0), 0.3);
+    let mut mr = MixedReality::new(&ctx, scene.clone(), k, small_mr_settings(1.0)).unwrap();
+    let out = mr.render(&ctx, &frame, Mat4::IDENTITY).unwrap();
+    let covered = |x0: u32, x1: u32| {
+        (0..24u32)
+            .flat_map(|y| (x0..x1).map(move |x| (y * 32 + x) as usize))
+            .filter(|&i| out.alpha[i] > 0.5)
+            .count()
+    };
+    assert_eq!(
+        covered(0, 16),
+        0,
+        "the real box at 1 m hides the sphere at 2 m"
+    );
+    assert!(
+        covered(16, 32) > 20,
+        "the sphere is in front of the wall at 3 m"
+    );
+    // Where hidden, the composite is the photo; where visible, the object.
+    assert_eq!(out.composite.pixels[12 * 32 + 14][0], 0.5);
+    // The sensor's VALs reached the gather: the count is the CPU twin's, and they light it.
+    let p = DepthValSettings::default().kernel_params(&k, Mat4::IDENTITY);
+    let cpu = depth_vals_cpu(&frame, &p);
+    assert_eq!(
+        out.real_vals as usize,
+        cpu.iter().filter(|v| v.area > 0.0).count()
+    );
+    let lit: f32 = (0..32 * 24)
+        .filter(|&i| out.alpha[i] > 0.5)
+        .map(|i| out.indirect.pixels[i][0])
+        .sum();
+    assert!(lit > 0.0);
+    // No room light (k = 0) and no virtual light: the sphere is black.
+    let mut dark = MixedReality::new(&ctx, scene, k, small_mr_settings(0.0)).unwrap();
+    let out = dark.render(&ctx, &frame, Mat4::IDENTITY).unwrap();
+    assert!(out
+        .indirect
+        .pixels
+        .iter()
+        .all(|p| p[0] == 0.0 && p[1] == 0.0));
+}

@@ -8,7 +8,7 @@ use super::depth_vals::DepthValSettings;
 use super::rgbd::{self, DepthFormat, DepthRange, Intrinsics, RgbdError, RgbdFrame};
 use super::session::{self, MixedReality, MrFrame, MrSettings, Placement};
 use crate::gpu::{GpuContext, GpuError};
-use crate::image_io::ImageError;
+use crate::image_io::{Image, ImageError};
 use crate::raster::RenderError;
 use crate::scene::{LoadParams, SceneError};
 
@@ -47,8 +47,12 @@ pub struct MrRequest {
     pub frames: std::ops::Range<usize>,
     /// `bunny` or a scene file (glTF, PLY, OBJ).
     pub object: String,
-    /// `None`: stand the object on the horizontal surface near the image centre.
-    pub place: Option<Placement>,
+    /// Where the object's bottom centre stands; `None`: on the horizontal surface near the
+    /// image centre.
+    pub place: Option<glam::Vec3>,
+    /// Degrees about world +y.
+    pub yaw: f32,
+    pub scale: f32,
     pub lights: Vec<(glam::Vec3, glam::Vec3)>,
     pub settings: MrSettings,
     pub out: PathBuf,
@@ -175,18 +179,24 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
         Ok((frame, pose_of(&poses, index)?))
     };
     let (first, first_pose) = read_frame(request.frames.start)?;
-    let placement = match request.place {
+    let base = match request.place {
         Some(p) => p,
-        None => Placement {
-            base: session::find_floor_point(&first, &intrinsics, first_pose).ok_or_else(|| {
-                MrError::Settings(
-                    "--place auto found no horizontal surface near the image centre; pass --place x,y,z"
-                        .into(),
-                )
-            })?,
-            yaw: 0.0,
-            scale: 1.0,
-        },
+        None => session::find_floor_point(&first, &intrinsics, first_pose).ok_or_else(|| {
+            MrError::Settings(
+                "--place auto found no horizontal surface near the image centre; pass --place x,y,z"
+                    .into(),
+            )
+        })?,
+    };
+    if !(request.scale > 0.0 && request.scale.is_finite() && request.yaw.is_finite()) {
+        return Err(MrError::Settings(
+            "--scale must be positive and --yaw finite".into(),
+        ));
+    }
+    let placement = Placement {
+        base,
+        yaw: request.yaw.to_radians(),
+        scale: request.scale,
     };
     let object = crate::scene::load_with(
         &resolve_object(&request.object)?,
@@ -216,12 +226,18 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
             "composite_ms": crate::gpu::timing::round3(out.composite_ms),
             "object_pixels": out.alpha.iter().filter(|a| **a > 0.5).count(),
         }));
-        layers.push((out.indirect, out.alpha));
+        let points = mr.point_irradiance(&ctx)?;
+        layers.push(Image::from_rgba(
+            points.len() as u32,
+            1,
+            points.iter().map(|e| e.extend(1.0).to_array()).collect(),
+        ));
     }
     Ok(serde_json::json!({
         "place": [placement.base.x, placement.base.y, placement.base.z],
         "frames": reports,
-        "indirect_flicker": session::flicker(&layers),
+        // The project's flicker metric over the irradiance at the object's sparse points.
+        "point_flicker": crate::eval::metrics::flicker(&layers),
         "report": mr.method_report(),
     }))
 }

@@ -38,33 +38,21 @@ pub struct Placement {
     pub scale: f32,
 }
 
-impl Placement {
-    /// `x,y,z[,yaw_degrees[,scale]]`.
-    pub fn parse(text: &str) -> Result<Self, RenderError> {
-        let v: Vec<f32> = text
-            .split(',')
-            .map(|t| t.trim().parse::<f32>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| bad_place(text))?;
-        if !(3..=5).contains(&v.len()) || v.iter().any(|x| !x.is_finite()) {
-            return Err(bad_place(text));
-        }
-        let scale = v.get(4).copied().unwrap_or(1.0);
-        if scale <= 0.0 {
-            return Err(bad_place(text));
-        }
-        Ok(Self {
-            base: Vec3::new(v[0], v[1], v[2]),
-            yaw: v.get(3).copied().unwrap_or(0.0).to_radians(),
-            scale,
-        })
+/// `x,y,z` (metres, the trajectory's world).
+pub fn parse_point(text: &str) -> Result<Vec3, RenderError> {
+    let v: Vec<f32> = text
+        .split(',')
+        .map(|t| t.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| bad_place(text))?;
+    if v.len() != 3 || v.iter().any(|x| !x.is_finite()) {
+        return Err(bad_place(text));
     }
+    Ok(Vec3::from_slice(&v))
 }
 
 fn bad_place(text: &str) -> RenderError {
-    RenderError::Settings(format!(
-        "--place {text}: expected x,y,z[,yaw_degrees[,scale]] with a positive scale"
-    ))
+    RenderError::Settings(format!("--place {text}: expected auto or x,y,z (metres)"))
 }
 
 /// A virtual point light: `point:x,y,z:intensity[:r,g,b]` (W/sr).
@@ -250,6 +238,27 @@ impl MixedReality {
             slot,
             view: None,
         })
+    }
+
+    /// The diffuse irradiance the last frame left at every sparse point of the object (its
+    /// renormalized point light evaluated at the point): view-independent, so it changes
+    /// between frames only when the light does.
+    pub fn point_irradiance(&self, ctx: &GpuContext) -> Result<Vec<Vec3>, RenderError> {
+        let world = self.scene.world_from_node();
+        let read = self.method.sparse.read_points(ctx, &self.scene, &world)?;
+        Ok(read
+            .points
+            .iter()
+            .zip(&read.lights)
+            .map(|(p, l)| {
+                crate::vals::math::diffuse_point(
+                    p.position,
+                    p.normal,
+                    l.diffuse_position,
+                    l.diffuse,
+                )
+            })
+            .collect())
     }
 
     /// The sparse method's report of the last frame (VAL counts, per-pass times).
@@ -449,39 +458,4 @@ pub fn find_floor_point(
             d(*a).total_cmp(&d(*b))
         })
         .map(|(_, s)| s.val.position)
-}
-
-/// Flicker of the object across frames: the mean over pixels covered in every frame of the
-/// frame-to-frame change of its indirect radiance, relative to its mean.
-pub fn flicker(frames: &[(Image, Vec<f32>)]) -> f64 {
-    if frames.len() < 2 {
-        return 0.0;
-    }
-    let n = frames[0].1.len();
-    let covered: Vec<usize> = (0..n)
-        .filter(|&i| frames.iter().all(|(_, a)| a[i] > 0.5))
-        .collect();
-    if covered.is_empty() {
-        return 0.0;
-    }
-    let luminance = |img: &Image, i: usize| {
-        let p = img.pixels[i];
-        0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64
-    };
-    let mean: f64 = frames
-        .iter()
-        .map(|(img, _)| covered.iter().map(|&i| luminance(img, i)).sum::<f64>())
-        .sum::<f64>()
-        / (covered.len() * frames.len()) as f64;
-    let change: f64 = frames
-        .windows(2)
-        .map(|w| {
-            covered
-                .iter()
-                .map(|&i| (luminance(&w[1].0, i) - luminance(&w[0].0, i)).abs())
-                .sum::<f64>()
-        })
-        .sum::<f64>()
-        / (covered.len() * (frames.len() - 1)) as f64;
-    change / mean.max(1e-12)
 }
