@@ -208,7 +208,8 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
     let scene = session::place_object(object, placement, &request.lights)?;
     let ctx = GpuContext::new()?;
     let mut mr = MixedReality::new(&ctx, scene, intrinsics, request.settings)?;
-    let exposure = 1.0 / request.settings.depth.real_scale.max(1e-12);
+    // Stops that map the photo's radiance k·c back to c: the PNGs show the photo unchanged.
+    let exposure = -request.settings.depth.real_scale.max(1e-12).log2();
     let mut reports = Vec::new();
     let mut layers = Vec::new();
     for index in request.frames.clone() {
