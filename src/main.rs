@@ -100,6 +100,13 @@ struct MrArgs {
     /// The VAL disc area: the facing footprint, or the true (tilted) patch area.
     #[arg(long, default_value = "facing", value_parser = ["facing", "true"])]
     real_area: String,
+    /// Fuse the surfels of the last K frames in a world-space voxel hash, one VAL per voxel
+    /// (1: the latest frame only).
+    #[arg(long, default_value_t = 1)]
+    accumulate: u32,
+    /// Voxel edge of --accumulate, metres.
+    #[arg(long, default_value_t = 0.02)]
+    voxel: f32,
     /// Bilateral filter half-width in pixels (0: off).
     #[arg(long, default_value_t = 2)]
     bilateral_radius: u32,
@@ -789,14 +796,17 @@ fn mr_request(
         .iter()
         .map(|l| session::parse_light(l))
         .collect::<Result<Vec<_>, _>>()?;
-    let depth = run::depth_settings(
-        args.real_scale,
-        args.real_vals,
-        args.bilateral_radius,
-        args.sigma_spatial,
-        args.sigma_range,
-        args.real_area == "true",
-    );
+    let depth = valgi::mixed_reality::depth_vals::DepthValSettings {
+        radius: args.bilateral_radius,
+        sigma_spatial: args.sigma_spatial,
+        sigma_range: args.sigma_range,
+        real_scale: args.real_scale,
+        true_area: args.real_area == "true",
+        real_vals: args.real_vals,
+        accumulate: args.accumulate,
+        voxel: args.voxel,
+        ..Default::default()
+    };
     depth.check()?;
     let sparse = valgi::vals::SparseSettings {
         rsm: args.rsm,

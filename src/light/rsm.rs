@@ -33,6 +33,14 @@ pub struct GpuVal {
 }
 
 impl GpuVal {
+    pub fn from_val(val: &Val) -> Self {
+        Self {
+            position_area: val.position.extend(val.area).to_array(),
+            normal: val.normal.extend(0.0).to_array(),
+            flux: val.flux.extend(0.0).to_array(),
+        }
+    }
+
     pub fn to_val(&self) -> Val {
         Val {
             position: glam::Vec4::from(self.position_area).truncate(),

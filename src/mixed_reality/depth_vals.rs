@@ -81,6 +81,10 @@ pub struct DepthValSettings {
     pub true_area: bool,
     /// At most this many VALs (`--real-vals`); `None` keeps one per pixel.
     pub real_vals: Option<u32>,
+    /// Fuse the last this-many frames in a voxel hash (`--accumulate`; 1: latest frame only).
+    pub accumulate: u32,
+    /// Voxel edge of the fusion, metres.
+    pub voxel: f32,
 }
 
 impl Default for DepthValSettings {
@@ -94,6 +98,8 @@ impl Default for DepthValSettings {
             max_jump: 0.05,
             true_area: false,
             real_vals: None,
+            accumulate: 1,
+            voxel: 0.02,
         }
     }
 }
@@ -114,6 +120,12 @@ impl DepthValSettings {
         }
         if !(self.max_jump > 0.0 && self.max_jump.is_finite()) {
             return bad("the depth-jump threshold must be positive");
+        }
+        if self.accumulate == 0 || self.accumulate > 64 {
+            return bad("--accumulate must be 1..=64 frames");
+        }
+        if !(self.voxel > 0.0 && self.voxel.is_finite()) {
+            return bad("--voxel must be a positive length in metres");
         }
         if self.real_vals == Some(0) {
             return bad("--real-vals must be at least 1");
@@ -171,6 +183,9 @@ pub struct DepthVals {
     /// A frame has been uploaded (until then the candidates are all empty).
     has_frame: bool,
     last_valid_pixels: usize,
+    /// `accumulate > 1`: the fusion, whose VALs are uploaded as the candidates.
+    fusion: Option<math::VoxelFusion>,
+    last_fused: usize,
 }
 
 impl DepthVals {
@@ -266,6 +281,9 @@ impl DepthVals {
             bytes,
             has_frame: false,
             last_valid_pixels: 0,
+            fusion: (settings.accumulate > 1)
+                .then(|| math::VoxelFusion::new(settings.accumulate as usize, settings.voxel)),
+            last_fused: 0,
         })
     }
 
@@ -300,6 +318,18 @@ impl DepthVals {
         q.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
         self.has_frame = true;
         self.last_valid_pixels = frame.depth.iter().filter(|&&z| z > 0.0).count();
+        if let Some(fusion) = &mut self.fusion {
+            // The fusion runs on the CPU over the surfel pass's CPU twin; its VALs replace
+            // the reduction's candidates.
+            let p = self.settings.kernel_params(&self.intrinsics, world_from_camera);
+            let surfels = math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p);
+            let capacity = (self.external.rows * self.external.row_length) as usize;
+            let fused = fusion.push(surfels, capacity);
+            self.last_fused = fused.len();
+            let mut records: Vec<GpuVal> = fused.iter().map(GpuVal::from_val).collect();
+            records.resize(capacity, GpuVal::default());
+            q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
+        }
         Ok(())
     }
 
@@ -360,12 +390,13 @@ impl ValSource for DepthVals {
         if let Some((frame, pose)) = pending {
             self.upload(ctx, &frame, pose)?;
         }
-        if self.has_frame {
-            self.record_passes(passes)?;
-        } else {
-            passes
+        match (self.has_frame, self.fusion.is_some()) {
+            (true, false) => self.record_passes(passes)?,
+            // `upload` wrote the fused VALs as the candidates.
+            (true, true) => {}
+            (false, _) => passes
                 .encoder()
-                .clear_buffer(&self.external.candidates, 0, None);
+                .clear_buffer(&self.external.candidates, 0, None),
         }
         Ok(())
     }
@@ -380,6 +411,8 @@ impl ValSource for DepthVals {
             "real_vals_grid": [p.grid_width, p.grid_height],
             "real_valid_pixels": self.last_valid_pixels,
             "real_scale": self.settings.real_scale,
+            "accumulate": self.settings.accumulate,
+            "fused_vals": self.last_fused,
         })
         .as_object()
         .cloned()

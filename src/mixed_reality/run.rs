@@ -4,7 +4,6 @@ use std::path::{Path, PathBuf};
 
 use glam::Mat4;
 
-use super::depth_vals::DepthValSettings;
 use super::rgbd::{self, DepthFormat, DepthRange, Intrinsics, RgbdError, RgbdFrame};
 use super::session::{self, MixedReality, MrFrame, MrSettings, Placement};
 use crate::gpu::{GpuContext, GpuError};
@@ -241,24 +240,4 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
         "point_flicker": crate::eval::metrics::flicker(&layers),
         "report": mr.method_report(),
     }))
-}
-
-/// Settings for [`MrRequest`] from the command line's numbers.
-pub fn depth_settings(
-    real_scale: f32,
-    real_vals: Option<u32>,
-    bilateral_radius: u32,
-    sigma_spatial: f32,
-    sigma_range: f32,
-    true_area: bool,
-) -> DepthValSettings {
-    DepthValSettings {
-        radius: bilateral_radius,
-        sigma_spatial,
-        sigma_range,
-        real_scale,
-        true_area,
-        real_vals,
-        ..DepthValSettings::default()
-    }
 }
