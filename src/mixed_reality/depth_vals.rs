@@ -110,9 +110,8 @@ impl DepthValSettings {
         if self.radius > 16 {
             return bad("--bilateral-radius must be 0..=16 pixels");
         }
-        if !(self.sigma_spatial > 0.0 && self.sigma_spatial.is_finite())
-            || !(self.sigma_range > 0.0 && self.sigma_range.is_finite())
-        {
+        let positive = |x: f32| x > 0.0 && x.is_finite();
+        if !positive(self.sigma_spatial) || !positive(self.sigma_range) {
             return bad("--sigma-spatial and --sigma-range must be positive");
         }
         if !(self.real_scale >= 0.0 && self.real_scale.is_finite()) {
@@ -321,7 +320,9 @@ impl DepthVals {
         if let Some(fusion) = &mut self.fusion {
             // The fusion runs on the CPU over the surfel pass's CPU twin; its VALs replace
             // the reduction's candidates.
-            let p = self.settings.kernel_params(&self.intrinsics, world_from_camera);
+            let p = self
+                .settings
+                .kernel_params(&self.intrinsics, world_from_camera);
             let surfels = math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p);
             let capacity = (self.external.rows * self.external.row_length) as usize;
             let fused = fusion.push(surfels, capacity);

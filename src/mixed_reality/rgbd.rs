@@ -165,10 +165,9 @@ impl Intrinsics {
             cx: m[6] as f32,
             cy: m[7] as f32,
         };
-        if !(intrinsics.fx > 0.0 && intrinsics.fy > 0.0)
-            || !intrinsics.cx.is_finite()
-            || !intrinsics.cy.is_finite()
-        {
+        let focal_ok = intrinsics.fx > 0.0 && intrinsics.fy > 0.0;
+        let centre_ok = intrinsics.cx.is_finite() && intrinsics.cy.is_finite();
+        if !(focal_ok && centre_ok) {
             return Err(bad("focal lengths must be positive and the centre finite"));
         }
         Ok(intrinsics)
@@ -324,7 +323,7 @@ pub fn read_poses(path: &Path) -> Result<Vec<Mat4>, RgbdError> {
                 ));
             }
             let q = DQuat::from_xyzw(v[4], v[5], v[6], v[7]);
-            if !(q.length() > 1e-6) {
+            if q.length().is_nan() || q.length() <= 1e-6 {
                 return Err(bad(*line, "the rotation quaternion is zero"));
             }
             let pose =
@@ -333,7 +332,7 @@ pub fn read_poses(path: &Path) -> Result<Vec<Mat4>, RgbdError> {
         }
     } else {
         // trajectory.log: a 3-number header, then the 4×4 matrix row by row.
-        if lines.len() % 5 != 0 {
+        if !lines.len().is_multiple_of(5) {
             return Err(bad(
                 lines.last().map_or(0, |l| l.0),
                 "a trajectory.log holds blocks of 5 lines (a header, then 4 matrix rows)",

@@ -340,7 +340,7 @@ impl MixedReality {
         let rays = self.settings.differential_rays;
         let bias = self.settings.depth_bias;
         let width = k.width as usize;
-        let pixels: Vec<([f32; 4], [f32; 4], f32, [f32; 4])> = (0..frame.depth.len())
+        let pixels: Vec<CompositePixel> = (0..frame.depth.len())
             .into_par_iter()
             .map(|i| {
                 let (u, v) = ((i % width) as f32, (i / width) as f32);
@@ -384,6 +384,9 @@ impl MixedReality {
         )
     }
 }
+
+/// One pixel of the composite: (composite, object layer, alpha, differential).
+type CompositePixel = ([f32; 4], [f32; 4], f32, [f32; 4]);
 
 /// `ΔE` at a real surface point: the virtual lights' shadow plus the room's light the object
 /// blocks, replaced by the light the object sends back (module docs).
