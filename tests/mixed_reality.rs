@@ -884,3 +884,104 @@ fn a_synthetic_room_lights_a_virtual_sphere_like_the_path_tracer() {
         "left {left}, right {right}"
     );
 }
+
+#[test]
+fn fusion_averages_the_frames_and_keeps_what_the_camera_turned_away_from() {
+    // A fronto-parallel wall seen twice, the second time shifted right by a quarter of the
+    // view: the overlap is averaged (not counted twice), the part only the first frame saw
+    // stays lit.
+    let (w, h, z) = (24u32, 16u32, 2.0f32);
+    let k = Intrinsics {
+        width: w,
+        height: h,
+        fx: 20.0,
+        fy: 20.0,
+        cx: 11.5,
+        cy: 7.5,
+    };
+    let frame = RgbdFrame {
+        width: w,
+        height: h,
+        depth: vec![z; (w * h) as usize],
+        color: vec![[0.6, 0.6, 0.6]; (w * h) as usize],
+    };
+    let s = DepthValSettings {
+        radius: 0,
+        ..Default::default()
+    };
+    let surfels = |pose: Mat4| {
+        let p = s.kernel_params(&k, pose);
+        math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p)
+    };
+    let shift = z * 6.0 / k.fx; // 6 pixels at the wall
+    let first = surfels(Mat4::IDENTITY);
+    let second = surfels(Mat4::from_translation(Vec3::X * shift));
+    let total = |v: &[Val]| v.iter().map(|v| v.flux.x).sum::<f32>();
+    let mut fusion = math::VoxelFusion::new(2, 0.1);
+    let one = fusion.push(first.clone(), usize::MAX);
+    let per_frame = first.iter().map(|s| s.val.flux.x).sum::<f32>();
+    assert!((total(&one) - per_frame).abs() < 1e-4 * per_frame);
+    let two = fusion.push(second, usize::MAX);
+    // The union is 30 of 24 columns wide: about 30/24 of one frame's flux, not twice it.
+    let ratio = total(&two) / per_frame;
+    assert!((ratio - 30.0 / 24.0).abs() < 0.1, "{ratio}");
+    // Deterministic: the same frames give the same VALs in the same order.
+    let mut again = math::VoxelFusion::new(2, 0.1);
+    again.push(first, usize::MAX);
+    let repeat = again.push(surfels(Mat4::from_translation(Vec3::X * shift)), usize::MAX);
+    assert_eq!(repeat, two);
+}
+
+#[test]
+fn sensor_vals_follow_the_rsm_vals_in_one_buffer() {
+    let Some(ctx) = common::gpu() else { return };
+    let k = Intrinsics {
+        width: 16,
+        height: 12,
+        fx: 14.0,
+        fy: 14.0,
+        cx: 7.5,
+        cy: 5.5,
+    };
+    let (frame, _) = synthetic_frame(16, 12, 3, 0.0);
+    let centre = Vec3::new(0.0, 0.0, 1.5);
+    let lit = session::place_object(
+        sphere_scene(centre, 0.2),
+        Placement {
+            base: Vec3::new(0.0, -1.0, 1.5),
+            yaw: 0.0,
+            scale: 1.0,
+        },
+        &[(Vec3::new(0.0, -1.0, 0.5), Vec3::splat(2.0))],
+    )
+    .unwrap();
+    // The RSM's VALs alone, then with the sensor's appended.
+    let settings = small_mr_settings(1.0);
+    let rsm_only = {
+        let mut m = valgi::vals::SparseMethod::new(
+            &ctx,
+            &lit,
+            valgi::raster::RenderSettings {
+                width: 16,
+                height: 12,
+                shadow_resolution: 64,
+                ..Default::default()
+            },
+            settings.sparse,
+        )
+        .unwrap();
+        let camera = session::sensor_camera(&k, Mat4::IDENTITY);
+        valgi::frame::Method::render(&mut m, &ctx, &lit, &lit.world_from_node(), &camera).unwrap();
+        m.rsm.read_vals(&ctx).unwrap()
+    };
+    assert!(!rsm_only.is_empty());
+    let mut mr = MixedReality::new(&ctx, lit, k, settings).unwrap();
+    mr.render(&ctx, &frame, Mat4::IDENTITY).unwrap();
+    let all = mr.method.rsm.read_vals(&ctx).unwrap();
+    let mut expected = rsm_only.clone();
+    let p = settings.depth.kernel_params(&k, Mat4::IDENTITY);
+    valgi::light::append_vals(&mut expected, &depth_vals_cpu(&frame, &p), usize::MAX);
+    assert_eq!(all.len(), expected.len());
+    assert_eq!(&all[..rsm_only.len()], &rsm_only[..]);
+    assert_vals_match(&all[rsm_only.len()..], &expected[rsm_only.len()..]);
+}
