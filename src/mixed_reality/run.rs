@@ -172,6 +172,10 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
         None => Intrinsics::primesense_default(),
     };
     let poses = request.poses()?;
+    // Every frame of the range must exist (and have a pose) before any is rendered.
+    let last = request.frames.end.saturating_sub(1);
+    request.frame_files(last)?;
+    pose_of(&poses, last)?;
     let read_frame = |index: usize| -> Result<(RgbdFrame, Mat4), MrError> {
         let (color, depth) = request.frame_files(index)?;
         let frame = RgbdFrame::read(&color, &depth, request.format, DepthRange::default())?;
