@@ -12,6 +12,7 @@ pub mod gpu;
 pub mod image_io;
 pub mod light;
 pub mod method;
+pub mod mixed_reality;
 pub mod negative;
 pub mod peers;
 pub mod raster;

@@ -40,12 +40,98 @@ enum Command {
     /// (Table 1) and a discontinuity-threshold sweep (Table 2); writes DIR/table1.csv and
     /// DIR/table2.csv.
     NegativeBench(NegativeBenchArgs),
+    /// Mixed reality: place a virtual object in the room of RGB-D frames, light it with the
+    /// frames' pixels as virtual area lights, and composite it into the photos; writes
+    /// composite, object (RGBA) and indirect images per frame and prints a JSON report.
+    Mr(MrArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
     Methods,
     /// List the GPU adapters wgpu can see (honours WGPU_BACKEND).
     Adapters,
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct MrArgs {
+    /// An Open3D-style RGB-D folder (color/, depth/, trajectory.log).
+    #[arg(long, conflicts_with_all = ["color", "depth"])]
+    rgbd: Option<PathBuf>,
+    /// One colour frame (with --depth).
+    #[arg(long, requires = "depth")]
+    color: Option<PathBuf>,
+    /// One 16-bit depth frame (with --color).
+    #[arg(long, requires = "color")]
+    depth: Option<PathBuf>,
+    /// Depth layout: primesense (mm), tum (÷5000), nyu (Kinect disparity), sun (rotated mm).
+    #[arg(long, default_value = "primesense")]
+    format: String,
+    /// Intrinsics JSON (width, height, column-major intrinsic_matrix); PrimeSense defaults
+    /// (fx = fy = 525, cx = 319.5, cy = 239.5) without.
+    #[arg(long)]
+    intrinsics: Option<PathBuf>,
+    /// Camera-to-world poses: trajectory.log or TUM `t tx ty tz qx qy qz qw` (default:
+    /// DIR/trajectory.log for --rgbd; identity without).
+    #[arg(long)]
+    trajectory: Option<PathBuf>,
+    /// One frame K, or a half-open range A..B.
+    #[arg(long, alias = "frame", default_value = "0")]
+    frames: String,
+    /// `bunny` or a scene file (.glb, .gltf, .ply, .obj).
+    #[arg(long, default_value = "bunny")]
+    object: String,
+    /// Where the object's bottom centre stands: x,y,z in the trajectory's world, or `auto`
+    /// (the horizontal real surface nearest the lower middle of the first frame).
+    #[arg(long, default_value = "auto")]
+    place: String,
+    /// The object's turn about world +y, degrees.
+    #[arg(long, default_value_t = 0.0)]
+    yaw: f32,
+    /// The object's uniform scale.
+    #[arg(long, default_value_t = 1.0)]
+    scale: f32,
+    /// A virtual point light, point:x,y,z:intensity[:r,g,b] (W/sr); repeatable.
+    #[arg(long)]
+    light: Vec<String>,
+    /// Radiance (W/(m²·sr)) of a decoded colour value of 1; see src/mixed_reality/README.md.
+    #[arg(long, default_value_t = 1.0)]
+    real_scale: f32,
+    /// At most N real VALs (footprint-weighted, stratified over the image); one per pixel
+    /// without.
+    #[arg(long)]
+    real_vals: Option<u32>,
+    /// The VAL disc area: the facing footprint, or the true (tilted) patch area.
+    #[arg(long, default_value = "facing", value_parser = ["facing", "true"])]
+    real_area: String,
+    /// Fuse the surfels of the last K frames in a world-space voxel hash, one VAL per voxel
+    /// (1: the latest frame only).
+    #[arg(long, default_value_t = 1)]
+    accumulate: u32,
+    /// Voxel edge of --accumulate, metres.
+    #[arg(long, default_value_t = 0.02)]
+    voxel: f32,
+    /// Bilateral filter half-width in pixels (0: off).
+    #[arg(long, default_value_t = 2)]
+    bilateral_radius: u32,
+    /// Bilateral spatial σ in pixels.
+    #[arg(long, default_value_t = 2.0)]
+    sigma_spatial: f32,
+    /// Bilateral range σ in metres.
+    #[arg(long, default_value_t = 0.03)]
+    sigma_range: f32,
+    /// Sparse receiver points on the virtual object.
+    #[arg(long, default_value_t = 1024)]
+    sparse_points: usize,
+    /// RSM resolution of the virtual lights.
+    #[arg(long, default_value_t = 128)]
+    rsm: u32,
+    /// Rays per real pixel for the object's shadow and bounce on the real surfaces (0: off).
+    #[arg(long, default_value_t = 16)]
+    differential_rays: u32,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -547,6 +633,18 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake(args),
         Command::BakeBench(args) => bake_bench(args),
         Command::NegativeBench(args) => negative_bench(args),
+        Command::Mr(args) => {
+            match mr_request(args).and_then(|r| valgi::mixed_reality::run::run(&r)) {
+                Ok(report) => {
+                    println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
         Command::Scenes => {
             let names = builtin::names();
             let width = names.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
@@ -737,5 +835,67 @@ fn with_method_flags(cli: clap::Command) -> clap::Command {
             );
         }
         render
+    })
+}
+
+/// `valgi mr`'s flags → the library's request.
+fn mr_request(
+    args: MrArgs,
+) -> Result<valgi::mixed_reality::run::MrRequest, valgi::mixed_reality::run::MrError> {
+    use valgi::mixed_reality::run::{self, FrameSource, MrError};
+    use valgi::mixed_reality::{rgbd::DepthFormat, session};
+    let source = match (args.rgbd, args.color, args.depth) {
+        (Some(dir), None, None) => FrameSource::Folder(dir),
+        (None, Some(color), Some(depth)) => FrameSource::Pair { color, depth },
+        _ => {
+            return Err(MrError::Settings(
+                "give --rgbd DIR, or --color FILE and --depth FILE".into(),
+            ))
+        }
+    };
+    let place = match args.place.as_str() {
+        "auto" => None,
+        text => Some(session::parse_point(text)?),
+    };
+    let lights = args
+        .light
+        .iter()
+        .map(|l| session::parse_light(l))
+        .collect::<Result<Vec<_>, _>>()?;
+    let depth = valgi::mixed_reality::depth_vals::DepthValSettings {
+        radius: args.bilateral_radius,
+        sigma_spatial: args.sigma_spatial,
+        sigma_range: args.sigma_range,
+        real_scale: args.real_scale,
+        true_area: args.real_area == "true",
+        real_vals: args.real_vals,
+        accumulate: args.accumulate,
+        voxel: args.voxel,
+        ..Default::default()
+    };
+    depth.check()?;
+    let sparse = valgi::vals::SparseSettings {
+        rsm: args.rsm,
+        sparse_points: args.sparse_points.max(1),
+        ..Default::default()
+    };
+    Ok(run::MrRequest {
+        source,
+        format: DepthFormat::parse(&args.format)?,
+        intrinsics: args.intrinsics,
+        trajectory: args.trajectory,
+        frames: run::parse_frames(&args.frames)?,
+        object: args.object,
+        place,
+        yaw: args.yaw,
+        scale: args.scale,
+        lights,
+        settings: session::MrSettings {
+            depth,
+            sparse,
+            differential_rays: args.differential_rays,
+            ..Default::default()
+        },
+        out: args.out,
     })
 }

@@ -1,5 +1,6 @@
 //! The WGSL sources, embedded in the binary. They live under `shaders/<part>/`, one folder
-//! per part that owns them (base, light, vals, brute, lpv, atlas, bench, negative), and are named by
+//! per part that owns them (base, light, vals, brute, lpv, atlas, bench, negative,
+//! mixed_reality), and are named by
 //! file name. A line `#include "file.wgsl"` is replaced by that file's text (once per
 //! shader), because WGSL has no include of its own; tests validate every resolved shader
 //! with naga.
@@ -33,6 +34,14 @@ pub const FILES: &[(&str, &str)] = &[
     (
         "vals_from_rsm.wgsl",
         include_str!("../shaders/light/vals_from_rsm.wgsl"),
+    ),
+    (
+        "vals_append.wgsl",
+        include_str!("../shaders/light/vals_append.wgsl"),
+    ),
+    (
+        "depth_vals.wgsl",
+        include_str!("../shaders/mixed_reality/depth_vals.wgsl"),
     ),
     (
         "vals_gather.wgsl",

@@ -93,6 +93,8 @@ fn rust_structs_match_naga_layout() {
 fn workgroup_sizes_match_the_dispatches() {
     let tile = valgi::frame::PIXEL_TILE;
     let group = valgi::vals::sparse::POINT_GROUP;
+    let reduce = valgi::mixed_reality::depth_vals::REDUCE_GROUP;
+    let append = valgi::light::rsm::APPEND_GROUP;
     let expected: &[(&str, &str, [u32; 3])] = &[
         ("direct_light.wgsl", "cs_main", [tile, tile, 1]),
         ("resolve.wgsl", "cs_main", [tile, tile, 1]),
@@ -105,6 +107,11 @@ fn workgroup_sizes_match_the_dispatches() {
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
         ("vals_interpolate.wgsl", "cs_main", [group, 1, 1]),
+        ("depth_vals.wgsl", "bilateral", [tile, tile, 1]),
+        ("depth_vals.wgsl", "surfel", [tile, tile, 1]),
+        ("depth_vals.wgsl", "reduce", [reduce, 1, 1]),
+        ("vals_append.wgsl", "count_rows", [append, 1, 1]),
+        ("vals_append.wgsl", "append_rows", [append, 1, 1]),
     ];
     let mut expected = expected.to_vec();
     for entry in valgi::negative::VIEW_ENTRIES {

@@ -54,9 +54,13 @@ struct Sums {
 var<private> point_visibility: array<u32, VISIBILITY_WORDS>;
 
 // V of the VAL's cluster (`flux.w`) at this invocation's point.
+// VALs outside every cluster (appended external ones, w = 32) are not scaled.
 fn val_visibility(val: Val) -> f32 {
     let cluster = u32(val.flux.w);
-    let word = point_visibility[(cluster / 4u) % VISIBILITY_WORDS];
+    if (cluster >= VISIBILITY_WORDS * 4u) {
+        return 1.0;
+    }
+    let word = point_visibility[cluster / 4u];
     return f32((word >> (8u * (cluster % 4u))) & 255u) / 255.0;
 }
 

@@ -44,6 +44,49 @@ pub struct ValParams {
     pub pad1: u32,
 }
 
+/// VALs made by something other than the RSM — the surfels of a depth-sensor frame — that
+/// join the RSM's VALs in the same buffer, so the sparse gather, brute force and every other
+/// VAL consumer treat both alike. The producer fills `candidates` (`rows × row_length`
+/// [`rsm::GpuVal`] records, row-major) each frame before [`rsm::Rsm::record`] runs; a
+/// candidate whose area (`position_area.w`) is not positive is an empty slot (a depth hole)
+/// and never becomes a VAL. [`rsm::Rsm::with_external`] reserves the slots and its `record`
+/// appends the valid candidates after the RSM's, in row order; [`append_vals`] is the CPU
+/// twin of that pass.
+pub struct ExternalVals {
+    pub candidates: wgpu::Buffer,
+    pub rows: u32,
+    pub row_length: u32,
+}
+
+/// Something that makes [`ExternalVals`] every frame (a depth sensor's frame turned into
+/// surfels), for a method to append to its RSM VALs.
+pub trait ValSource {
+    /// The candidate buffer and its shape (fixed for the source's life).
+    fn external(&self) -> &ExternalVals;
+    /// Uploads this frame's input and records the passes that fill its candidates.
+    fn record(
+        &mut self,
+        ctx: &crate::gpu::GpuContext,
+        passes: &mut crate::gpu::Passes,
+    ) -> Result<(), crate::raster::RenderError>;
+    fn gpu_bytes(&self) -> u64;
+    /// Extra keys for the method's JSON report.
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        serde_json::Map::new()
+    }
+}
+
+/// CPU twin of `vals_append.wgsl`: `candidates`' valid entries (positive area), in order,
+/// after `vals`, up to `capacity` VALs in all.
+pub fn append_vals(vals: &mut Vec<Val>, candidates: &[Val], capacity: usize) {
+    for c in candidates.iter().filter(|c| c.area > 0.0) {
+        if vals.len() >= capacity {
+            break;
+        }
+        vals.push(*c);
+    }
+}
+
 /// Glossy lobes on.
 pub const FLAG_GLOSSY: u32 = 1;
 /// Light positions averaged with flux weights instead of geometric ones.
@@ -76,6 +119,12 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 tan_half_fov,
                 texel_area
             ]
+        ),
+        shared_layout!(
+            "AppendSize",
+            "vals_append.wgsl",
+            rsm::AppendSize,
+            [rows, row_length, capacity, pad]
         ),
         shared_layout!(
             "RsmSize",

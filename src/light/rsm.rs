@@ -19,7 +19,7 @@ use crate::raster::{
 };
 use crate::scene::{Aabb, LightKind, Scene};
 
-use super::Val;
+use super::{ExternalVals, Val};
 
 /// One VAL as the shaders store it (`Val` in `shaders/vals/vals_common.wgsl`).
 #[repr(C)]
@@ -33,6 +33,14 @@ pub struct GpuVal {
 }
 
 impl GpuVal {
+    pub fn from_val(val: &Val) -> Self {
+        Self {
+            position_area: val.position.extend(val.area).to_array(),
+            normal: val.normal.extend(0.0).to_array(),
+            flux: val.flux.extend(0.0).to_array(),
+        }
+    }
+
     pub fn to_val(&self) -> Val {
         Val {
             position: glam::Vec4::from(self.position_area).truncate(),
@@ -75,6 +83,10 @@ pub struct RsmSize {
 /// The most VAL clusters a frame has: visibility is kept per (sparse point, cluster), one
 /// byte each.
 pub const MAX_CLUSTERS: u32 = 32;
+
+/// The cluster id (`flux.w`) of VALs from no RSM tile (appended external VALs): the gather
+/// gives them no cluster visibility.
+pub const UNCLUSTERED: u32 = MAX_CLUSTERS;
 
 /// Clusters the tiling aims at (at most [`MAX_CLUSTERS`]). 16 clusters of 8×8 samples
 /// (2.6× the rays) measured the same error and the same flicker on `cornell-moving` as 25
@@ -127,8 +139,10 @@ const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 pub struct Rsm {
     pub resolution: u32,
     pub layer_count: u32,
-    /// Capacity in VALs (every texel of every layer).
+    /// Capacity in RSM VALs (every texel of every layer).
     pub capacity: u32,
+    /// Further slots after the RSM's for [`ExternalVals`] (0 without).
+    pub external_capacity: u32,
     pub vals_buffer: wgpu::Buffer,
     /// One u32: how many VALs this frame produced.
     pub val_count_buffer: wgpu::Buffer,
@@ -153,6 +167,28 @@ pub struct Rsm {
     /// Position/area, normal and flux of every layer, as 2-D arrays (read by techniques that
     /// sample the RSM itself rather than its VAL list).
     pub array_views: [wgpu::TextureView; 3],
+    append: Option<Append>,
+}
+
+/// The passes of `vals_append.wgsl` bound to one [`ExternalVals`].
+struct Append {
+    /// count_rows, append_rows.
+    pipelines: [wgpu::ComputePipeline; 2],
+    group: wgpu::BindGroup,
+    rows: u32,
+}
+
+/// Rows per workgroup of the append passes (`@workgroup_size(64, 1, 1)`).
+pub const APPEND_GROUP: u32 = 64;
+
+/// `AppendSize` in `shaders/light/vals_append.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct AppendSize {
+    pub rows: u32,
+    pub row_length: u32,
+    pub capacity: u32,
+    pub pad: u32,
 }
 
 impl Rsm {
@@ -161,6 +197,18 @@ impl Rsm {
         scene: &Scene,
         scene_gpu: &SceneGpu,
         resolution: u32,
+    ) -> Result<Self, RenderError> {
+        Self::with_external(ctx, scene, scene_gpu, resolution, None)
+    }
+
+    /// The RSMs, with room after their VALs for `external`'s valid candidates, which
+    /// [`Rsm::record`] appends every frame (see [`ExternalVals`]).
+    pub fn with_external(
+        ctx: &GpuContext,
+        scene: &Scene,
+        scene_gpu: &SceneGpu,
+        resolution: u32,
+        external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
         let device = &ctx.device;
         let limits = device.limits();
@@ -182,13 +230,20 @@ impl Rsm {
             )));
         }
         let texels = layer_count as u64 * resolution as u64 * resolution as u64;
-        let val_bytes = texels.max(1) * std::mem::size_of::<GpuVal>() as u64;
+        let external_slots = external.map_or(0, |e| e.rows as u64 * e.row_length as u64);
+        let slots = texels + external_slots;
+        if slots > u32::MAX as u64 {
+            return Err(RenderError::Settings(format!(
+                "{texels} RSM VALs and {external_slots} external VALs exceed the 2³² VAL indices"
+            )));
+        }
+        let val_bytes = slots.max(1) * std::mem::size_of::<GpuVal>() as u64;
         let max_binding = limits
             .max_storage_buffer_binding_size
             .min(limits.max_buffer_size);
         if val_bytes > max_binding {
             return Err(RenderError::Settings(format!(
-                "--rsm {resolution} with {layer_count} layers needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm"
+                "--rsm {resolution} with {layer_count} layers and {external_slots} external VALs needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm or the external VALs"
             )));
         }
         let mut bytes = GpuBytes::default();
@@ -402,10 +457,62 @@ impl Rsm {
         let compact_pipelines = ["count_rows", "scan_rows", "write_rows"].map(|entry| {
             crate::raster::compute_pipeline_at(device, entry, &module, &compact_bgl, entry)
         });
+        let append = external.map(|e| {
+            let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("vals append"),
+                entries: &[
+                    uniform_entry(0, cs),
+                    storage_entry(1, cs),
+                    crate::raster::storage_entry_rw(2, cs),
+                    crate::raster::storage_entry_rw(3, cs),
+                    crate::raster::storage_entry_rw(4, cs),
+                ],
+            });
+            let size = bytes.buffer_init(
+                device,
+                "vals append size",
+                bytemuck::bytes_of(&AppendSize {
+                    rows: e.rows,
+                    row_length: e.row_length,
+                    capacity: slots as u32,
+                    pad: 0,
+                }),
+                wgpu::BufferUsages::UNIFORM,
+            );
+            let row_counts = bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some("vals append rows"),
+                    size: (e.rows as u64 + 1) * 4,
+                    usage: wgpu::BufferUsages::STORAGE,
+                    mapped_at_creation: false,
+                },
+            );
+            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vals append"),
+                layout: &bgl,
+                entries: &[
+                    buffer_binding(0, &size),
+                    buffer_binding(1, &e.candidates),
+                    buffer_binding(2, &vals_buffer),
+                    buffer_binding(3, &val_count_buffer),
+                    buffer_binding(4, &row_counts),
+                ],
+            });
+            let module = ctx.shader("vals_append.wgsl");
+            Append {
+                pipelines: ["count_rows", "append_rows"].map(|entry| {
+                    crate::raster::compute_pipeline_at(device, entry, &module, &bgl, entry)
+                }),
+                group,
+                rows: e.rows,
+            }
+        });
         Ok(Self {
             resolution,
             layer_count,
             capacity,
+            external_capacity: external_slots as u32,
             vals_buffer,
             val_count_buffer,
             tiles,
@@ -421,6 +528,7 @@ impl Rsm {
             compact_group,
             mesh_bounds: scene.meshes.iter().map(|m| m.model_bounds()).collect(),
             array_views,
+            append,
         })
     }
 
@@ -478,7 +586,9 @@ impl Rsm {
         setup_lights(scene, world_from_node, &bounds, self.resolution, 0.0)
     }
 
-    /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm").
+    /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm"), then
+    /// appends the external VALs' valid candidates (pass "vals append"); their producer must
+    /// have recorded its passes before this.
     pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
         for (views, group) in self.layer_views.iter().zip(&self.layer_groups) {
             passes.render(
@@ -523,12 +633,23 @@ impl Rsm {
                 .encoder()
                 .clear_buffer(&self.val_count_buffer, 0, None);
         }
+        if let Some(append) = self.append.as_ref().filter(|a| a.rows > 0) {
+            for pipeline in &append.pipelines {
+                passes.compute("vals append", |pass| {
+                    pass.set_pipeline(pipeline);
+                    pass.set_bind_group(0, &append.group, &[]);
+                    pass.dispatch_workgroups(append.rows.div_ceil(APPEND_GROUP), 1, 1);
+                })?;
+            }
+        }
         Ok(())
     }
 
     /// The VALs of the last recorded frame.
     pub fn read_vals(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {
-        let count = self.read_count(ctx)?.min(self.capacity) as usize;
+        let count = self
+            .read_count(ctx)?
+            .min(self.capacity.saturating_add(self.external_capacity)) as usize;
         let all: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.vals_buffer)?;
         Ok(all[..count.min(all.len())]
             .iter()

@@ -17,6 +17,7 @@ use std::time::Instant;
 use crate::frame::{FrameInput, IndirectLayer, Method, View, ViewCache, ViewResult};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
+use crate::light::ValSource;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{Rasterizer, RenderError, RenderSettings};
 use crate::scene::Scene;
@@ -231,6 +232,8 @@ pub struct SparseMethod {
     pub meshes_computed: usize,
     /// Further indirect light added after the apply pass (`None` for `--method sparse`).
     pub layer: Option<Box<dyn IndirectLayer>>,
+    /// VALs from outside the RSM (a depth sensor's surfels), appended to the RSM's.
+    pub val_source: Option<Box<dyn ValSource>>,
     /// Per-view parameter blocks and kernel bindings (`--glossy-eye per-view`).
     per_view: ViewCache<(wgpu::Buffer, KernelGroups)>,
     report: serde_json::Map<String, serde_json::Value>,
@@ -243,8 +246,25 @@ impl SparseMethod {
         render: RenderSettings,
         settings: SparseSettings,
     ) -> Result<Self, RenderError> {
+        Self::with_val_source(ctx, scene, render, settings, None)
+    }
+
+    /// The sparse method gathering `val_source`'s VALs along with the RSM's.
+    pub fn with_val_source(
+        ctx: &GpuContext,
+        scene: &Scene,
+        render: RenderSettings,
+        settings: SparseSettings,
+        val_source: Option<Box<dyn ValSource>>,
+    ) -> Result<Self, RenderError> {
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(ctx, scene, &raster.scene_gpu, settings.rsm)?;
+        let rsm = Rsm::with_external(
+            ctx,
+            scene,
+            &raster.scene_gpu,
+            settings.rsm,
+            val_source.as_ref().map(|s| s.external()),
+        )?;
         let started = Instant::now();
         let (points, meshes_computed) =
             points::scene_points(scene, settings.sparse_points, settings.seed);
@@ -260,6 +280,7 @@ impl SparseMethod {
             preprocess_ms,
             meshes_computed,
             layer: None,
+            val_source,
             per_view: ViewCache::default(),
             report: Default::default(),
         })
@@ -299,6 +320,9 @@ impl Method for SparseMethod {
         self.per_view.retain(views);
         if let Some(layer) = &mut self.layer {
             layer.update(ctx, frame, views);
+        }
+        if let Some(source) = &mut self.val_source {
+            source.record(ctx, passes)?;
         }
         self.rsm.record(passes, &self.raster.scene_gpu)?;
         self.sparse
@@ -381,11 +405,15 @@ impl Method for SparseMethod {
         if let Some(layer) = &self.layer {
             self.report.extend(layer.report());
         }
+        if let Some(source) = &self.val_source {
+            self.report.extend(source.report());
+        }
         Ok(())
     }
 
     fn gpu_bytes(&self) -> u64 {
-        let layer = self.layer.as_ref().map_or(0, |l| l.gpu_bytes());
+        let layer = self.layer.as_ref().map_or(0, |l| l.gpu_bytes())
+            + self.val_source.as_ref().map_or(0, |s| s.gpu_bytes());
         self.raster.gpu_bytes() + self.rsm.bytes.0 + self.solution_bytes() + layer
     }
 

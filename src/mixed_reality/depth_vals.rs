@@ -1,0 +1,422 @@
+//! The GPU passes that turn a depth-sensor frame into VALs (`depth_vals.wgsl`): bilateral
+//! filter → surfels → stratified reduction. [`DepthVals`] is a [`ValSource`]: the sparse
+//! method appends its VALs to the RSM's. Frames arrive through a [`FrameSlot`] (the latest
+//! one wins, as from a live sensor) and are uploaded when the next frame is recorded.
+
+use std::sync::{Arc, Mutex};
+
+use bytemuck::{Pod, Zeroable};
+use glam::Mat4;
+
+use super::math::{self, KernelParams, Surfel};
+use super::rgbd::{Intrinsics, RgbdFrame};
+use crate::frame::PIXEL_TILE;
+use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::light::rsm::GpuVal;
+use crate::light::{ExternalVals, Val, ValSource};
+use crate::raster::{buffer_binding, storage_entry_rw, uniform_entry, RenderError};
+
+/// Blocks per workgroup of the `reduce` pass (`@workgroup_size(64, 1, 1)`).
+pub const REDUCE_GROUP: u32 = 64;
+
+/// `DepthValParams` in `shaders/mixed_reality/depth_vals.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+pub struct DepthValParams {
+    pub world_from_camera: [[f32; 4]; 4],
+    pub fx: f32,
+    pub fy: f32,
+    pub cx: f32,
+    pub cy: f32,
+    pub width: u32,
+    pub height: u32,
+    pub grid_width: u32,
+    pub grid_height: u32,
+    pub sigma_spatial: f32,
+    pub sigma_range: f32,
+    pub real_scale: f32,
+    pub max_jump: f32,
+    pub radius: u32,
+    pub area_mode: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+}
+
+impl From<&KernelParams> for DepthValParams {
+    fn from(p: &KernelParams) -> Self {
+        Self {
+            world_from_camera: p.world_from_camera.to_cols_array_2d(),
+            fx: p.fx,
+            fy: p.fy,
+            cx: p.cx,
+            cy: p.cy,
+            width: p.width,
+            height: p.height,
+            grid_width: p.grid_width,
+            grid_height: p.grid_height,
+            sigma_spatial: p.sigma_spatial,
+            sigma_range: p.sigma_range,
+            real_scale: p.real_scale,
+            max_jump: p.max_jump,
+            radius: p.radius,
+            area_mode: p.true_area as u32,
+            pad0: 0,
+            pad1: 0,
+        }
+    }
+}
+
+/// How a depth frame becomes VALs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DepthValSettings {
+    /// Bilateral half-width in pixels (0: no filter).
+    pub radius: u32,
+    pub sigma_spatial: f32,
+    /// Metres.
+    pub sigma_range: f32,
+    /// Radiance of a decoded colour of 1 (`--real-scale`, W/(m²·sr)).
+    pub real_scale: f32,
+    pub max_jump: f32,
+    /// The VAL's area is the true tilted area rather than the facing footprint.
+    pub true_area: bool,
+    /// At most this many VALs (`--real-vals`); `None` keeps one per pixel.
+    pub real_vals: Option<u32>,
+    /// Fuse the last this-many frames in a voxel hash (`--accumulate`; 1: latest frame only).
+    pub accumulate: u32,
+    /// Voxel edge of the fusion, metres.
+    pub voxel: f32,
+}
+
+impl Default for DepthValSettings {
+    /// 5×5 kernel, σ_s = 2 px, σ_r = 30 mm (methods note C.2).
+    fn default() -> Self {
+        Self {
+            radius: 2,
+            sigma_spatial: 2.0,
+            sigma_range: 0.03,
+            real_scale: 1.0,
+            max_jump: 0.05,
+            true_area: false,
+            real_vals: None,
+            accumulate: 1,
+            voxel: 0.02,
+        }
+    }
+}
+
+impl DepthValSettings {
+    pub fn check(&self) -> Result<(), RenderError> {
+        let bad = |why: &str| Err(RenderError::Settings(why.to_string()));
+        if self.radius > 16 {
+            return bad("--bilateral-radius must be 0..=16 pixels");
+        }
+        let positive = |x: f32| x > 0.0 && x.is_finite();
+        if !positive(self.sigma_spatial) || !positive(self.sigma_range) {
+            return bad("--sigma-spatial and --sigma-range must be positive");
+        }
+        if !(self.real_scale >= 0.0 && self.real_scale.is_finite()) {
+            return bad("--real-scale must be a finite number ≥ 0");
+        }
+        if !(self.max_jump > 0.0 && self.max_jump.is_finite()) {
+            return bad("the depth-jump threshold must be positive");
+        }
+        if self.accumulate == 0 || self.accumulate > 64 {
+            return bad("--accumulate must be 1..=64 frames");
+        }
+        if !(self.voxel > 0.0 && self.voxel.is_finite()) {
+            return bad("--voxel must be a positive length in metres");
+        }
+        if self.real_vals == Some(0) {
+            return bad("--real-vals must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// The kernels' parameters for a frame of `intrinsics` seen from `world_from_camera`.
+    pub fn kernel_params(&self, intrinsics: &Intrinsics, world_from_camera: Mat4) -> KernelParams {
+        let (grid_width, grid_height) =
+            math::grid_for(intrinsics.width, intrinsics.height, self.real_vals);
+        KernelParams {
+            world_from_camera,
+            fx: intrinsics.fx,
+            fy: intrinsics.fy,
+            cx: intrinsics.cx,
+            cy: intrinsics.cy,
+            width: intrinsics.width,
+            height: intrinsics.height,
+            grid_width,
+            grid_height,
+            sigma_spatial: self.sigma_spatial,
+            sigma_range: self.sigma_range,
+            real_scale: self.real_scale,
+            max_jump: self.max_jump,
+            radius: self.radius,
+            true_area: self.true_area,
+        }
+    }
+}
+
+/// CPU twin of the three passes together: the candidates [`DepthVals`] leaves.
+pub fn depth_vals_cpu(frame: &RgbdFrame, p: &KernelParams) -> Vec<Val> {
+    let filtered = math::bilateral(&frame.depth, p);
+    math::reduce(&math::surfels(&filtered, &frame.color, p), p)
+}
+
+/// The latest sensor frame and its camera-to-world pose, waiting for upload.
+pub type FrameSlot = Arc<Mutex<Option<(RgbdFrame, Mat4)>>>;
+
+pub struct DepthVals {
+    pub intrinsics: Intrinsics,
+    pub settings: DepthValSettings,
+    pub slot: FrameSlot,
+    external: ExternalVals,
+    params_buffer: wgpu::Buffer,
+    depth_raw: wgpu::Buffer,
+    color: wgpu::Buffer,
+    depth_filtered: wgpu::Buffer,
+    surfels: wgpu::Buffer,
+    /// bilateral, surfel, reduce.
+    pipelines: [wgpu::ComputePipeline; 3],
+    group: wgpu::BindGroup,
+    bytes: GpuBytes,
+    /// A frame has been uploaded (until then the candidates are all empty).
+    has_frame: bool,
+    last_valid_pixels: usize,
+    /// `accumulate > 1`: the fusion, whose VALs are uploaded as the candidates.
+    fusion: Option<math::VoxelFusion>,
+    last_fused: usize,
+}
+
+impl DepthVals {
+    pub fn new(
+        ctx: &GpuContext,
+        intrinsics: Intrinsics,
+        settings: DepthValSettings,
+    ) -> Result<Self, RenderError> {
+        settings.check()?;
+        let device = &ctx.device;
+        let pixels = intrinsics.width as u64 * intrinsics.height as u64;
+        let p = settings.kernel_params(&intrinsics, Mat4::IDENTITY);
+        let blocks = p.grid_width as u64 * p.grid_height as u64;
+        let limits = device.limits();
+        let largest = pixels * std::mem::size_of::<GpuVal>() as u64;
+        if largest
+            > limits
+                .max_storage_buffer_binding_size
+                .min(limits.max_buffer_size)
+            || blocks.div_ceil(REDUCE_GROUP as u64)
+                > limits.max_compute_workgroups_per_dimension as u64
+        {
+            return Err(RenderError::Settings(format!(
+                "a {}×{} depth frame is too large for this device",
+                intrinsics.width, intrinsics.height
+            )));
+        }
+        let mut bytes = GpuBytes::default();
+        let usage = wgpu::BufferUsages::STORAGE
+            | wgpu::BufferUsages::COPY_DST
+            | wgpu::BufferUsages::COPY_SRC;
+        let mut storage = |label: &str, size: u64| {
+            bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: size.max(16),
+                    usage,
+                    mapped_at_creation: false,
+                },
+            )
+        };
+        let val = std::mem::size_of::<GpuVal>() as u64;
+        let depth_raw = storage("mr depth", pixels * 4);
+        let color = storage("mr colour", pixels * 16);
+        let depth_filtered = storage("mr filtered depth", pixels * 4);
+        let surfels = storage("mr surfels", pixels * val);
+        let candidates = storage("mr candidates", blocks * val);
+        let params_buffer = bytes.uniform::<DepthValParams>(device, "mr params");
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("depth vals"),
+            entries: &[
+                uniform_entry(0, cs),
+                storage_entry_rw(1, cs),
+                storage_entry_rw(2, cs),
+                storage_entry_rw(3, cs),
+                storage_entry_rw(4, cs),
+                storage_entry_rw(5, cs),
+            ],
+        });
+        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("depth vals"),
+            layout: &bgl,
+            entries: &[
+                buffer_binding(0, &params_buffer),
+                buffer_binding(1, &depth_raw),
+                buffer_binding(2, &color),
+                buffer_binding(3, &depth_filtered),
+                buffer_binding(4, &surfels),
+                buffer_binding(5, &candidates),
+            ],
+        });
+        let module = ctx.shader("depth_vals.wgsl");
+        let pipelines = ["bilateral", "surfel", "reduce"]
+            .map(|entry| crate::raster::compute_pipeline_at(device, entry, &module, &bgl, entry));
+        Ok(Self {
+            intrinsics,
+            settings,
+            slot: FrameSlot::default(),
+            external: ExternalVals {
+                candidates,
+                rows: p.grid_height,
+                row_length: p.grid_width,
+            },
+            params_buffer,
+            depth_raw,
+            color,
+            depth_filtered,
+            surfels,
+            pipelines,
+            group,
+            bytes,
+            has_frame: false,
+            last_valid_pixels: 0,
+            fusion: (settings.accumulate > 1)
+                .then(|| math::VoxelFusion::new(settings.accumulate as usize, settings.voxel)),
+            last_fused: 0,
+        })
+    }
+
+    /// Uploads a frame now (the slot's frame, if any, is uploaded at the next record).
+    pub fn upload(
+        &mut self,
+        ctx: &GpuContext,
+        frame: &RgbdFrame,
+        world_from_camera: Mat4,
+    ) -> Result<(), RenderError> {
+        let k = &self.intrinsics;
+        if (frame.width, frame.height) != (k.width, k.height) {
+            return Err(RenderError::Settings(format!(
+                "the RGB-D frame is {}×{} but the intrinsics are for {}×{}",
+                frame.width, frame.height, k.width, k.height
+            )));
+        }
+        if !world_from_camera.is_finite() {
+            return Err(RenderError::Settings(
+                "the camera pose is not finite".into(),
+            ));
+        }
+        let params = DepthValParams::from(&self.kernel_params(world_from_camera));
+        let color: Vec<[f32; 4]> = frame
+            .color
+            .iter()
+            .map(|c| [c[0], c[1], c[2], 0.0])
+            .collect();
+        let q = &ctx.queue;
+        q.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        q.write_buffer(&self.depth_raw, 0, bytemuck::cast_slice(&frame.depth));
+        q.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
+        self.has_frame = true;
+        self.last_valid_pixels = frame.depth.iter().filter(|&&z| z > 0.0).count();
+        if let Some(fusion) = &mut self.fusion {
+            // The fusion runs on the CPU over the surfel pass's CPU twin; its VALs replace
+            // the reduction's candidates.
+            let p = self
+                .settings
+                .kernel_params(&self.intrinsics, world_from_camera);
+            let surfels = math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p);
+            let capacity = (self.external.rows * self.external.row_length) as usize;
+            let fused = fusion.push(surfels, capacity);
+            self.last_fused = fused.len();
+            let mut records: Vec<GpuVal> = fused.iter().map(GpuVal::from_val).collect();
+            records.resize(capacity, GpuVal::default());
+            q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
+        }
+        Ok(())
+    }
+
+    pub fn kernel_params(&self, world_from_camera: Mat4) -> KernelParams {
+        self.settings
+            .kernel_params(&self.intrinsics, world_from_camera)
+    }
+
+    /// The three passes ("mr bilateral", "mr surfels", "mr reduce").
+    pub fn record_passes(&self, passes: &mut Passes) -> Result<(), GpuError> {
+        let (w, h) = (self.intrinsics.width, self.intrinsics.height);
+        let blocks = self.external.rows * self.external.row_length;
+        let tiles = (w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
+        let sizes = [tiles, tiles, (blocks.div_ceil(REDUCE_GROUP), 1, 1)];
+        let labels = ["mr bilateral", "mr surfels", "mr reduce"];
+        for ((pipeline, (x, y, z)), label) in self.pipelines.iter().zip(sizes).zip(labels) {
+            passes.compute(label, |pass| {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &self.group, &[]);
+                pass.dispatch_workgroups(x, y, z);
+            })?;
+        }
+        Ok(())
+    }
+
+    pub fn read_filtered(&self, ctx: &GpuContext) -> Result<Vec<f32>, GpuError> {
+        crate::gpu::read_buffer(ctx, &self.depth_filtered)
+    }
+
+    pub fn read_surfels(&self, ctx: &GpuContext) -> Result<Vec<Surfel>, GpuError> {
+        let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.surfels)?;
+        Ok(raw
+            .iter()
+            .map(|g| Surfel {
+                val: g.to_val(),
+                true_area: g.normal[3],
+            })
+            .collect())
+    }
+
+    pub fn read_candidates(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {
+        let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.external.candidates)?;
+        Ok(raw.iter().map(GpuVal::to_val).collect())
+    }
+}
+
+impl ValSource for DepthVals {
+    fn external(&self) -> &ExternalVals {
+        &self.external
+    }
+
+    fn record(&mut self, ctx: &GpuContext, passes: &mut Passes) -> Result<(), RenderError> {
+        let pending = self
+            .slot
+            .lock()
+            .map_err(|_| RenderError::Settings("the RGB-D frame slot was poisoned".into()))?
+            .take();
+        if let Some((frame, pose)) = pending {
+            self.upload(ctx, &frame, pose)?;
+        }
+        match (self.has_frame, self.fusion.is_some()) {
+            (true, false) => self.record_passes(passes)?,
+            // `upload` wrote the fused VALs as the candidates.
+            (true, true) => {}
+            (false, _) => passes
+                .encoder()
+                .clear_buffer(&self.external.candidates, 0, None),
+        }
+        Ok(())
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        self.bytes.0
+    }
+
+    fn report(&self) -> serde_json::Map<String, serde_json::Value> {
+        let p = self.kernel_params(Mat4::IDENTITY);
+        serde_json::json!({
+            "real_vals_grid": [p.grid_width, p.grid_height],
+            "real_valid_pixels": self.last_valid_pixels,
+            "real_scale": self.settings.real_scale,
+            "accumulate": self.settings.accumulate,
+            "fused_vals": self.last_fused,
+        })
+        .as_object()
+        .cloned()
+        .unwrap_or_default()
+    }
+}
