@@ -34,6 +34,7 @@ fn sparse_settings(
             glossy,
             occlusion,
             weights: Weights::Geometric,
+            visibility_history: 0,
         },
         ..Default::default()
     }

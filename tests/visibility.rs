@@ -22,6 +22,7 @@ fn settings(points: usize) -> SparseSettings {
             glossy: true,
             occlusion: OcclusionMode::Rays,
             weights: Weights::Geometric,
+            visibility_history: 0,
         },
         ..Default::default()
     }
@@ -229,4 +230,56 @@ fn the_bvh_follows_rigid_motion_without_a_rebuild() {
     assert!(!bvh.occluded(across.0, across.1, scene.instances.len()));
     let up = Vec3::new(0.0, 10.0, 0.0);
     assert!(bvh.occluded(across.0 + up, across.1 + up, scene.instances.len()));
+}
+
+#[test]
+fn visibility_history_blends_last_frames_bytes_like_the_cpu_twin() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell-moving", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    let mut s = settings(300);
+    s.options.visibility_history = 50;
+    let mut method = SparseMethod::new(&ctx, &scene, common::small_render_settings(16), s).unwrap();
+    method.last_stage = Stage::Gather;
+    let render = |method: &mut SparseMethod, time: f32| {
+        let world = scene.world_from_node_at(time);
+        let camera = scene.camera_view(None, 1.0, &world).unwrap();
+        method.render(&ctx, &scene, &world, &camera).unwrap();
+        world
+    };
+    render(&mut method, 0.0);
+    let previous = method.sparse.read_visibility(&ctx).unwrap();
+    let world = render(&mut method, 0.5);
+    let current = method.sparse.read_visibility(&ctx).unwrap();
+    let gpu_vals = method.rsm.read_gpu_vals(&ctx).unwrap();
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let points = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+    let tiles = method.rsm.tile_count();
+    let clusters = tiles.min(MAX_CLUSTERS) as usize;
+    let per_point = MAX_CLUSTERS as usize;
+    let (mut pairs, mut agree, mut moved) = (0usize, 0usize, 0usize);
+    for (i, p) in points.points.iter().enumerate() {
+        for c in 0..clusters {
+            let v = visibility::cluster_visibility(
+                method.sparse.bvh(),
+                scene.instances.len(),
+                p.position,
+                p.normal,
+                c as u32,
+                tiles,
+                &samples,
+                &gpu_vals,
+            );
+            let k = i * per_point + c;
+            let blended = visibility::quantize(visibility::blend_history(v, previous[k], 50));
+            pairs += 1;
+            agree += usize::from(blended.abs_diff(current[k]) <= 1);
+            moved += usize::from(visibility::quantize(v).abs_diff(previous[k]) > 8);
+        }
+    }
+    eprintln!("{pairs} pairs: {agree} agree, {moved} changed between the frames");
+    assert!(
+        moved > 20,
+        "the light's motion must change some visibility ({moved})"
+    );
+    assert!(agree as f64 >= 0.995 * pairs as f64, "{agree} of {pairs}");
 }

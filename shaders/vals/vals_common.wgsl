@@ -27,7 +27,8 @@ struct SparseParams {
     vertex_count: u32,
     // RSM cluster tiles over all layers (`--occlusion rays`).
     rsm_tiles: u32,
-    pad1: u32,
+    // Percent of the last frame's cluster visibility kept in this frame's.
+    visibility_history: u32,
 }
 
 // Where an instance's vertices, points and links start in the flat buffers.

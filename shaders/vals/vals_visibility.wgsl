@@ -21,6 +21,8 @@ const RAY_OFFSET: f32 = 2e-3;
 // Per point MAX_CLUSTERS / 4 words, four clusters' V·255 per word (low byte first); cleared
 // before the pass, each invocation ORs in its byte.
 @group(0) @binding(6) var<storage, read_write> visibility: array<atomic<u32>>;
+// Last frame's bytes, blended in by params.visibility_history percent.
+@group(0) @binding(7) var<storage, read> visibility_history: array<u32>;
 
 fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
@@ -66,7 +68,14 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let point_meta = points_meta[index];
     let point = world_point(points_model[index], point_meta, instances[point_meta.y]);
-    let v = cluster_visibility(point, cluster);
-    let byte = u32(round(clamp(v, 0.0, 1.0) * 255.0));
-    atomicOr(&visibility[index * (MAX_CLUSTERS / 4u) + cluster / 4u], byte << (8u * (cluster % 4u)));
+    let word = index * (MAX_CLUSTERS / 4u) + cluster / 4u;
+    let shift = 8u * (cluster % 4u);
+    var v = clamp(cluster_visibility(point, cluster), 0.0, 1.0);
+    let keep = f32(min(params.visibility_history, 100u)) / 100.0;
+    if (keep > 0.0) {
+        let previous = f32((visibility_history[word] >> shift) & 255u) / 255.0;
+        v = mix(v, previous, keep);
+    }
+    let byte = u32(round(v * 255.0));
+    atomicOr(&visibility[word], byte << shift);
 }

@@ -41,7 +41,8 @@ pub struct ValParams {
     pub vertex_count: u32,
     /// RSM cluster tiles over all layers (`--occlusion rays`).
     pub rsm_tiles: u32,
-    pub pad1: u32,
+    /// Percent of the last frame's cluster visibility kept (0: none, or no history yet).
+    pub visibility_history: u32,
 }
 
 /// VALs made by something other than the RSM — the surfels of a depth-sensor frame — that

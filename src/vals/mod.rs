@@ -50,6 +50,7 @@ impl Default for SparseSettings {
                 glossy: true,
                 occlusion: OcclusionMode::Rays,
                 weights: Weights::Geometric,
+                visibility_history: 50,
             },
             glossy_eye: GlossyEye::Mid,
         }
@@ -90,6 +91,8 @@ impl SparseSettings {
                     "flux" => Weights::Flux,
                     _ => Weights::Geometric,
                 },
+                visibility_history: options
+                    .get("visibility-history", d.options.visibility_history)?,
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -116,7 +119,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 tile,
                 vertex_count,
                 rsm_tiles,
-                pad1
+                visibility_history
             ]
         ),
         shared_layout!(
@@ -203,6 +206,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Choice(&["rays", "sum", "union", "off"]),
         default: "rays",
         help: "indirect occlusion: from the sparse points' discs (sum, union), none, or shadow rays through the scene's BVH to each VAL cluster (rays)",
+    },
+    OptionSpec {
+        name: "visibility-history",
+        kind: OptionKind::Int { min: 0, max: 90 },
+        default: "50",
+        help: "percent of the last frame's cluster visibility kept in this frame's (--occlusion rays): steadies indirect shadows under moving lights, lags them by about a frame",
     },
     OptionSpec {
         name: "weights",

@@ -57,6 +57,8 @@ pub struct SparseOptions {
     pub glossy: bool,
     pub occlusion: OcclusionMode,
     pub weights: Weights,
+    /// `--occlusion rays`: percent of last frame's visibility blended into this frame's.
+    pub visibility_history: u32,
 }
 
 /// Octahedral encoding of a unit vector in two snorm16 (`oct_decode` in the shader).
@@ -144,6 +146,10 @@ pub struct SparseGpu {
     apply_bgl: wgpu::BindGroupLayout,
     bvh: SceneBvh,
     visibility_buffer: wgpu::Buffer,
+    /// Last frame's visibility, blended into this frame's (`visibility-history`).
+    visibility_history: wgpu::Buffer,
+    /// Solutions recorded so far: the first has no history to blend.
+    solutions_recorded: std::cell::Cell<u64>,
     visibility_pipeline: wgpu::ComputePipeline,
     visibility_group: wgpu::BindGroup,
     /// RSM cluster tiles over all layers.
@@ -321,6 +327,11 @@ impl SparseGpu {
             "point cluster visibility",
             n * VISIBILITY_BYTES_PER_POINT,
         );
+        let visibility_history = empty(
+            &mut bytes,
+            "point cluster visibility history",
+            n * VISIBILITY_BYTES_PER_POINT,
+        );
         let point_bytes = bytes.0;
         let ranges_buffer = init(&mut bytes, "instance ranges", bytemuck::cast_slice(&ranges));
         let links_buffer = init(&mut bytes, "vertex links", bytemuck::cast_slice(&links));
@@ -443,6 +454,7 @@ impl SparseGpu {
             (vals_buffer, false),
             (&rsm.cluster_samples, false),
             (&visibility_buffer, true),
+            (&visibility_history, false),
         ];
         let visibility_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("visibility"),
@@ -544,6 +556,8 @@ impl SparseGpu {
             apply_bgl,
             bvh,
             visibility_buffer,
+            visibility_history,
+            solutions_recorded: std::cell::Cell::new(0),
             visibility_pipeline,
             visibility_group,
             rsm_tiles: rsm.tile_count(),
@@ -595,7 +609,11 @@ impl SparseGpu {
             tile: options.tile,
             vertex_count: self.vertex_count,
             rsm_tiles: self.rsm_tiles,
-            pad1: 0,
+            visibility_history: if self.solutions_recorded.get() > 0 {
+                options.visibility_history
+            } else {
+                0
+            },
         }
     }
 
@@ -626,9 +644,18 @@ impl SparseGpu {
     ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
         if options.occlusion == OcclusionMode::Rays {
+            passes.encoder().copy_buffer_to_buffer(
+                &self.visibility_buffer,
+                0,
+                &self.visibility_history,
+                0,
+                None,
+            );
             passes
                 .encoder()
                 .clear_buffer(&self.visibility_buffer, 0, None);
+            self.solutions_recorded
+                .set(self.solutions_recorded.get() + 1);
             let clusters = self.rsm_tiles.clamp(1, MAX_CLUSTERS);
             passes.compute("visibility", |pass| {
                 pass.set_pipeline(&self.visibility_pipeline);

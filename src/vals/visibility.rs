@@ -73,6 +73,18 @@ pub fn cluster_visibility(
     }
 }
 
+/// This frame's visibility with `percent` of last frame's stored byte kept
+/// (`--visibility-history`): `V ← (1 − h)·V + h·V_prev`. A light that moves smoothly moves
+/// the rays' samples smoothly, but each ray's answer flips at an edge; the blend spreads a
+/// flip over a few frames (it halves in one frame at the default h = 0.5).
+pub fn blend_history(v: f32, previous: u8, percent: u32) -> f32 {
+    let keep = percent.min(100) as f32 / 100.0;
+    if keep <= 0.0 {
+        return v;
+    }
+    v + (previous as f32 / 255.0 - v) * keep
+}
+
 /// `V·255` rounded, as the GPU stores it.
 pub fn quantize(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
