@@ -43,6 +43,9 @@ fn atlas_for(scene_name: &str, from_bounce: u32) -> std::path::PathBuf {
     path
 }
 
+/// A method, its options and the views of each frame.
+type Run<'a> = (&'a str, Vec<(&'a str, &'a str)>, ViewRig);
+
 #[test]
 fn no_method_grows_over_a_long_run() {
     if common::gpu().is_none() {
@@ -53,7 +56,7 @@ fn no_method_grows_over_a_long_run() {
     let later_bounces = atlas_for(scene_name, 2);
     let atlas = atlas.display().to_string();
     let later_bounces = later_bounces.display().to_string();
-    let runs: Vec<(&str, Vec<(&str, &str)>, ViewRig)> = vec![
+    let runs: Vec<Run> = vec![
         ("direct", vec![], ViewRig::Mono),
         (
             "sparse",
