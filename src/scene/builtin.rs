@@ -597,6 +597,14 @@ mod tests {
                     assert_eq!(mesh.triangle_count(), 2, "the coarse wall stays coarse");
                     continue;
                 }
+                // Seed 002's box: walls of two triangles, as in the paper.
+                if name.starts_with("bunny-box") && mesh.name.ends_with("wall")
+                    || name.starts_with("bunny-box")
+                        && ["floor", "ceiling"].contains(&mesh.name.as_str())
+                {
+                    assert_eq!(mesh.triangle_count(), 2, "{name}/{}", mesh.name);
+                    continue;
+                }
                 for n in &mesh.normals {
                     assert!((n.length() - 1.0).abs() < 1e-5, "{name}/{}", mesh.name);
                 }
