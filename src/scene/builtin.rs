@@ -82,6 +82,65 @@ pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
         });
     }
     let max_edge = params.max_edge;
+    if max_edge < TESSELLATION_CHECK_BELOW {
+        // Built once coarsely (cheap), the scene's area tells how many triangles the fine
+        // tessellation would make, before any of them is allocated.
+        let coarse = build(name, TESSELLATION_CHECK_BELOW)?;
+        let implied = implied_triangles(&coarse, max_edge);
+        if implied > MAX_TESSELLATED_TRIANGLES {
+            return Err(SceneError::Other {
+                path: name.into(),
+                message: format!(
+                    "--max-edge {max_edge} would tessellate this scene into about {implied} \
+                     triangles, beyond the budget of {MAX_TESSELLATED_TRIANGLES}; use \
+                     --max-edge {:.4} or more",
+                    min_max_edge(&coarse)
+                ),
+            });
+        }
+    }
+    build(name, max_edge)
+}
+
+/// Above this maximum edge (metres) no built-in scene comes near the triangle budget.
+const TESSELLATION_CHECK_BELOW: f32 = 0.02;
+
+/// Most triangles a built-in scene may be tessellated into (about 0.5 GB of vertices,
+/// indices and acceleration structures).
+pub const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
+
+/// Triangles the tessellation at `max_edge` makes of `coarse`: a quad's cells have
+/// diagonals of at most `max_edge`, so each cell (two triangles) covers at most
+/// `max_edge²/2`; meshes that are not tessellated keep their count.
+fn implied_triangles(coarse: &Scene, max_edge: f32) -> u64 {
+    let cell_area = (max_edge as f64).powi(2) / 2.0;
+    coarse
+        .meshes
+        .iter()
+        .map(|m| {
+            let cells = (mesh_area(m) / cell_area).ceil();
+            (m.triangle_count() as u64).max((2.0 * cells).min(u64::MAX as f64) as u64)
+        })
+        .fold(0u64, u64::saturating_add)
+}
+
+/// The smallest maximum edge whose tessellation stays within the budget.
+fn min_max_edge(coarse: &Scene) -> f64 {
+    let area: f64 = coarse.meshes.iter().map(mesh_area).sum();
+    (4.0 * area / MAX_TESSELLATED_TRIANGLES as f64).sqrt()
+}
+
+fn mesh_area(mesh: &Mesh) -> f64 {
+    mesh.indices
+        .chunks_exact(3)
+        .map(|t| {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| mesh.positions[i as usize]);
+            0.5 * (b - a).cross(c - a).length() as f64
+        })
+        .sum()
+}
+
+fn build(name: &str, max_edge: f32) -> Result<Scene, SceneError> {
     match name {
         "cornell" => Ok(cornell(name, CornellLight::Spot, max_edge)),
         "cornell-point" => Ok(cornell(name, CornellLight::Point, max_edge)),
