@@ -109,8 +109,8 @@ const TESSELLATION_CHECK_BELOW: f32 = 0.02;
 /// indices and acceleration structures).
 pub const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
 
-/// Triangles the tessellation at `max_edge` makes of `coarse`: a quad's cells have
-/// diagonals of at most `max_edge`, so each cell (two triangles) covers at most
+/// About how many triangles the tessellation at `max_edge` makes of `coarse`: a quad's
+/// cells have diagonals of at most `max_edge`, so each cell (two triangles) covers about
 /// `max_edge²/2`; meshes that are not tessellated keep their count.
 fn implied_triangles(coarse: &Scene, max_edge: f32) -> u64 {
     let cell_area = (max_edge as f64).powi(2) / 2.0;
@@ -771,6 +771,27 @@ mod tests {
                 assert!(low.abs() < 1e-6, "instance {i}");
             }
         }
+    }
+
+    #[test]
+    fn the_tessellation_estimate_tracks_the_triangles_built() {
+        for name in ["cornell", "plane-blocker", "corridor"] {
+            let coarse = build(name, TESSELLATION_CHECK_BELOW).unwrap();
+            let max_edge = 0.01;
+            let built = build(name, max_edge).unwrap();
+            let actual: u64 = built.meshes.iter().map(|m| m.triangle_count() as u64).sum();
+            let implied = implied_triangles(&coarse, max_edge);
+            // Cells of max_edge²/2 (diagonal ≤ max_edge); rounding up to whole rows adds a
+            // few per cent on small faces the area does not see.
+            assert!(
+                implied as f64 >= 0.9 * actual as f64,
+                "{name}: {implied} ≪ {actual}"
+            );
+            assert!(implied <= 2 * actual, "{name}: {implied} ≫ {actual}");
+        }
+        let err = load("cornell", &BuiltinParams { max_edge: 1e-4 }).unwrap_err();
+        assert!(err.to_string().contains("--max-edge"), "{err}");
+        assert!(load("cornell", &BuiltinParams { max_edge: 0.01 }).is_ok());
     }
 
     #[test]
