@@ -134,7 +134,7 @@ fn storage_buffers_beyond_the_binding_limit_are_refused_up_front() {
         .min(limits.max_buffer_size);
     assert!(ctx.check_storage_buffer("points", limit, "fewer").is_ok());
     let message = ctx
-        .check_storage_buffer("the sparse points", limit + 1, "lower --sparse-points")
+        .check_storage_buffer("the sparse points", limit + 1, "Lower --sparse-points")
         .expect_err("one byte beyond the limit")
         .to_string();
     assert!(message.contains("the sparse points"), "{message}");

@@ -136,7 +136,7 @@ impl View {
         let targets = ctx.scoped(
             &format!("the render targets of view '{name}' ({rw}×{rh} after {ssaa}×{ssaa} SSAA)"),
             Some(FrameTargets::bytes(width, height, ssaa)),
-            "lower --width/--height or --ssaa",
+            "Lower --width/--height or --ssaa",
             || FrameTargets::new(device, width, height, ssaa),
         )?;
         let mut bytes = GpuBytes::default();

@@ -28,7 +28,7 @@ pub enum GpuError {
     #[error("GPU readback failed: {0}")]
     Readback(String),
     /// wgpu refused or could not back an allocation or a pipeline.
-    #[error("could not create {what} ({size}) on the GPU: {message}. {remedy}")]
+    #[error("could not create {what} on the GPU ({size}): {message}. {remedy}")]
     Allocation {
         what: String,
         size: String,
@@ -53,6 +53,15 @@ pub fn format_bytes(bytes: u64) -> String {
         format!("{bytes} B")
     } else {
         format!("{value:.1} {}", UNITS[unit])
+    }
+}
+
+/// `1 light`, `3 lights`.
+pub fn count_of(count: usize, noun: &str) -> String {
+    if count == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{count} {noun}s")
     }
 }
 
@@ -303,20 +312,6 @@ impl GpuContext {
             None => Ok(()),
             Some(message) => Err(GpuError::Uncaptured(message)),
         }
-    }
-
-    /// An error unless `side` texels fit the device's 2D textures.
-    pub fn check_texture_side(&self, what: &str, side: u64, remedy: &str) -> Result<(), GpuError> {
-        let limit = self.device.limits().max_texture_dimension_2d;
-        if side > limit as u64 {
-            return Err(GpuError::Allocation {
-                what: what.to_string(),
-                size: format!("{side} texels per side"),
-                message: format!("the device's 2D textures are at most {limit} texels per side"),
-                remedy: remedy.to_string(),
-            });
-        }
-        Ok(())
     }
 
     /// An error unless a storage buffer of `bytes` can be made and bound whole.

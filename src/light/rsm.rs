@@ -251,7 +251,7 @@ impl Rsm {
         let vals_buffer = ctx.scoped(
             &format!("the VAL buffer ({slots} VALs)"),
             Some(val_bytes),
-            "lower --rsm, or use fewer lights or external VALs",
+            "Lower --rsm, or use fewer lights or external VALs",
             || {
                 bytes.buffer(
                     device,
@@ -293,12 +293,12 @@ impl Rsm {
                 + crate::gpu::resources::block_bytes(DEPTH_FORMAT));
         let (textures, depth) = ctx.scoped(
             &format!(
-                "the RSMs of scene '{}' ({} lights: {layers} layers of {resolution}×{resolution})",
+                "the RSMs of scene '{}' ({}: {layers} layers of {resolution}×{resolution})",
                 scene.name,
-                scene.lights.len()
+                crate::gpu::count_of(scene.lights.len(), "light")
             ),
             Some(rsm_bytes),
-            "lower --rsm (a point light takes six layers) or use fewer lights",
+            "Lower --rsm (a point light takes six layers) or use fewer lights",
             || {
                 let mut array = |label: &str, format| {
                     bytes.texture(

@@ -43,7 +43,7 @@ impl Default for RenderSettings {
 
 /// What to try when wgpu refuses a pipeline: it exceeds a limit of this adapter.
 pub const PIPELINE_REMEDY: &str =
-    "the adapter's limits are below what the pipeline needs; try another adapter (WGPU_ADAPTER_NAME)";
+    "The adapter's limits are below what the pipeline needs; try another adapter (WGPU_ADAPTER_NAME)";
 
 /// Smallest `--shadow-res`: below it PCF kernels span the whole map.
 pub const MIN_SHADOW_RESOLUTION: u32 = 16;
@@ -160,13 +160,13 @@ impl Rasterizer {
         };
         let shadow_texture = ctx.scoped(
             &format!(
-                "the shadow maps of scene '{}' ({} lights: {layers} layers of \
+                "the shadow maps of scene '{}' ({}: {layers} layers of \
                  {shadow_resolution}×{shadow_resolution})",
                 scene.name,
-                scene.lights.len()
+                crate::gpu::count_of(scene.lights.len(), "light")
             ),
             Some(crate::gpu::resources::texture_bytes(&shadow_desc)),
-            "lower --shadow-res (a point light takes six layers) or use fewer lights",
+            "Lower --shadow-res (a point light takes six layers) or use fewer lights",
             || shadow_bytes.texture(device, &shadow_desc),
         )?;
         let shadow_array_view = shadow_texture.create_view(&wgpu::TextureViewDescriptor {

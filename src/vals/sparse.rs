@@ -318,7 +318,7 @@ impl SparseGpu {
             )
         };
         let n = point_count as u64;
-        let points_remedy = "lower --sparse-points";
+        let points_remedy = "Lower --sparse-points";
         ctx.check_storage_buffer(
             &format!("the sparse points' cluster visibility ({point_count} points)"),
             n * VISIBILITY_BYTES_PER_POINT,
@@ -327,7 +327,7 @@ impl SparseGpu {
         ctx.check_storage_buffer(
             &format!("the vertex links ({} rows)", links.len()),
             (links.len() * 16) as u64,
-            "use a coarser tessellation (--max-edge) or a smaller scene",
+            "Use a coarser tessellation (--max-edge) or a smaller scene",
         )?;
         let point_buffers_bytes = n * (16 + 16 + 8 + 2 * VISIBILITY_BYTES_PER_POINT);
         let (point_diffuse, point_glossy, point_extra, visibility_buffer, visibility_history) = ctx
@@ -362,7 +362,7 @@ impl SparseGpu {
         let vertex_lights = ctx.scoped(
             &format!("the vertex lights ({vertex_count} instance vertices)"),
             Some(vertex_light_size),
-            "use a coarser tessellation (--max-edge) or fewer instances",
+            "Use a coarser tessellation (--max-edge) or fewer instances",
             || empty(&mut bytes, "vertex lights", vertex_light_size),
         )?;
         let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
