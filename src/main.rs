@@ -293,7 +293,7 @@ struct BakeArgs {
     /// Number of VPL patches (1..=16384; photon paths with --lights polygons, 1..=1048576).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().vpls)]
     vpls: usize,
-    /// Indirect bounces kept.
+    /// Indirect bounces kept (1..=64).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().bounces)]
     bounces: u32,
     /// Atlas width and height in texels.

@@ -105,9 +105,9 @@ pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
 /// Above this maximum edge (metres) no built-in scene comes near the triangle budget.
 const TESSELLATION_CHECK_BELOW: f32 = 0.02;
 
-/// Most triangles a built-in scene may be tessellated into (about 0.5 GB of vertices,
-/// indices and acceleration structures).
-pub const MAX_TESSELLATED_TRIANGLES: u64 = 4_000_000;
+/// Most triangles a built-in scene may be tessellated into: the budget an imported mesh's
+/// refinement stops at, for the whole scene.
+pub const MAX_TESSELLATED_TRIANGLES: u64 = super::mesh::MAX_TESSELLATED_TRIANGLES as u64;
 
 /// About how many triangles the tessellation at `max_edge` makes of `coarse`: a quad's
 /// cells have diagonals of at most `max_edge`, so each cell (two triangles) covers about
