@@ -26,6 +26,9 @@ pub enum AppError {
     Image(#[from] ImageError),
 }
 
+/// Beyond ±64 stops (2^64) every pixel of a PNG is black or white.
+pub const MAX_EXPOSURE_STOPS: f32 = 64.0;
+
 /// One `valgi render` invocation.
 #[derive(Clone, Debug)]
 pub struct RenderRequest {
@@ -192,6 +195,13 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         return Err(
             RenderError::Settings("--time must be a finite number of seconds".into()).into(),
         );
+    }
+    if !request.exposure.is_finite() || request.exposure.abs() > MAX_EXPOSURE_STOPS {
+        return Err(RenderError::Settings(format!(
+            "--exposure {}: must be a finite number of stops within ±{MAX_EXPOSURE_STOPS}",
+            request.exposure
+        ))
+        .into());
     }
     let multi_view = request.views != ViewRig::Mono;
     // Fail on an unwritable output before spending time on the scene and the GPU.

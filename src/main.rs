@@ -120,7 +120,7 @@ struct MrArgs {
     /// Bilateral range σ in metres.
     #[arg(long, default_value_t = 0.03)]
     sigma_range: f32,
-    /// Sparse receiver points on the virtual object.
+    /// Sparse receiver points on the virtual object (1..=1048576).
     #[arg(long, default_value_t = 1024)]
     sparse_points: usize,
     /// RSM resolution of the virtual lights.
@@ -156,7 +156,7 @@ struct RenderArgs {
     /// out/<scene>.exr and out/<scene>.png.
     #[arg(long)]
     out: Vec<PathBuf>,
-    /// PNG exposure in stops: png = sRGB(clamp(radiance × 2^E)).
+    /// PNG exposure in stops: png = sRGB(clamp(radiance × 2^E)); finite, within ±64.
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
     /// Write only the indirect part of the radiance (direct light removed).
@@ -165,13 +165,15 @@ struct RenderArgs {
     /// N×N supersampling per pixel for anti-aliased edges.
     #[arg(long, default_value_t = 1)]
     ssaa: u32,
-    /// Shadow-map resolution per layer (a point light uses six layers).
+    /// Shadow-map resolution per layer (a point light uses six layers): 16 up to the
+    /// device's largest 2D texture side (16384 on most).
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
-    /// Tessellation of built-in scenes: maximum triangle edge length in metres.
+    /// Tessellation of built-in scenes: maximum triangle edge length in metres (positive;
+    /// refused when the scene would exceed 4 million triangles).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
-    /// Animation time in seconds (glTF animations).
+    /// Animation time in seconds (glTF animations); finite.
     #[arg(long, default_value_t = 0.0)]
     time: f32,
     /// Render F frames of the scene's animation (from --time, at --fps) as numbered EXRs into
@@ -288,10 +290,10 @@ struct BakeArgs {
     /// Output atlas (.exr, linear irradiance in W/m², alpha 1 on texels that hold a surface).
     #[arg(long)]
     out: PathBuf,
-    /// Number of VPL patches.
+    /// Number of VPL patches (1..=16384; photon paths with --lights polygons, 1..=1048576).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().vpls)]
     vpls: usize,
-    /// Indirect bounces kept.
+    /// Indirect bounces kept (1..=64).
     #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().bounces)]
     bounces: u32,
     /// Atlas width and height in texels.
@@ -838,6 +840,9 @@ fn with_method_flags(cli: clap::Command) -> clap::Command {
     })
 }
 
+/// The range of `render --sparse-points` (the registry's), for `mr` as well.
+const MAX_SPARSE_POINTS: usize = 1 << 20;
+
 /// `valgi mr`'s flags → the library's request.
 fn mr_request(
     args: MrArgs,
@@ -874,9 +879,15 @@ fn mr_request(
         ..Default::default()
     };
     depth.check()?;
+    if !(1..=MAX_SPARSE_POINTS).contains(&args.sparse_points) {
+        return Err(MrError::Settings(format!(
+            "--sparse-points {}: must be 1..={MAX_SPARSE_POINTS}",
+            args.sparse_points
+        )));
+    }
     let sparse = valgi::vals::SparseSettings {
         rsm: args.rsm,
-        sparse_points: args.sparse_points.max(1),
+        sparse_points: args.sparse_points,
         ..Default::default()
     };
     Ok(run::MrRequest {

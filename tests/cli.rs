@@ -210,3 +210,170 @@ fn sparse_renders_numbered_frames_of_an_animation_with_table2_timings() {
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("has no option(s) rsm"));
 }
+
+/// Runs `valgi ARGS` and asserts it exits non-zero without a panic and that its error
+/// names every one of `needles`.
+fn assert_refused(args: &[&str], needles: &[&str]) {
+    let output = valgi().args(args).output().expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success(),
+        "valgi {args:?} succeeded; stderr: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "valgi {args:?}: {stderr}");
+    for needle in needles {
+        assert!(
+            stderr.contains(needle),
+            "valgi {args:?}: error does not name '{needle}': {stderr}"
+        );
+    }
+}
+
+/// `NAME` in a fresh folder of its own for `test`.
+fn temp_out(test: &str, name: &str) -> String {
+    common::temp_dir(test).join(name).display().to_string()
+}
+
+fn tiny_render<'a>(out: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let mut args = vec![
+        "render",
+        "--scene",
+        "plane-point",
+        "--width",
+        "8",
+        "--height",
+        "8",
+        "--out",
+        out,
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
+#[test]
+fn non_finite_times_and_exposures_are_refused_before_work_starts() {
+    let out = temp_out("cli-finite", "x.exr");
+    let out = out.as_str();
+    for value in ["NaN", "inf", "-inf"] {
+        // `=`: clap reads a separate `-inf` as a flag.
+        let time = format!("--time={value}");
+        assert_refused(&tiny_render(out, &[&time]), &["--time"]);
+        let exposure = format!("--exposure={value}");
+        assert_refused(&tiny_render(out, &[&exposure]), &["--exposure", value]);
+    }
+    assert_refused(
+        &tiny_render(out, &["--exposure", "1000"]),
+        &["--exposure", "1000"],
+    );
+    assert!(!std::path::Path::new(out).exists(), "an image was written");
+}
+
+#[test]
+fn a_max_edge_that_would_blow_up_the_mesh_is_refused_with_its_triangle_count() {
+    let out = temp_out("cli-max-edge", "x.exr");
+    // Cornell at 1 µm edges would be ~10¹³ triangles; the check must answer at once, without
+    // building them (the test would run out of memory otherwise).
+    for command in ["render", "bake"] {
+        assert_refused(
+            &[
+                command,
+                "--scene",
+                "cornell",
+                "--max-edge",
+                "0.000001",
+                "--out",
+                &out,
+            ],
+            &["--max-edge", "triangles", "budget"],
+        );
+    }
+}
+
+#[test]
+fn bake_refuses_absurd_vpl_counts() {
+    let out = temp_out("cli-vpls", "atlas.exr");
+    let out = out.as_str();
+    assert_refused(
+        &[
+            "bake", "--scene", "cornell", "--vpls", "100000", "--out", out,
+        ],
+        &["--vpls", "100000"],
+    );
+    assert_refused(
+        &[
+            "bake",
+            "--scene",
+            "cornell",
+            "--bounces",
+            "1000",
+            "--out",
+            out,
+        ],
+        &["--bounces", "1000"],
+    );
+}
+
+#[test]
+fn mr_refuses_a_sparse_point_count_out_of_range() {
+    let dir = common::temp_dir("cli-mr-points");
+    let out = dir.to_str().unwrap();
+    for count in ["0", "10000000"] {
+        assert_refused(
+            &[
+                "mr",
+                "--color",
+                "no-color.png",
+                "--depth",
+                "no-depth.png",
+                "--sparse-points",
+                count,
+                "--out",
+                out,
+            ],
+            &["--sparse-points", count],
+        );
+    }
+}
+
+#[test]
+fn shadow_resolutions_spp_and_sparse_points_out_of_range_are_refused() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-ranges", "x.exr");
+    let out = out.as_str();
+    for res in ["0", "8", "1000000"] {
+        assert_refused(
+            &tiny_render(out, &["--shadow-res", res]),
+            &["--shadow-res", res],
+        );
+    }
+    assert_refused(
+        &tiny_render(out, &["--method", "reference", "--spp", "1000000000"]),
+        &["spp", "1000000000"],
+    );
+    // In range per pixel, but 2⁴⁴ paths over the whole image.
+    assert_refused(
+        &[
+            "render",
+            "--scene",
+            "plane-point",
+            "--method",
+            "reference",
+            "--width",
+            "4096",
+            "--height",
+            "4096",
+            "--spp",
+            "1048576",
+            "--out",
+            out,
+        ],
+        &["spp", "paths", "budget"],
+    );
+    assert_refused(
+        &tiny_render(out, &["--method", "sparse", "--sparse-points", "10000000"]),
+        &["sparse-points", "10000000"],
+    );
+    assert!(!std::path::Path::new(out).exists(), "an image was written");
+}

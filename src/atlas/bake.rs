@@ -143,6 +143,38 @@ pub struct BakeSettings {
     pub polygon: PolygonSettings,
 }
 
+/// Most VPL patches: shooting is quadratic in them (the depth cubes' memory is checked by
+/// the patch baker).
+pub const MAX_PATCH_VPLS: usize = 16384;
+/// Most photon paths of the polygon-light baker.
+pub const MAX_PHOTON_PATHS: usize = 1 << 20;
+/// Most bounces kept (light is spent long before).
+pub const MAX_BOUNCES: u32 = 64;
+
+impl BakeSettings {
+    /// Refuses counts whose work or memory no bake could finish, before any is spent.
+    pub fn check_budget(&self) -> Result<(), BakeError> {
+        let max_vpls = match self.lights {
+            Lights::Patches => MAX_PATCH_VPLS,
+            Lights::Polygons => MAX_PHOTON_PATHS,
+        };
+        if self.vpls > max_vpls {
+            return Err(BakeError::Settings(format!(
+                "--vpls {}: at most {max_vpls} with --lights {}",
+                self.vpls,
+                self.lights.name()
+            )));
+        }
+        if self.bounces > MAX_BOUNCES {
+            return Err(BakeError::Settings(format!(
+                "--bounces {}: at most {MAX_BOUNCES}",
+                self.bounces
+            )));
+        }
+        Ok(())
+    }
+}
+
 impl Default for BakeSettings {
     fn default() -> Self {
         Self {
@@ -386,6 +418,7 @@ impl<'a> BakeScene<'a> {
                 "--vpls and --bounces must be at least 1".into(),
             ));
         }
+        settings.check_budget()?;
         let lights = WorldLight::from_scene(scene, world_from_node);
         if lights.is_empty() {
             return Err(BakeError::NoLights(scene.name.clone()));

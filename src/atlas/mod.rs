@@ -65,6 +65,7 @@ pub fn bake_to_file(
         )));
     }
     crate::image_io::prepare_output(&request.out)?;
+    request.settings.check_budget()?;
     if request.from_bounce == 0 || request.from_bounce > request.settings.bounces {
         return Err(BakeError::Settings(format!(
             "--from-bounce {} must be between 1 and --bounces {}",

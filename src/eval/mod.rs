@@ -306,6 +306,22 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             "width, height, ref-spp and frames must be at least 1".into(),
         ));
     }
+    if let Some(exposure) = request.exposure.filter(|e| !e.is_finite()) {
+        return Err(EvalError::Settings(format!(
+            "--exposure {exposure}: must be a finite number of stops"
+        )));
+    }
+    let reference_paths = request.width as u64 * request.height as u64 * request.ref_spp as u64;
+    if reference_paths > crate::reference::ReferenceMethod::MAX_PATHS {
+        return Err(EvalError::Settings(format!(
+            "--ref-spp {}: {reference_paths} reference paths at {}×{}, beyond the budget of {}; \
+             lower --ref-spp or the image size",
+            request.ref_spp,
+            request.width,
+            request.height,
+            crate::reference::ReferenceMethod::MAX_PATHS
+        )));
+    }
     // Parse every spec before any rendering, so a typo fails at once.
     let specs: Vec<(String, MethodOptions)> = request
         .methods

@@ -41,6 +41,20 @@ pub struct FrameTargets {
 }
 
 impl FrameTargets {
+    /// Bytes [`FrameTargets::new`] allocates: depth and four G-buffer layers, two radiance
+    /// targets at the render size, two outputs at the output size.
+    pub fn bytes(width: u32, height: u32, ssaa: u32) -> u64 {
+        let texel = crate::gpu::resources::block_bytes;
+        let render = width as u64 * ssaa as u64 * height as u64 * ssaa as u64;
+        let output = width as u64 * height as u64;
+        render
+            * (texel(DEPTH_FORMAT)
+                + texel(GBUFFER_NORMAL_FORMAT)
+                + 3 * texel(GBUFFER_MATERIAL_FORMAT)
+                + 2 * texel(RADIANCE_FORMAT))
+            + output * 2 * texel(RADIANCE_FORMAT)
+    }
+
     fn new(device: &wgpu::Device, width: u32, height: u32, ssaa: u32) -> Self {
         let mut bytes = GpuBytes::default();
         let (rw, rh) = (width * ssaa, height * ssaa);
@@ -118,7 +132,13 @@ impl View {
     ) -> Result<Self, RenderError> {
         check_size(ctx, width, height, ssaa)?;
         let device = &ctx.device;
-        let targets = FrameTargets::new(device, width, height, ssaa);
+        let (rw, rh) = (width * ssaa, height * ssaa);
+        let targets = ctx.scoped(
+            &format!("the render targets of view '{name}' ({rw}×{rh} after {ssaa}×{ssaa} SSAA)"),
+            Some(FrameTargets::bytes(width, height, ssaa)),
+            "Lower --width/--height or --ssaa",
+            || FrameTargets::new(device, width, height, ssaa),
+        )?;
         let mut bytes = GpuBytes::default();
         let frame_buffer = bytes.uniform::<FrameUniforms>(device, "frame uniforms");
         let resolve_params = bytes.uniform::<ResolveParams>(device, "resolve params");
@@ -146,8 +166,12 @@ impl View {
                 view_binding(4, &out_indirect),
             ],
         });
-        let resolve_pipeline =
-            compute_pipeline(device, "resolve", &ctx.shader("resolve.wgsl"), &resolve_bgl);
+        let resolve_pipeline = ctx.scoped(
+            "the resolve pipeline",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || compute_pipeline(device, "resolve", &ctx.shader("resolve.wgsl"), &resolve_bgl),
+        )?;
         Ok(Self {
             id: NEXT_VIEW_ID.fetch_add(1, Ordering::Relaxed),
             name: name.to_string(),
@@ -235,6 +259,7 @@ impl View {
     /// Reads the resolved direct and indirect images back (the indirect one only when the
     /// method wrote it; otherwise it is black).
     pub fn read(&self, ctx: &GpuContext, has_indirect: bool) -> Result<(Image, Image), GpuError> {
+        ctx.check_uncaptured()?;
         let (w, h) = (self.width, self.height);
         let direct = crate::gpu::read_texture_rgba32f(ctx, &self.targets.output_direct)?;
         let indirect = if has_indirect {
@@ -491,6 +516,7 @@ pub fn record_frame<M: Method + ?Sized>(
         results.push(result);
     }
     let timings = passes.finish_scoped()?;
+    ctx.check_uncaptured()?;
     method.end_frame(ctx, &timings)?;
     Ok(RecordedFrame {
         timings,

@@ -27,6 +27,75 @@ pub enum GpuError {
     Device { adapter: String, message: String },
     #[error("GPU readback failed: {0}")]
     Readback(String),
+    /// wgpu refused or could not back an allocation or a pipeline.
+    #[error("could not create {what} on the GPU ({size}): {message}. {remedy}")]
+    Allocation {
+        what: String,
+        size: String,
+        message: String,
+        remedy: String,
+    },
+    /// An error wgpu raised outside any allocation scope (while recording or submitting).
+    #[error("GPU error: {0}")]
+    Uncaptured(String),
+}
+
+/// `1.5 GiB`, `256 KiB`, `12 B`: sizes in error messages.
+pub fn format_bytes(bytes: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut value = bytes as f64;
+    let mut unit = 0;
+    while value >= 1024.0 && unit + 1 < UNITS.len() {
+        value /= 1024.0;
+        unit += 1;
+    }
+    if unit == 0 {
+        format!("{bytes} B")
+    } else {
+        format!("{value:.1} {}", UNITS[unit])
+    }
+}
+
+/// `1 light`, `3 lights`.
+pub fn count_of(count: usize, noun: &str) -> String {
+    if count == 1 {
+        format!("1 {noun}")
+    } else {
+        format!("{count} {noun}s")
+    }
+}
+
+/// The first error wgpu raised outside a scope since it was last taken. wgpu's default is to
+/// panic; the device's handler stores the message here instead, and the next
+/// [`GpuContext::check_uncaptured`] returns it as an error.
+#[derive(Clone, Default)]
+struct UncapturedErrors(std::sync::Arc<std::sync::Mutex<Option<String>>>);
+
+impl UncapturedErrors {
+    fn install(&self, device: &wgpu::Device) {
+        let slot = self.0.clone();
+        device.on_uncaptured_error(std::sync::Arc::new(move |error: wgpu::Error| {
+            let message = describe(&error);
+            log::error!("GPU error: {message}");
+            let mut first = slot.lock().unwrap_or_else(|e| e.into_inner());
+            first.get_or_insert(message);
+        }));
+    }
+
+    fn take(&self) -> Option<String> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).take()
+    }
+}
+
+/// One line for a wgpu error: its kind and description (with the validation error's source
+/// chain, which names the resource and the limit).
+fn describe(error: &wgpu::Error) -> String {
+    match error {
+        wgpu::Error::OutOfMemory { .. } => "out of GPU memory".into(),
+        wgpu::Error::Validation { description, .. } | wgpu::Error::Internal { description, .. } => {
+            description.split_whitespace().collect::<Vec<_>>().join(" ")
+        }
+    }
 }
 
 /// The device, its queue, and what the adapter can do.
@@ -38,6 +107,7 @@ pub struct GpuContext {
     /// Whether pass timings come from GPU timestamp queries (else from wall-clock time around
     /// a submission per pass).
     pub timestamps: bool,
+    uncaptured: UncapturedErrors,
 }
 
 impl GpuContext {
@@ -198,13 +268,75 @@ impl GpuContext {
             Ok("gpu") => timestamps,
             _ => timestamps && adapter_info.device_type != wgpu::DeviceType::Cpu,
         };
+        let uncaptured = UncapturedErrors::default();
+        uncaptured.install(&device);
         Ok(Self {
             adapter,
             device,
             queue,
             adapter_info,
             timestamps,
+            uncaptured,
         })
+    }
+
+    /// Runs `create` under out-of-memory and validation error scopes, so that an allocation
+    /// or pipeline wgpu cannot make is an error naming `what` (and how big, `bytes`) with a
+    /// `remedy`, not a panic. Whatever `create` made is dropped on error.
+    pub fn scoped<T>(
+        &self,
+        what: &str,
+        bytes: Option<u64>,
+        remedy: &str,
+        create: impl FnOnce() -> T,
+    ) -> Result<T, GpuError> {
+        let out_of_memory = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let made = create();
+        let invalid = pollster::block_on(validation.pop());
+        let exhausted = pollster::block_on(out_of_memory.pop());
+        match exhausted.or(invalid) {
+            None => Ok(made),
+            Some(error) => Err(GpuError::Allocation {
+                what: what.to_string(),
+                size: bytes.map_or_else(|| "size n/a".into(), format_bytes),
+                message: describe(&error),
+                remedy: remedy.to_string(),
+            }),
+        }
+    }
+
+    /// The first GPU error raised outside [`GpuContext::scoped`] since the last call.
+    pub fn check_uncaptured(&self) -> Result<(), GpuError> {
+        match self.uncaptured.take() {
+            None => Ok(()),
+            Some(message) => Err(GpuError::Uncaptured(message)),
+        }
+    }
+
+    /// An error unless a storage buffer of `bytes` can be made and bound whole.
+    pub fn check_storage_buffer(
+        &self,
+        what: &str,
+        bytes: u64,
+        remedy: &str,
+    ) -> Result<(), GpuError> {
+        let limits = self.device.limits();
+        let limit = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        if bytes > limit {
+            return Err(GpuError::Allocation {
+                what: what.to_string(),
+                size: format_bytes(bytes),
+                message: format!(
+                    "the device binds storage buffers of at most {}",
+                    format_bytes(limit)
+                ),
+                remedy: remedy.to_string(),
+            });
+        }
+        Ok(())
     }
 
     /// "name (backend)" for reports.

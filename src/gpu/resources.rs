@@ -110,16 +110,17 @@ impl GpuBytes {
     }
 }
 
+/// Bytes of one block (one texel for uncompressed formats) of `format`.
+pub fn block_bytes(format: wgpu::TextureFormat) -> u64 {
+    format
+        .block_copy_size(Some(wgpu::TextureAspect::All))
+        .or_else(|| format.block_copy_size(Some(wgpu::TextureAspect::DepthOnly)))
+        .unwrap_or(4) as u64
+}
+
 /// Bytes a texture occupies: every mip level of every layer, at the format's block size.
 pub fn texture_bytes(desc: &wgpu::TextureDescriptor) -> u64 {
-    let block = desc
-        .format
-        .block_copy_size(Some(wgpu::TextureAspect::All))
-        .or_else(|| {
-            desc.format
-                .block_copy_size(Some(wgpu::TextureAspect::DepthOnly))
-        })
-        .unwrap_or(4) as u64;
+    let block = block_bytes(desc.format);
     let (bw, bh) = desc.format.block_dimensions();
     let mut total = 0u64;
     for level in 0..desc.mip_level_count {

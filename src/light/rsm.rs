@@ -248,15 +248,22 @@ impl Rsm {
         }
         let mut bytes = GpuBytes::default();
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
-        let vals_buffer = bytes.buffer(
-            device,
-            &wgpu::BufferDescriptor {
-                label: Some("vals"),
-                size: val_bytes,
-                usage: storage | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
+        let vals_buffer = ctx.scoped(
+            &format!("the VAL buffer ({slots} VALs)"),
+            Some(val_bytes),
+            "Lower --rsm, or use fewer lights or external VALs",
+            || {
+                bytes.buffer(
+                    device,
+                    &wgpu::BufferDescriptor {
+                        label: Some("vals"),
+                        size: val_bytes,
+                        usage: storage | wgpu::BufferUsages::COPY_SRC,
+                        mapped_at_creation: false,
+                    },
+                )
             },
-        );
+        )?;
         let val_count_buffer = bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -276,38 +283,58 @@ impl Rsm {
             },
         );
         let layers = layer_count.max(1);
-        let mut array = |label: &str, format| {
-            bytes.texture(
-                device,
-                &wgpu::TextureDescriptor {
-                    label: Some(label),
-                    size: wgpu::Extent3d {
-                        width: resolution,
-                        height: resolution,
-                        depth_or_array_layers: layers,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                        | wgpu::TextureUsages::TEXTURE_BINDING,
-                    view_formats: &[],
-                },
-            )
-        };
-        let textures = [
-            array("rsm position", POSITION_FORMAT),
-            array("rsm normal", NORMAL_FORMAT),
-            array("rsm flux", FLUX_FORMAT),
-        ];
-        let depth = bytes.texture_2d(
-            device,
-            "rsm depth",
-            (resolution, resolution),
-            DEPTH_FORMAT,
-            wgpu::TextureUsages::RENDER_ATTACHMENT,
-        );
+        let side = resolution as u64 * resolution as u64;
+        let rsm_bytes = side
+            * (layers as u64
+                * [POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT]
+                    .map(crate::gpu::resources::block_bytes)
+                    .iter()
+                    .sum::<u64>()
+                + crate::gpu::resources::block_bytes(DEPTH_FORMAT));
+        let (textures, depth) = ctx.scoped(
+            &format!(
+                "the RSMs of scene '{}' ({}: {layers} layers of {resolution}×{resolution})",
+                scene.name,
+                crate::gpu::count_of(scene.lights.len(), "light")
+            ),
+            Some(rsm_bytes),
+            "Lower --rsm (a point light takes six layers) or use fewer lights",
+            || {
+                let mut array = |label: &str, format| {
+                    bytes.texture(
+                        device,
+                        &wgpu::TextureDescriptor {
+                            label: Some(label),
+                            size: wgpu::Extent3d {
+                                width: resolution,
+                                height: resolution,
+                                depth_or_array_layers: layers,
+                            },
+                            mip_level_count: 1,
+                            sample_count: 1,
+                            dimension: wgpu::TextureDimension::D2,
+                            format,
+                            usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                                | wgpu::TextureUsages::TEXTURE_BINDING,
+                            view_formats: &[],
+                        },
+                    )
+                };
+                let textures = [
+                    array("rsm position", POSITION_FORMAT),
+                    array("rsm normal", NORMAL_FORMAT),
+                    array("rsm flux", FLUX_FORMAT),
+                ];
+                let depth = bytes.texture_2d(
+                    device,
+                    "rsm depth",
+                    (resolution, resolution),
+                    DEPTH_FORMAT,
+                    wgpu::TextureUsages::RENDER_ATTACHMENT,
+                );
+                (textures, depth)
+            },
+        )?;
         let depth_view = depth.create_view(&Default::default());
         let layer_views: Vec<[wgpu::TextureView; 3]> = (0..layer_count)
             .map(|layer| {
@@ -363,21 +390,28 @@ impl Rsm {
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
-        let pipeline = ScenePipeline {
-            label: "rsm",
-            module: &module,
-            layout: &layout,
-            vertex: wgpu::VertexBufferLayout {
-                array_stride: std::mem::size_of::<Vertex>() as u64,
-                step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &attributes,
+        let pipeline = ctx.scoped(
+            "the RSM pipeline",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                ScenePipeline {
+                    label: "rsm",
+                    module: &module,
+                    layout: &layout,
+                    vertex: wgpu::VertexBufferLayout {
+                        array_stride: std::mem::size_of::<Vertex>() as u64,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &attributes,
+                    },
+                    depth_write: true,
+                    depth_compare: wgpu::CompareFunction::Less,
+                    depth_bias: wgpu::DepthBiasState::default(),
+                    targets: &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT],
+                }
+                .build(device)
             },
-            depth_write: true,
-            depth_compare: wgpu::CompareFunction::Less,
-            depth_bias: wgpu::DepthBiasState::default(),
-            targets: &[POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT],
-        }
-        .build(device);
+        )?;
 
         let cs = wgpu::ShaderStages::COMPUTE;
         let array_entry = |binding| wgpu::BindGroupLayoutEntry {
@@ -454,9 +488,16 @@ impl Rsm {
             ],
         });
         let module = ctx.shader("vals_from_rsm.wgsl");
-        let compact_pipelines = ["count_rows", "scan_rows", "write_rows"].map(|entry| {
-            crate::raster::compute_pipeline_at(device, entry, &module, &compact_bgl, entry)
-        });
+        let compact_pipelines = ctx.scoped(
+            "the VAL compaction pipelines",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                ["count_rows", "scan_rows", "write_rows"].map(|entry| {
+                    crate::raster::compute_pipeline_at(device, entry, &module, &compact_bgl, entry)
+                })
+            },
+        )?;
         let append = external.map(|e| {
             let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                 label: Some("vals append"),

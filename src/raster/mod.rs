@@ -41,6 +41,13 @@ impl Default for RenderSettings {
     }
 }
 
+/// What to try when wgpu refuses a pipeline: it exceeds a limit of this adapter.
+pub const PIPELINE_REMEDY: &str =
+    "The adapter's limits are below what the pipeline needs; try another adapter (WGPU_ADAPTER_NAME)";
+
+/// Smallest `--shadow-res`: below it PCF kernels span the whole map.
+pub const MIN_SHADOW_RESOLUTION: u32 = 16;
+
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     #[error(transparent)]
@@ -90,9 +97,14 @@ impl Rasterizer {
         let limits = device.limits();
         // The mono view's size is checked here so that a bad size fails before any upload.
         crate::frame::check_size(ctx, settings.width, settings.height, settings.ssaa)?;
-        let shadow_resolution = settings
-            .shadow_resolution
-            .clamp(16, limits.max_texture_dimension_2d);
+        let shadow_resolution = settings.shadow_resolution;
+        let max_shadow_resolution = limits.max_texture_dimension_2d;
+        if !(MIN_SHADOW_RESOLUTION..=max_shadow_resolution).contains(&shadow_resolution) {
+            return Err(RenderError::Settings(format!(
+                "--shadow-res {shadow_resolution}: must be {MIN_SHADOW_RESOLUTION}..={max_shadow_resolution} \
+                 (the device's largest 2D texture side)"
+            )));
+        }
         let layer_count: u32 = scene
             .lights
             .iter()
@@ -132,24 +144,31 @@ impl Rasterizer {
                 mapped_at_creation: false,
             },
         );
-        let shadow_texture = shadow_bytes.texture(
-            device,
-            &wgpu::TextureDescriptor {
-                label: Some("shadow maps"),
-                size: wgpu::Extent3d {
-                    width: shadow_resolution,
-                    height: shadow_resolution,
-                    depth_or_array_layers: layers,
-                },
-                mip_level_count: 1,
-                sample_count: 1,
-                dimension: wgpu::TextureDimension::D2,
-                format: DEPTH_FORMAT,
-                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::TEXTURE_BINDING,
-                view_formats: &[],
+        let shadow_desc = wgpu::TextureDescriptor {
+            label: Some("shadow maps"),
+            size: wgpu::Extent3d {
+                width: shadow_resolution,
+                height: shadow_resolution,
+                depth_or_array_layers: layers,
             },
-        );
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: DEPTH_FORMAT,
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+            view_formats: &[],
+        };
+        let shadow_texture = ctx.scoped(
+            &format!(
+                "the shadow maps of scene '{}' ({}: {layers} layers of \
+                 {shadow_resolution}×{shadow_resolution})",
+                scene.name,
+                crate::gpu::count_of(scene.lights.len(), "light")
+            ),
+            Some(crate::gpu::resources::texture_bytes(&shadow_desc)),
+            "Lower --shadow-res (a point light takes six layers) or use fewer lights",
+            || shadow_bytes.texture(device, &shadow_desc),
+        )?;
         let shadow_array_view = shadow_texture.create_view(&wgpu::TextureViewDescriptor {
             label: Some("shadow maps array"),
             dimension: Some(wgpu::TextureViewDimension::D2Array),
@@ -203,21 +222,23 @@ impl Rasterizer {
             bind_group_layouts: &[Some(&shadow_bgl)],
             immediate_size: 0,
         });
-        let shadow_pipeline = ScenePipeline {
-            label: "shadow",
-            module: &shadow_module,
-            layout: &shadow_layout,
-            vertex: POSITION_ONLY,
-            depth_write: true,
-            depth_compare: wgpu::CompareFunction::Less,
-            depth_bias: wgpu::DepthBiasState {
-                constant: 2,
-                slope_scale: 1.5,
-                clamp: 0.0,
-            },
-            targets: &[],
-        }
-        .build(device);
+        let shadow_pipeline = ctx.scoped("the shadow pipeline", None, PIPELINE_REMEDY, || {
+            ScenePipeline {
+                label: "shadow",
+                module: &shadow_module,
+                layout: &shadow_layout,
+                vertex: POSITION_ONLY,
+                depth_write: true,
+                depth_compare: wgpu::CompareFunction::Less,
+                depth_bias: wgpu::DepthBiasState {
+                    constant: 2,
+                    slope_scale: 1.5,
+                    clamp: 0.0,
+                },
+                targets: &[],
+            }
+            .build(device)
+        })?;
 
         // G-buffer pipeline.
         let gbuffer_module = ctx.shader("gbuffer.wgsl");
@@ -233,22 +254,24 @@ impl Rasterizer {
             bind_group_layouts: &[Some(&frame_bgl), Some(&scene_gpu.material_layout)],
             immediate_size: 0,
         });
-        let gbuffer_pipeline = ScenePipeline {
-            label: "gbuffer",
-            module: &gbuffer_module,
-            layout: &gbuffer_layout,
-            vertex: Vertex::layout(),
-            depth_write: true,
-            depth_compare: wgpu::CompareFunction::Less,
-            depth_bias: wgpu::DepthBiasState::default(),
-            targets: &[
-                GBUFFER_NORMAL_FORMAT,
-                GBUFFER_MATERIAL_FORMAT,
-                GBUFFER_MATERIAL_FORMAT,
-                GBUFFER_MATERIAL_FORMAT,
-            ],
-        }
-        .build(device);
+        let gbuffer_pipeline = ctx.scoped("the gbuffer pipeline", None, PIPELINE_REMEDY, || {
+            ScenePipeline {
+                label: "gbuffer",
+                module: &gbuffer_module,
+                layout: &gbuffer_layout,
+                vertex: Vertex::layout(),
+                depth_write: true,
+                depth_compare: wgpu::CompareFunction::Less,
+                depth_bias: wgpu::DepthBiasState::default(),
+                targets: &[
+                    GBUFFER_NORMAL_FORMAT,
+                    GBUFFER_MATERIAL_FORMAT,
+                    GBUFFER_MATERIAL_FORMAT,
+                    GBUFFER_MATERIAL_FORMAT,
+                ],
+            }
+            .build(device)
+        })?;
 
         // Direct lighting.
         let direct_module = ctx.shader("direct_light.wgsl");
@@ -292,7 +315,10 @@ impl Rasterizer {
             compare: Some(wgpu::CompareFunction::LessEqual),
             ..Default::default()
         });
-        let direct_pipeline = compute_pipeline(device, "direct light", &direct_module, &direct_bgl);
+        let direct_pipeline =
+            ctx.scoped("the direct-light pipeline", None, PIPELINE_REMEDY, || {
+                compute_pipeline(device, "direct light", &direct_module, &direct_bgl)
+            })?;
 
         if scene.lights.is_empty() {
             log::warn!(

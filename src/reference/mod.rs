@@ -466,6 +466,8 @@ pub struct ReferenceMethod {
 impl ReferenceMethod {
     pub const DEFAULT_SPP: u32 = 64;
     pub const DEFAULT_SEED: u64 = 1;
+    /// Camera paths one frame may trace: 4096 spp at 1024² (hours on a CPU already).
+    pub const MAX_PATHS: u64 = 1 << 32;
 
     pub fn new(settings: RenderSettings, options: &MethodOptions) -> Result<Self, RenderError> {
         let bounces: String = options.get("bounces", "1".to_string())?;
@@ -475,6 +477,16 @@ impl ReferenceMethod {
             return Err(RenderError::Settings(
                 "option spp=0: need at least 1".into(),
             ));
+        }
+        let paths = settings.width as u64 * settings.height as u64 * spp as u64;
+        if paths > Self::MAX_PATHS {
+            return Err(RenderError::Settings(format!(
+                "option spp={spp}: {}×{} pixels × {spp} spp is {paths} paths, beyond the budget \
+                 of {} per frame; lower --spp or the image size",
+                settings.width,
+                settings.height,
+                Self::MAX_PATHS
+            )));
         }
         let seed: u64 = options.get("seed", Self::DEFAULT_SEED)?;
         Ok(Self {

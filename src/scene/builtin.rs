@@ -82,6 +82,65 @@ pub fn load(name: &str, params: &BuiltinParams) -> Result<Scene, SceneError> {
         });
     }
     let max_edge = params.max_edge;
+    if max_edge < TESSELLATION_CHECK_BELOW {
+        // Built once coarsely (cheap), the scene's area tells how many triangles the fine
+        // tessellation would make, before any of them is allocated.
+        let coarse = build(name, TESSELLATION_CHECK_BELOW)?;
+        let implied = implied_triangles(&coarse, max_edge);
+        if implied > MAX_TESSELLATED_TRIANGLES {
+            return Err(SceneError::Other {
+                path: name.into(),
+                message: format!(
+                    "--max-edge {max_edge} would tessellate this scene into about {implied} \
+                     triangles, beyond the budget of {MAX_TESSELLATED_TRIANGLES}; use \
+                     --max-edge {:.4} or more",
+                    min_max_edge(&coarse)
+                ),
+            });
+        }
+    }
+    build(name, max_edge)
+}
+
+/// Above this maximum edge (metres) no built-in scene comes near the triangle budget.
+const TESSELLATION_CHECK_BELOW: f32 = 0.02;
+
+/// Most triangles a built-in scene may be tessellated into: the budget an imported mesh's
+/// refinement stops at, for the whole scene.
+pub const MAX_TESSELLATED_TRIANGLES: u64 = super::mesh::MAX_TESSELLATED_TRIANGLES as u64;
+
+/// About how many triangles the tessellation at `max_edge` makes of `coarse`: a quad's
+/// cells have diagonals of at most `max_edge`, so each cell (two triangles) covers about
+/// `max_edge²/2`; meshes that are not tessellated keep their count.
+fn implied_triangles(coarse: &Scene, max_edge: f32) -> u64 {
+    let cell_area = (max_edge as f64).powi(2) / 2.0;
+    coarse
+        .meshes
+        .iter()
+        .map(|m| {
+            let cells = (mesh_area(m) / cell_area).ceil();
+            (m.triangle_count() as u64).max((2.0 * cells).min(u64::MAX as f64) as u64)
+        })
+        .fold(0u64, u64::saturating_add)
+}
+
+/// The smallest maximum edge whose tessellation stays within the budget.
+fn min_max_edge(coarse: &Scene) -> f64 {
+    let area: f64 = coarse.meshes.iter().map(mesh_area).sum();
+    (4.0 * area / MAX_TESSELLATED_TRIANGLES as f64).sqrt()
+}
+
+fn mesh_area(mesh: &Mesh) -> f64 {
+    mesh.indices
+        .chunks_exact(3)
+        .map(|t| {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| mesh.positions[i as usize]);
+            0.5 * (b - a).cross(c - a).length() as f64
+        })
+        .sum()
+}
+
+fn build(name: &str, max_edge: f32) -> Result<Scene, SceneError> {
     match name {
         "cornell" => Ok(cornell(name, CornellLight::Spot, max_edge)),
         "cornell-point" => Ok(cornell(name, CornellLight::Point, max_edge)),
@@ -720,6 +779,27 @@ mod tests {
                 assert!(low.abs() < 1e-6, "instance {i}");
             }
         }
+    }
+
+    #[test]
+    fn the_tessellation_estimate_tracks_the_triangles_built() {
+        for name in ["cornell", "plane-blocker", "corridor"] {
+            let coarse = build(name, TESSELLATION_CHECK_BELOW).unwrap();
+            let max_edge = 0.01;
+            let built = build(name, max_edge).unwrap();
+            let actual: u64 = built.meshes.iter().map(|m| m.triangle_count() as u64).sum();
+            let implied = implied_triangles(&coarse, max_edge);
+            // Cells of max_edge²/2 (diagonal ≤ max_edge); rounding up to whole rows adds a
+            // few per cent on small faces the area does not see.
+            assert!(
+                implied as f64 >= 0.9 * actual as f64,
+                "{name}: {implied} ≪ {actual}"
+            );
+            assert!(implied <= 2 * actual, "{name}: {implied} ≫ {actual}");
+        }
+        let err = load("cornell", &BuiltinParams { max_edge: 1e-4 }).unwrap_err();
+        assert!(err.to_string().contains("--max-edge"), "{err}");
+        assert!(load("cornell", &BuiltinParams { max_edge: 0.01 }).is_ok());
     }
 
     #[test]

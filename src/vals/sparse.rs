@@ -318,25 +318,53 @@ impl SparseGpu {
             )
         };
         let n = point_count as u64;
-        let point_diffuse = empty(&mut bytes, "point diffuse", n * 16);
-        let point_glossy = empty(&mut bytes, "point glossy", n * 16);
-        let point_extra = empty(&mut bytes, "point extra", n * 8);
-        // One byte per (point, cluster): the VAL clusters' visibility (`--occlusion rays`).
-        let visibility_buffer = empty(
-            &mut bytes,
-            "point cluster visibility",
+        let points_remedy = "Lower --sparse-points";
+        ctx.check_storage_buffer(
+            &format!("the sparse points' cluster visibility ({point_count} points)"),
             n * VISIBILITY_BYTES_PER_POINT,
-        );
-        let visibility_history = empty(
-            &mut bytes,
-            "point cluster visibility history",
-            n * VISIBILITY_BYTES_PER_POINT,
-        );
+            points_remedy,
+        )?;
+        ctx.check_storage_buffer(
+            &format!("the vertex links ({} rows)", links.len()),
+            (links.len() * 16) as u64,
+            "Use a coarser tessellation (--max-edge) or a smaller scene",
+        )?;
+        let point_buffers_bytes = n * (16 + 16 + 8 + 2 * VISIBILITY_BYTES_PER_POINT);
+        let (point_diffuse, point_glossy, point_extra, visibility_buffer, visibility_history) = ctx
+            .scoped(
+                &format!("the sparse point buffers ({point_count} points)"),
+                Some(point_buffers_bytes),
+                points_remedy,
+                || {
+                    (
+                        empty(&mut bytes, "point diffuse", n * 16),
+                        empty(&mut bytes, "point glossy", n * 16),
+                        empty(&mut bytes, "point extra", n * 8),
+                        // One byte per (point, cluster): the VAL clusters' visibility
+                        // (`--occlusion rays`).
+                        empty(
+                            &mut bytes,
+                            "point cluster visibility",
+                            n * VISIBILITY_BYTES_PER_POINT,
+                        ),
+                        empty(
+                            &mut bytes,
+                            "point cluster visibility history",
+                            n * VISIBILITY_BYTES_PER_POINT,
+                        ),
+                    )
+                },
+            )?;
         let point_bytes = bytes.0;
         let ranges_buffer = init(&mut bytes, "instance ranges", bytemuck::cast_slice(&ranges));
         let links_buffer = init(&mut bytes, "vertex links", bytemuck::cast_slice(&links));
         let link_bytes = (links.len() * 16) as u64;
-        let vertex_lights = empty(&mut bytes, "vertex lights", vertex_light_size);
+        let vertex_lights = ctx.scoped(
+            &format!("the vertex lights ({vertex_count} instance vertices)"),
+            Some(vertex_light_size),
+            "Use a coarser tessellation (--max-edge) or fewer instances",
+            || empty(&mut bytes, "vertex lights", vertex_light_size),
+        )?;
         let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
         let params_buffer = bytes.params::<SparseParams>(device, "sparse params");
 
@@ -361,7 +389,12 @@ impl SparseGpu {
                 label: Some(name),
                 entries: &entries,
             });
-            let pipeline = compute_pipeline(device, name, &ctx.shader(shader), &layout);
+            let pipeline = ctx.scoped(
+                &format!("the {name} pipeline"),
+                None,
+                crate::raster::PIPELINE_REMEDY,
+                || compute_pipeline(device, name, &ctx.shader(shader), &layout),
+            )?;
             let buffers: Vec<wgpu::Buffer> =
                 list.iter().skip(1).map(|(b, _)| (*b).clone()).collect();
             let mut kernel = Kernel {
@@ -372,7 +405,7 @@ impl SparseGpu {
                 group: None,
             };
             kernel.group = Some(kernel.bind(device, list[0].0));
-            kernel
+            Ok::<_, GpuError>(kernel)
         };
         let instances = &scene_gpu.instance_buffer;
         let gather = make(
@@ -390,7 +423,7 @@ impl SparseGpu {
                 (&point_extra, true),
                 (&visibility_buffer, false),
             ],
-        );
+        )?;
         let renormalize = make(
             "renormalize",
             "vals_renormalize.wgsl",
@@ -404,7 +437,7 @@ impl SparseGpu {
                 (&point_extra, false),
                 (&clamp_buffer, true),
             ],
-        );
+        )?;
         let occlusion = make(
             "occlusion",
             "vals_occlusion.wgsl",
@@ -417,7 +450,7 @@ impl SparseGpu {
                 (&point_glossy, true),
                 (&point_extra, false),
             ],
-        );
+        )?;
         let interpolate = make(
             "interpolation",
             "vals_interpolate.wgsl",
@@ -433,7 +466,7 @@ impl SparseGpu {
                 (&links_buffer, false),
                 (&vertex_lights, true),
             ],
-        );
+        )?;
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
         let bvh = SceneBvh::new(ctx, scene);
@@ -476,14 +509,21 @@ impl SparseGpu {
                 bind_group_layouts: &[Some(&visibility_bgl), Some(&bvh.layout)],
                 immediate_size: 0,
             });
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("visibility"),
-                layout: Some(&layout),
-                module: &ctx.shader("vals_visibility.wgsl"),
-                entry_point: Some("cs_main"),
-                compilation_options: Default::default(),
-                cache: None,
-            })
+            ctx.scoped(
+                "the visibility pipeline",
+                None,
+                crate::raster::PIPELINE_REMEDY,
+                || {
+                    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                        label: Some("visibility"),
+                        layout: Some(&layout),
+                        module: &ctx.shader("vals_visibility.wgsl"),
+                        entry_point: Some("cs_main"),
+                        compilation_options: Default::default(),
+                        cache: None,
+                    })
+                },
+            )?
         };
         let visibility_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("visibility"),
