@@ -125,7 +125,11 @@ pub struct FlyCamera {
 impl FlyCamera {
     /// The heading and pitch of `camera`'s view direction (its roll is dropped).
     pub fn from_view(camera: &CameraView) -> Self {
-        let forward = -camera.world_from_view.z_axis.truncate().normalize_or(Vec3::NEG_Z);
+        let forward = -camera
+            .world_from_view
+            .z_axis
+            .truncate()
+            .normalize_or(Vec3::NEG_Z);
         Self {
             position: camera.position(),
             yaw: (-forward.x).atan2(-forward.z),
@@ -350,9 +354,15 @@ impl Running {
         scene: &Scene,
     ) -> Result<Self, ViewerError> {
         let s = request.settings;
-        let view_count = request.views.views(&dummy_camera(), (s.width, s.height), Vec3::ZERO);
+        let view_count = request
+            .views
+            .views(&dummy_camera(), (s.width, s.height), Vec3::ZERO);
         let total_width: u32 = view_count.iter().map(|v| v.size.0).sum();
-        let height = view_count.iter().map(|v| v.size.1).max().unwrap_or(s.height);
+        let height = view_count
+            .iter()
+            .map(|v| v.size.1)
+            .max()
+            .unwrap_or(s.height);
         let attributes = Window::default_attributes()
             .with_title(format!("valgi view: {}", scene.name))
             .with_inner_size(winit::dpi::PhysicalSize::new(
@@ -478,15 +488,21 @@ impl Running {
     fn make_views(&mut self, size: (u32, u32), scene: &Scene) -> Result<(), ViewerError> {
         let world_from_node = scene.world_from_node_at(self.knobs.time);
         let camera = self.base_camera(scene, size, &world_from_node)?;
-        let rig = self
-            .request
-            .views
-            .views(&camera, size, scene_pivot(scene, &world_from_node, &camera));
+        let rig =
+            self.request
+                .views
+                .views(&camera, size, scene_pivot(scene, &world_from_node, &camera));
         self.views.clear();
         self.present_targets.clear();
         let mut x = 0;
         for r in rig {
-            let view = View::new(&self.ctx, &r.name, r.camera, r.size, self.request.settings.ssaa)?;
+            let view = View::new(
+                &self.ctx,
+                &r.name,
+                r.camera,
+                r.size,
+                self.request.settings.ssaa,
+            )?;
             let params = self.ctx.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("present params"),
                 size: std::mem::size_of::<PresentParams>() as u64,
@@ -494,7 +510,10 @@ impl Running {
                 mapped_at_creation: false,
             });
             let direct = view.targets.output_direct.create_view(&Default::default());
-            let indirect = view.targets.output_indirect.create_view(&Default::default());
+            let indirect = view
+                .targets
+                .output_indirect
+                .create_view(&Default::default());
             let group = self
                 .ctx
                 .device
@@ -620,11 +639,10 @@ impl Running {
         let world_from_node = scene.world_from_node_at(self.knobs.time);
         let size = self.views.first().map_or((1, 1), |v| (v.width, v.height));
         let camera = self.base_camera(scene, size, &world_from_node)?;
-        let rig = self.request.views.views(
-            &camera,
-            size,
-            scene_pivot(scene, &world_from_node, &camera),
-        );
+        let rig =
+            self.request
+                .views
+                .views(&camera, size, scene_pivot(scene, &world_from_node, &camera));
         for (view, r) in self.views.iter_mut().zip(rig) {
             view.camera = r.camera;
         }
@@ -674,7 +692,8 @@ impl Running {
         self.write_present_params();
 
         let output = match self.surface.get_current_texture() {
-            wgpu::CurrentSurfaceTexture::Success(t) | wgpu::CurrentSurfaceTexture::Suboptimal(t) => Some(t),
+            wgpu::CurrentSurfaceTexture::Success(t)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(t) => Some(t),
             _ => {
                 self.surface.configure(&self.ctx.device, &self.config);
                 None
@@ -697,7 +716,10 @@ impl Running {
             let target = output.texture.create_view(&Default::default());
             self.draw(&mut encoder, &target, &jobs, &screen);
         }
-        let last = self.request.frames.is_some_and(|n| self.frames_done + 1 >= n);
+        let last = self
+            .request
+            .frames
+            .is_some_and(|n| self.frames_done + 1 >= n);
         let shot = match (&self.request.screenshot, last) {
             (Some(_), true) => Some(self.offscreen_target()),
             _ => None,
@@ -841,7 +863,11 @@ impl Running {
         })
     }
 
-    fn write_screenshot(&self, texture: &wgpu::Texture, path: &std::path::Path) -> Result<(), ViewerError> {
+    fn write_screenshot(
+        &self,
+        texture: &wgpu::Texture,
+        path: &std::path::Path,
+    ) -> Result<(), ViewerError> {
         let bytes = crate::gpu::read_texture_bytes(&self.ctx, texture, 4)?;
         let bgra = matches!(
             self.config.format,
@@ -849,7 +875,13 @@ impl Running {
         );
         let rgb: Vec<u8> = bytes
             .chunks_exact(4)
-            .flat_map(|p| if bgra { [p[2], p[1], p[0]] } else { [p[0], p[1], p[2]] })
+            .flat_map(|p| {
+                if bgra {
+                    [p[2], p[1], p[0]]
+                } else {
+                    [p[0], p[1], p[2]]
+                }
+            })
             .collect();
         let image = image::RgbImage::from_raw(texture.width(), texture.height(), rgb)
             .expect("texel count matches the texture");
@@ -904,7 +936,10 @@ impl PanelData<'_> {
 
     fn contents(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         ui.heading("valgi");
-        ui.label(format!("frame {:.1} ms (CPU wall, record + submit)", self.frame_ms));
+        ui.label(format!(
+            "frame {:.1} ms (CPU wall, record + submit)",
+            self.frame_ms
+        ));
         ui.separator();
         egui::ComboBox::from_label("method")
             .selected_text(self.method_name)
@@ -929,11 +964,14 @@ impl PanelData<'_> {
                     match spec.kind {
                         OptionKind::Int { min, max } => {
                             let mut value: i64 = text.parse().unwrap_or(min);
-                            let response = ui.add(egui::DragValue::new(&mut value).range(min..=max));
+                            let response =
+                                ui.add(egui::DragValue::new(&mut value).range(min..=max));
                             if response.changed() {
                                 *text = value.to_string();
                             }
-                            if response.drag_stopped() || (response.changed() && !response.dragged()) {
+                            if response.drag_stopped()
+                                || (response.changed() && !response.dragged())
+                            {
                                 actions.push(Action::SetOption(spec.name, text.clone()));
                             }
                         }
@@ -942,15 +980,22 @@ impl PanelData<'_> {
                                 .selected_text(text.as_str())
                                 .show_ui(ui, |ui| {
                                     for choice in choices {
-                                        if ui.selectable_label(text == choice, *choice).clicked() && text != choice {
-                                            actions.push(Action::SetOption(spec.name, choice.to_string()));
+                                        if ui.selectable_label(text == choice, *choice).clicked()
+                                            && text != choice
+                                        {
+                                            actions.push(Action::SetOption(
+                                                spec.name,
+                                                choice.to_string(),
+                                            ));
                                         }
                                     }
                                 });
                         }
                         OptionKind::Path | OptionKind::Text => {
                             let response = ui.text_edit_singleline(text);
-                            if response.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter)) {
+                            if response.lost_focus()
+                                && ui.input(|i| i.key_pressed(egui::Key::Enter))
+                            {
                                 actions.push(Action::SetOption(spec.name, text.clone()));
                             }
                         }
@@ -991,7 +1036,11 @@ impl PanelData<'_> {
             });
         }
         ui.separator();
-        let gpu = if self.timings.solution.gpu_timestamps { "GPU timestamps" } else { "wall clock" };
+        let gpu = if self.timings.solution.gpu_timestamps {
+            "GPU timestamps"
+        } else {
+            "wall clock"
+        };
         ui.label(format!("passes, ms ({gpu})"));
         let scope = |ui: &mut egui::Ui, title: &str, timings: &crate::gpu::PassTimings| {
             ui.label(format!("{title}: {:.2}", timings.total_ms()));
@@ -1076,8 +1125,12 @@ mod tests {
     #[test]
     fn fly_camera_round_trips_a_view_direction() {
         let camera = CameraView {
-            world_from_view: Mat4::look_at_rh(Vec3::new(1.0, 2.0, 3.0), Vec3::new(0.0, 0.5, 0.0), Vec3::Y)
-                .inverse(),
+            world_from_view: glam::camera::rh::view::look_at_mat4(
+                Vec3::new(1.0, 2.0, 3.0),
+                Vec3::new(0.0, 0.5, 0.0),
+                Vec3::Y,
+            )
+            .inverse(),
             ..dummy_camera()
         };
         let fly = FlyCamera::from_view(&camera);
@@ -1091,9 +1144,17 @@ mod tests {
 
     #[test]
     fn fly_camera_moves_along_its_view() {
-        let mut fly = FlyCamera { position: Vec3::ZERO, yaw: std::f32::consts::FRAC_PI_2, pitch: 0.0 };
+        let mut fly = FlyCamera {
+            position: Vec3::ZERO,
+            yaw: std::f32::consts::FRAC_PI_2,
+            pitch: 0.0,
+        };
         // Heading +90° about +y looks down −x.
         fly.translate_local(Vec3::NEG_Z);
-        assert!((fly.position - Vec3::NEG_X).length() < 1e-6, "{:?}", fly.position);
+        assert!(
+            (fly.position - Vec3::NEG_X).length() < 1e-6,
+            "{:?}",
+            fly.position
+        );
     }
 }
