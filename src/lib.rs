@@ -23,4 +23,5 @@ pub mod shaders;
 pub mod shading;
 pub mod trace;
 pub mod vals;
+pub mod viewer;
 pub mod views_bench;

@@ -23,6 +23,9 @@ struct Cli {
 enum Command {
     /// Render a scene to linear EXR and/or tone-mapped PNG; prints one JSON line of timings.
     Render(RenderArgs),
+    /// Open a window on a scene: the frames of `render`, a fly camera and a panel of live
+    /// knobs (method and its options, exposure, direct/indirect, animation, pass times).
+    View(ViewArgs),
     /// Benchmark the sparse method (the paper's Table 1 grid), brute force and the device's
     /// FMA peak; prints a table and writes DIR/bench.csv.
     Bench(BenchArgs),
@@ -202,6 +205,52 @@ struct RenderArgs {
     /// the report's "memory" list, with the growth over the run's second half.
     #[arg(long, default_value_t = 0)]
     memory_every: u32,
+}
+
+#[derive(clap::Args)]
+#[command(allow_negative_numbers = true)]
+struct ViewArgs {
+    /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
+    #[arg(long, default_value = "cornell")]
+    scene: String,
+    /// Rendering method (see `valgi methods`); switchable in the panel.
+    #[arg(long, default_value = "direct")]
+    method: String,
+    /// Width of each view's region of the window, pixels.
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    /// Height of each view's region, pixels.
+    #[arg(long, default_value_t = 512)]
+    height: u32,
+    /// Camera name or index the view starts from (and resets to).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Exposure in stops (the PNG tone map of `render`).
+    #[arg(long, default_value_t = 0.0)]
+    exposure: f32,
+    #[arg(long, default_value_t = 1)]
+    ssaa: u32,
+    #[arg(long, default_value_t = 1024)]
+    shadow_res: u32,
+    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
+    max_edge: f32,
+    /// Animation time of the first frame, seconds.
+    #[arg(long, default_value_t = 0.0)]
+    time: f32,
+    /// A method option as key=value (repeatable); the method-specific flags are shorthands.
+    #[arg(long = "opt", value_name = "KEY=VALUE")]
+    options: Vec<String>,
+    /// mono, or stereo[:IPD_METRES] shown side by side (any rig of `render` works).
+    #[arg(long, default_value = "mono")]
+    views: String,
+    /// Render N frames (the animation at 30 fps), then exit.
+    #[arg(long)]
+    frames: Option<u32>,
+    /// Write the last frame's window to this PNG (with --frames).
+    #[arg(long, requires = "frames")]
+    screenshot: Option<PathBuf>,
+    #[arg(long)]
+    allow_external_paths: bool,
 }
 
 #[derive(clap::Args)]
@@ -521,21 +570,13 @@ fn main() -> ExitCode {
             } else {
                 args.out
             };
-            let mut options = valgi::method::MethodOptions::default();
-            if let Some(render) = matches.subcommand_matches("render") {
-                for (spec, _) in valgi::method::all_options() {
-                    if let Some(value) = render.get_one::<String>(spec.name) {
-                        options.set(spec.name, value);
-                    }
-                }
-            }
-            for pair in &args.options {
-                let Some((key, value)) = pair.split_once('=') else {
-                    eprintln!("error: --opt {pair}: expected KEY=VALUE");
+            let options = match method_options(&matches, "render", &args.options) {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!("error: {e}");
                     return ExitCode::FAILURE;
-                };
-                options.set(key.trim(), value.trim());
-            }
+                }
+            };
             let views = match valgi::frame::ViewRig::parse(&args.views) {
                 Ok(rig) => rig,
                 Err(e) => {
@@ -568,6 +609,50 @@ fn main() -> ExitCode {
                 memory_every: args.memory_every,
             };
             match app::render(&request) {
+                Ok(report) => {
+                    println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::View(args) => {
+            let options = match method_options(&matches, "view", &args.options) {
+                Ok(o) => o,
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return ExitCode::FAILURE;
+                }
+            };
+            let request = (|| {
+                Ok::<_, valgi::raster::RenderError>(valgi::viewer::ViewerRequest {
+                    scene: args.scene,
+                    method: args.method,
+                    options,
+                    settings: RenderSettings {
+                        width: args.width,
+                        height: args.height,
+                        ssaa: args.ssaa,
+                        shadow_resolution: args.shadow_res,
+                        ..RenderSettings::default()
+                    },
+                    camera: args.camera,
+                    views: valgi::frame::ViewRig::parse(&args.views)?,
+                    max_edge: args.max_edge,
+                    allow_external_paths: args.allow_external_paths,
+                    time: args.time,
+                    exposure: args.exposure,
+                    frames: args.frames,
+                    screenshot: args.screenshot,
+                })
+            })();
+            match request
+                .map_err(valgi::viewer::ViewerError::from)
+                .and_then(|r| valgi::viewer::run(&r))
+            {
                 Ok(report) => {
                     println!("{report}");
                     ExitCode::SUCCESS
@@ -818,10 +903,39 @@ fn run_eval(args: EvalArgs) -> ExitCode {
     }
 }
 
-/// `valgi render`'s method flags, one per option in the method registry (`--rsm 64` is
-/// `--opt rsm=64`); values are checked by the chosen method's entry.
+/// A subcommand's method flags and `--opt KEY=VALUE` pairs as method options.
+fn method_options(
+    matches: &clap::ArgMatches,
+    subcommand: &str,
+    pairs: &[String],
+) -> Result<valgi::method::MethodOptions, String> {
+    let mut options = valgi::method::MethodOptions::default();
+    if let Some(sub) = matches.subcommand_matches(subcommand) {
+        for (spec, _) in valgi::method::all_options() {
+            if let Some(value) = sub.get_one::<String>(spec.name) {
+                options.set(spec.name, value);
+            }
+        }
+    }
+    for pair in pairs {
+        let Some((key, value)) = pair.split_once('=') else {
+            return Err(format!("--opt {pair}: expected KEY=VALUE"));
+        };
+        options.set(key.trim(), value.trim());
+    }
+    Ok(options)
+}
+
+/// `valgi render`'s and `valgi view`'s method flags, one per option in the method registry
+/// (`--rsm 64` is `--opt rsm=64`); values are checked by the chosen method's entry.
 fn with_method_flags(cli: clap::Command) -> clap::Command {
-    cli.mut_subcommand("render", |mut render| {
+    cli.mut_subcommand("render", add_method_flags)
+        .mut_subcommand("view", add_method_flags)
+}
+
+fn add_method_flags(render: clap::Command) -> clap::Command {
+    let mut render = render;
+    {
         for (spec, methods) in valgi::method::all_options() {
             let default = if spec.default.is_empty() {
                 String::new()
@@ -837,7 +951,7 @@ fn with_method_flags(cli: clap::Command) -> clap::Command {
             );
         }
         render
-    })
+    }
 }
 
 /// The range of `render --sparse-points` (the registry's), for `mr` as well.

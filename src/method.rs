@@ -28,7 +28,7 @@ pub static REGISTRY: &[&Entry] = &[
 /// Every struct shared between Rust and WGSL: the base layer's, the light module's and each
 /// technique's own list (checked against naga by `tests/shader_layout.rs`).
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
-    let lists: [fn() -> Vec<crate::raster::types::SharedLayout>; 8] = [
+    let lists: [fn() -> Vec<crate::raster::types::SharedLayout>; 9] = [
         crate::raster::types::shared_layouts,
         crate::light::shared_layouts,
         crate::vals::shared_layouts,
@@ -37,6 +37,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
         crate::bench::shared_layouts,
         crate::negative::shared_layouts,
         crate::mixed_reality::shared_layouts,
+        crate::viewer::shared_layouts,
     ];
     lists.iter().flat_map(|list| list()).collect()
 }

@@ -19,6 +19,7 @@ pub const FILES: &[(&str, &str)] = &[
     ),
     ("resolve.wgsl", include_str!("../shaders/base/resolve.wgsl")),
     ("bvh.wgsl", include_str!("../shaders/base/bvh.wgsl")),
+    ("present.wgsl", include_str!("../shaders/base/present.wgsl")),
     (
         "vals_visibility.wgsl",
         include_str!("../shaders/vals/vals_visibility.wgsl"),

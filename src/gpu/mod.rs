@@ -5,7 +5,7 @@ pub mod readback;
 pub mod resources;
 pub mod timing;
 
-pub use readback::{read_buffer, read_texture_rgba32f};
+pub use readback::{read_buffer, read_texture_bytes, read_texture_rgba32f};
 pub use resources::GpuBytes;
 pub use timing::{FrameTimings, PassTimings, Passes, Scope};
 
@@ -232,6 +232,41 @@ impl GpuContext {
             }
         };
         Self::from_adapter(adapter).await
+    }
+
+    /// An instance for windows on `display` (a winit event loop's display handle), with the
+    /// backends and debug flags the headless path uses.
+    pub fn window_instance(display: Box<dyn wgpu::wgt::WgpuHasDisplayHandle>) -> wgpu::Instance {
+        let mut desc = wgpu::InstanceDescriptor::new_with_display_handle(display);
+        desc.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::PRIMARY);
+        desc.flags = wgpu::InstanceFlags::empty().with_env();
+        wgpu::Instance::new(desc)
+    }
+
+    /// Opens a device on an adapter that can present to `surface` (made from `instance`),
+    /// falling back to a software adapter.
+    pub fn for_surface(
+        instance: &wgpu::Instance,
+        surface: &wgpu::Surface<'_>,
+    ) -> Result<Self, GpuError> {
+        pollster::block_on(async {
+            let options = |fallback| wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: fallback,
+                compatible_surface: Some(surface),
+                ..Default::default()
+            };
+            let adapter = match instance.request_adapter(&options(false)).await {
+                Ok(a) => a,
+                Err(_) => instance
+                    .request_adapter(&options(true))
+                    .await
+                    .map_err(|_| GpuError::NoAdapter {
+                        backends: "any that can present to the window".into(),
+                    })?,
+            };
+            Self::from_adapter(adapter).await
+        })
     }
 
     async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {

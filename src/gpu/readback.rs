@@ -31,9 +31,19 @@ pub fn read_texture_rgba32f(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
 ) -> Result<Vec<[f32; 4]>, GpuError> {
+    let bytes = read_texture_bytes(ctx, texture, 16)?;
+    Ok(bytemuck::pod_collect_to_vec(&bytes))
+}
+
+/// Reads mip 0, layer 0 of a texture of `texel_bytes` bytes per texel (it must have
+/// `COPY_SRC`): packed rows from the top-left texel.
+pub fn read_texture_bytes(
+    ctx: &GpuContext,
+    texture: &wgpu::Texture,
+    texel_bytes: u32,
+) -> Result<Vec<u8>, GpuError> {
     let width = texture.width();
     let height = texture.height();
-    let texel_bytes = 16u32;
     let unpadded = width * texel_bytes;
     let padded =
         unpadded.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
@@ -71,11 +81,9 @@ pub fn read_texture_rgba32f(
     );
     ctx.queue.submit([encoder.finish()]);
     let bytes = map_and_copy(ctx, &staging)?;
-    let mut texels = Vec::with_capacity((width * height) as usize);
+    let mut texels = Vec::with_capacity((unpadded * height) as usize);
     for row in bytes.chunks_exact(padded as usize) {
-        texels.extend(bytemuck::pod_collect_to_vec::<u8, [f32; 4]>(
-            &row[..unpadded as usize],
-        ));
+        texels.extend_from_slice(&row[..unpadded as usize]);
     }
     Ok(texels)
 }

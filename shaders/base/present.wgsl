@@ -1,0 +1,64 @@
+// Draws one view's resolved output into a window region with the PNG tone map of
+// `image_io` (radiance · 2^exposure, clamped, sRGB OETF), so the window shows what
+// `valgi render` writes. The viewport is the view's region and has the view's size, so each
+// fragment reads exactly one output texel.
+
+struct PresentParams {
+    // 2^exposure.
+    exposure_scale: f32,
+    // Bit 0: direct light, bit 1: indirect light.
+    components: u32,
+    // 1 when the target stores encoded values (a non-sRGB surface format); 0 when the
+    // format's hardware encode applies the OETF.
+    encode_srgb: u32,
+    pad0: u32,
+    // Top-left pixel of the view's region in the target.
+    origin: vec2<u32>,
+    size: vec2<u32>,
+}
+
+@group(0) @binding(0) var<uniform> params: PresentParams;
+@group(0) @binding(1) var output_direct: texture_2d<f32>;
+@group(0) @binding(2) var output_indirect: texture_2d<f32>;
+
+struct VertexOut {
+    @builtin(position) position: vec4<f32>,
+}
+
+// One triangle that covers the viewport.
+@vertex
+fn vs_main(@builtin(vertex_index) index: u32) -> VertexOut {
+    let corner = vec2<f32>(f32((index << 1u) & 2u), f32(index & 2u));
+    var out: VertexOut;
+    out.position = vec4<f32>(corner * 2.0 - 1.0, 0.0, 1.0);
+    return out;
+}
+
+fn srgb_oetf(x: f32) -> f32 {
+    if (x <= 0.0031308) {
+        return 12.92 * x;
+    }
+    return 1.055 * pow(x, 1.0 / 2.4) - 0.055;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    // Fragment positions are in target pixels, not relative to the viewport.
+    let texel = vec2<u32>(in.position.xy) - params.origin;
+    let clamped = min(texel, params.size - vec2<u32>(1u));
+    var radiance = vec3<f32>(0.0);
+    if ((params.components & 1u) != 0u) {
+        radiance += textureLoad(output_direct, clamped, 0).rgb;
+    }
+    if ((params.components & 2u) != 0u) {
+        radiance += textureLoad(output_indirect, clamped, 0).rgb;
+    }
+    // Non-finite channels are written as black, as `Image::sanitize` does for files.
+    let finite = (radiance == radiance) & (abs(radiance) <= vec3<f32>(3.0e38));
+    let sanitized = select(vec3<f32>(0.0), radiance, finite);
+    var mapped = clamp(sanitized * params.exposure_scale, vec3<f32>(0.0), vec3<f32>(1.0));
+    if (params.encode_srgb != 0u) {
+        mapped = vec3<f32>(srgb_oetf(mapped.r), srgb_oetf(mapped.g), srgb_oetf(mapped.b));
+    }
+    return vec4<f32>(mapped, 1.0);
+}
