@@ -28,22 +28,33 @@ fn settings(points: usize) -> SparseSettings {
     }
 }
 
+/// The sparse method on a static scene, run up to the gather for one frame.
+fn gathered_at_rest(
+    ctx: &valgi::gpu::GpuContext,
+    scene: &valgi::scene::Scene,
+    points: usize,
+) -> SparseMethod {
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    let mut method = SparseMethod::new(
+        ctx,
+        scene,
+        common::small_render_settings(16),
+        settings(points),
+    )
+    .unwrap();
+    method.last_stage = Stage::Gather;
+    method.render(ctx, scene, &world, &camera).unwrap();
+    method
+}
+
 #[test]
 fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
     let Some(ctx) = common::gpu() else { return };
     // The corridor: walls, a door and a partition between the VALs and many points.
     let scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
     let world = scene.world_from_node();
-    let camera = scene.camera_view(None, 1.0, &world).unwrap();
-    let mut method = SparseMethod::new(
-        &ctx,
-        &scene,
-        common::small_render_settings(16),
-        settings(600),
-    )
-    .unwrap();
-    method.last_stage = Stage::Gather;
-    method.render(&ctx, &scene, &world, &camera).unwrap();
+    let method = gathered_at_rest(&ctx, &scene, 600);
     let gpu_vals = method.rsm.read_gpu_vals(&ctx).unwrap();
     let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
     let gpu_visibility = method.sparse.read_visibility(&ctx).unwrap();
@@ -104,7 +115,7 @@ fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
 
     // The gather scaled by the GPU's own visibility bytes.
     let vals: Vec<_> = gpu_vals.iter().map(|v| v.to_val()).collect();
-    let eye = camera.position();
+    let eye = scene.camera_view(None, 1.0, &world).unwrap().position();
     for (i, p) in gathered.points.iter().enumerate() {
         let receiver = Receiver {
             position: p.position,
@@ -137,17 +148,7 @@ fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
 fn every_val_carries_its_texel_cluster_and_samples_point_at_their_stratum() {
     let Some(ctx) = common::gpu() else { return };
     let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.2 }).unwrap();
-    let world = scene.world_from_node();
-    let camera = scene.camera_view(None, 1.0, &world).unwrap();
-    let mut method = SparseMethod::new(
-        &ctx,
-        &scene,
-        common::small_render_settings(16),
-        settings(100),
-    )
-    .unwrap();
-    method.last_stage = Stage::Gather;
-    method.render(&ctx, &scene, &world, &camera).unwrap();
+    let method = gathered_at_rest(&ctx, &scene, 100);
     let vals = method.rsm.read_gpu_vals(&ctx).unwrap();
     let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
     let (res, tiles) = (method.rsm.resolution, method.rsm.tiles);

@@ -15,7 +15,7 @@ use obvhs::BvhBuildParams;
 use crate::gpu::resources::GpuBytes;
 use crate::gpu::GpuContext;
 use crate::scene::merge::flat_region_indices;
-use crate::scene::{Material, Scene};
+use crate::scene::{Aabb, Material, Scene};
 
 /// One BVH node: a leaf when `prim_count > 0` (triangles `first..first + prim_count` of its
 /// mesh), otherwise an inner node whose children are nodes `first` and `first + 1` of its mesh.
@@ -283,29 +283,12 @@ impl SceneBvh {
                         world_max: [-1.0, -1.0, -1.0, f32::from_bits(range.first_triangle)],
                     };
                 }
-                let (mut lo, mut hi) = (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN));
-                for corner in 0..8 {
-                    let c = Vec3::new(
-                        if corner & 1 == 0 {
-                            range.min.x
-                        } else {
-                            range.max.x
-                        },
-                        if corner & 2 == 0 {
-                            range.min.y
-                        } else {
-                            range.max.y
-                        },
-                        if corner & 4 == 0 {
-                            range.min.z
-                        } else {
-                            range.max.z
-                        },
-                    );
-                    let w = world_from_model.transform_point3(c);
-                    lo = lo.min(w);
-                    hi = hi.max(w);
+                let world = Aabb {
+                    min: range.min,
+                    max: range.max,
                 }
+                .transformed(world_from_model);
+                let (lo, hi) = (world.min, world.max);
                 BvhInstance {
                     model_from_world: world_from_model.inverse().to_cols_array_2d(),
                     world_min: lo.extend(f32::from_bits(range.first_node)).into(),
