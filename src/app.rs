@@ -40,6 +40,8 @@ pub struct RenderRequest {
     pub settings: RenderSettings,
     /// Camera name or index; `None` = the scene's first camera (or a framing default).
     pub camera: Option<String>,
+    /// Lights and a camera added to the scene (`--light`, `--camera-eye`, …).
+    pub edits: scene::edits::SceneEdits,
     /// Files to write; the extension picks EXR or PNG.
     pub outputs: Vec<PathBuf>,
     /// PNG exposure in stops.
@@ -71,6 +73,7 @@ impl Default for RenderRequest {
             options: MethodOptions::default(),
             settings: RenderSettings::default(),
             camera: None,
+            edits: Default::default(),
             outputs: vec![],
             exposure: 0.0,
             indirect_only: false,
@@ -210,13 +213,22 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             prepare_output(path)?;
         }
     }
-    let scene = scene::load_with(
+    let mut scene = scene::load_with(
         &request.scene,
         &scene::LoadParams {
             max_edge: request.max_edge,
             allow_external_paths: request.allow_external_paths,
         },
     )?;
+    let aspect = request.settings.width as f32 / request.settings.height as f32;
+    let camera = request
+        .edits
+        .apply(&mut scene, request.camera.as_deref(), aspect)?;
+    // From here on the request names the camera the edits chose.
+    let request = &RenderRequest {
+        camera,
+        ..request.clone()
+    };
     for warning in &scene.warnings {
         log::warn!("{warning}");
     }

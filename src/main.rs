@@ -137,6 +137,51 @@ struct MrArgs {
     out: PathBuf,
 }
 
+/// Lights and a camera added to the scene; shared by `render`, `view` and `eval`.
+#[derive(clap::Args)]
+struct SceneEditArgs {
+    /// Add a light (repeatable): point:X,Y,Z,INTENSITY[,R,G,B] (W/sr) |
+    /// spot:X,Y,Z,DX,DY,DZ,INNER_DEG,OUTER_DEG,INTENSITY[,R,G,B] | sun:DX,DY,DZ,IRRADIANCE[,R,G,B]
+    /// (W/m², travelling along D) | headlight:INTENSITY[,R,G,B] (at the camera).
+    #[arg(long = "light", value_name = "SPEC", value_parser = parse_light, allow_hyphen_values = true)]
+    lights: Vec<valgi::scene::edits::LightSpec>,
+    /// Camera position X,Y,Z in world space (looks at --camera-target, default the scene's
+    /// centre).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_eye, allow_hyphen_values = true)]
+    camera_eye: Option<glam::Vec3>,
+    /// Point the camera looks at, X,Y,Z in world space.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_target, allow_hyphen_values = true)]
+    camera_target: Option<glam::Vec3>,
+    /// Vertical field of view in degrees (alone: changes the chosen camera's).
+    #[arg(long, value_name = "DEG")]
+    fov: Option<f32>,
+}
+
+impl SceneEditArgs {
+    fn edits(&self) -> valgi::scene::edits::SceneEdits {
+        valgi::scene::edits::SceneEdits {
+            lights: self.lights.clone(),
+            camera: valgi::scene::edits::CameraEdit {
+                eye: self.camera_eye,
+                target: self.camera_target,
+                yfov_degrees: self.fov,
+            },
+        }
+    }
+}
+
+fn parse_light(text: &str) -> Result<valgi::scene::edits::LightSpec, String> {
+    text.parse()
+}
+
+fn parse_eye(text: &str) -> Result<glam::Vec3, String> {
+    valgi::scene::edits::parse_point("--camera-eye", text)
+}
+
+fn parse_target(text: &str) -> Result<glam::Vec3, String> {
+    valgi::scene::edits::parse_point("--camera-target", text)
+}
+
 #[derive(clap::Args)]
 #[command(allow_negative_numbers = true)]
 struct RenderArgs {
@@ -155,6 +200,8 @@ struct RenderArgs {
     /// Camera name or index (default: the scene's first camera, or one framing the scene).
     #[arg(long)]
     camera: Option<String>,
+    #[command(flatten)]
+    scene_edits: SceneEditArgs,
     /// Output file (.exr = linear 32-bit float, .png = tone-mapped). Repeatable. Default:
     /// out/<scene>.exr and out/<scene>.png.
     #[arg(long)]
@@ -225,6 +272,8 @@ struct ViewArgs {
     /// Camera name or index the view starts from (and resets to).
     #[arg(long)]
     camera: Option<String>,
+    #[command(flatten)]
+    scene_edits: SceneEditArgs,
     /// Exposure in stops (the PNG tone map of `render`).
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
@@ -272,6 +321,8 @@ struct EvalArgs {
     /// Camera name or index.
     #[arg(long)]
     camera: Option<String>,
+    #[command(flatten)]
+    scene_edits: SceneEditArgs,
     /// Reference paths per pixel.
     #[arg(long, default_value_t = 256)]
     ref_spp: u32,
@@ -366,6 +417,9 @@ struct BakeArgs {
     /// Tessellation of built-in scenes (render with the same value).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
+    /// Add a light (repeatable; the formats of `render --light`); render with the same ones.
+    #[arg(long = "light", value_name = "SPEC", value_parser = parse_light, allow_hyphen_values = true)]
+    added_lights: Vec<valgi::scene::edits::LightSpec>,
     /// Virtual lights: patches (seed 000: --vpls patches) or polygons (seed 001: --vpls
     /// photon paths, each leaving a VPL per bounce, clustered into polygon and sphere lights).
     #[arg(long, default_value = "patches")]
@@ -596,6 +650,7 @@ fn main() -> ExitCode {
                     ..RenderSettings::default()
                 },
                 camera: args.camera,
+                edits: args.scene_edits.edits(),
                 outputs,
                 exposure: args.exposure,
                 indirect_only: args.indirect_only,
@@ -640,6 +695,7 @@ fn main() -> ExitCode {
                         ..RenderSettings::default()
                     },
                     camera: args.camera,
+                    edits: args.scene_edits.edits(),
                     views: valgi::frame::ViewRig::parse(&args.views)?,
                     max_edge: args.max_edge,
                     allow_external_paths: args.allow_external_paths,
@@ -814,6 +870,10 @@ fn bake(args: BakeArgs) -> ExitCode {
     let request = valgi::atlas::BakeRequest {
         scene: args.scene,
         max_edge: args.max_edge,
+        edits: valgi::scene::edits::SceneEdits {
+            lights: args.added_lights,
+            ..Default::default()
+        },
         settings: valgi::atlas::BakeSettings {
             lights: args.lights,
             vpls: args.vpls,
@@ -874,6 +934,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
         width: args.width,
         height: args.height,
         camera: args.camera,
+        edits: args.scene_edits.edits(),
         ref_spp: args.ref_spp,
         ref_bounces,
         frames: args.frames,

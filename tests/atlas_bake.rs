@@ -185,6 +185,7 @@ fn cancelling_stops_the_bake_and_leaves_no_file() {
         }
     };
     let request = valgi::atlas::BakeRequest {
+        edits: Default::default(),
         scene: "box-point".into(),
         max_edge: 0.25,
         settings: small(200),
@@ -217,6 +218,7 @@ fn bad_input_fails_with_a_clear_error() {
     assert!(err.contains("no punctual lights"), "{err}");
 
     let request = |out: &str, from_bounce: u32| valgi::atlas::BakeRequest {
+        edits: Default::default(),
         scene: "box-point".into(),
         max_edge: 0.25,
         settings: small(10),

@@ -377,3 +377,58 @@ fn shadow_resolutions_spp_and_sparse_points_out_of_range_are_refused() {
     );
     assert!(!std::path::Path::new(out).exists(), "an image was written");
 }
+
+#[test]
+fn bad_lights_and_cameras_are_refused_naming_the_value() {
+    let out = temp_out("cli-edits", "x.exr");
+    let out = out.as_str();
+    assert_refused(
+        &tiny_render(out, &["--light", "lamp:1,2,3,4"]),
+        &["--light", "lamp:1,2,3,4", "unknown light kind"],
+    );
+    assert_refused(
+        &tiny_render(out, &["--light", "point:-1,2,3"]),
+        &["point:-1,2,3", "point takes 4 numbers"],
+    );
+    assert_refused(
+        &tiny_render(out, &["--camera-eye", "-1,2"]),
+        &["--camera-eye", "-1,2", "X,Y,Z"],
+    );
+    assert_refused(&tiny_render(out, &["--fov", "0"]), &["--fov 0"]);
+    assert_refused(
+        &tiny_render(out, &["--camera-eye", "0,1,0", "--camera-target", "0,1,0"]),
+        &["coincide"],
+    );
+    assert!(!std::path::Path::new(out).exists(), "an image was written");
+}
+
+#[test]
+fn a_light_and_camera_from_the_command_line_light_an_unlit_scene() {
+    if common::gpu().is_none() {
+        return;
+    }
+    // `plane-point` lit by a second light below the camera, seen from another eye: negative
+    // numbers pass as values, and the report counts the added light.
+    let out = temp_out("cli-edits-render", "lit.exr");
+    let output = valgi()
+        .args(tiny_render(
+            &out,
+            &[
+                "--light",
+                "spot:-0.5,1.5,0.5,0.2,-1,-0.2,10,40,3,1,0.8,0.6",
+                "--light",
+                "headlight:1",
+                "--camera-eye",
+                "-1.5,2,1.5",
+                "--fov",
+                "50",
+            ],
+        ))
+        .output()
+        .expect("run valgi");
+    common::assert_success(&output);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
+    assert_eq!(report["lights"], 3, "{report}");
+}

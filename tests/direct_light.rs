@@ -608,3 +608,56 @@ fn glossy_materials_match_the_cpu_twin_per_pixel() {
         }
     }
 }
+
+/// A light given on the command line (`--light`) is the same light as one in the file: adding
+/// a copy of each built-in plane scene's own light through `SceneEdits` doubles every pixel
+/// of the direct image (point, spot and directional alike; the shadow maps come along).
+#[test]
+fn lights_added_by_edits_shade_like_the_scenes_own() {
+    use valgi::scene::edits::{LightSpec, SceneEdits};
+    use valgi::shading::WorldLight;
+    let Some(ctx) = common::gpu() else { return };
+    for name in ["plane-point", "plane-spot", "plane-directional"] {
+        let scene = load(name);
+        let (single, _) = render(&ctx, &scene, small(48, 48));
+        let world = scene.world_from_node();
+        let own = WorldLight::from_scene(&scene, &world)[0];
+        let spec = match own.kind {
+            LightKind::Point => LightSpec::Point {
+                position: own.position,
+                intensity: own.intensity,
+            },
+            LightKind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => LightSpec::Spot {
+                position: own.position,
+                direction: own.direction,
+                inner_cone_angle,
+                outer_cone_angle,
+                intensity: own.intensity,
+            },
+            LightKind::Directional => LightSpec::Sun {
+                direction: own.direction,
+                irradiance: own.intensity,
+            },
+        };
+        let mut doubled_scene = scene.clone();
+        let edits = SceneEdits {
+            lights: vec![spec],
+            ..SceneEdits::default()
+        };
+        edits.apply(&mut doubled_scene, None, 1.0).unwrap();
+        assert_eq!(doubled_scene.lights.len(), scene.lights.len() + 1);
+        let (doubled, _) = render(&ctx, &doubled_scene, small(48, 48));
+        let (mut worst, mut lit) = (0.0f32, 0);
+        for (a, b) in single.direct.pixels.iter().zip(&doubled.direct.pixels) {
+            if a[0] > 1e-4 {
+                lit += 1;
+                worst = worst.max((b[0] / a[0] - 2.0).abs());
+            }
+        }
+        assert!(lit > 200, "{name}: only {lit} lit pixels");
+        assert!(worst < 2e-3, "{name}: worst ratio error {worst} against 2");
+    }
+}

@@ -36,6 +36,8 @@ pub struct BakeRequest {
     pub scene: String,
     /// Built-in scenes' tessellation; render with the same value (the layout depends on it).
     pub max_edge: f32,
+    /// Lights added to the scene (`--light`); render with the same ones.
+    pub edits: crate::scene::edits::SceneEdits,
     pub settings: BakeSettings,
     /// First bounce written (1 = all); bounces `from_bounce..=bounces` go into the file.
     pub from_bounce: u32,
@@ -72,12 +74,13 @@ pub fn bake_to_file(
             request.from_bounce, request.settings.bounces
         )));
     }
-    let scene = crate::scene::load(
+    let mut scene = crate::scene::load(
         &request.scene,
         &crate::scene::builtin::BuiltinParams {
             max_edge: request.max_edge,
         },
     )?;
+    request.edits.apply(&mut scene, None, 1.0)?;
     let world_from_node = scene.world_from_node();
     let result = bake(
         &scene,

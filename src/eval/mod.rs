@@ -45,6 +45,8 @@ pub struct EvalRequest {
     pub height: u32,
     /// Camera name or index (`None` = the scene's first).
     pub camera: Option<String>,
+    /// Lights and a camera added to every scene (`--light`, `--camera-eye`, …).
+    pub edits: scene::edits::SceneEdits,
     /// Reference paths per pixel.
     pub ref_spp: u32,
     /// Reference bounce count (1 compares single-bounce methods).
@@ -68,6 +70,7 @@ impl Default for EvalRequest {
             width: 256,
             height: 256,
             camera: None,
+            edits: Default::default(),
             ref_spp: 256,
             ref_bounces: Bounces::Limited(1),
             ref_seed: 0x5EED,
@@ -349,11 +352,16 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
     let params = BuiltinParams {
         max_edge: request.max_edge,
     };
-    let scenes: Vec<Scene> = request
-        .scenes
-        .iter()
-        .map(|s| scene::load(s, &params))
-        .collect::<Result<_, _>>()?;
+    let aspect = request.width as f32 / request.height as f32;
+    // Each scene with the command line's edits, and the camera they leave it with.
+    let mut scenes: Vec<(Scene, Option<String>)> = Vec::with_capacity(request.scenes.len());
+    for spec in &request.scenes {
+        let mut scene = scene::load(spec, &params)?;
+        let camera = request
+            .edits
+            .apply(&mut scene, request.camera.as_deref(), aspect)?;
+        scenes.push((scene, camera));
+    }
     let ctx = GpuContext::new()?;
     let settings = RenderSettings {
         width: request.width,
@@ -368,7 +376,13 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         references_rendered: 0,
         references_cached: 0,
     };
-    for (scene_spec, scene) in request.scenes.iter().zip(&scenes) {
+    for (scene_spec, (scene, camera)) in request.scenes.iter().zip(&scenes) {
+        // A reference cached for the bare scene must not serve the edited one.
+        let scene_key = if request.edits.is_empty() {
+            scene_spec.clone()
+        } else {
+            format!("{scene_spec} {:?}", request.edits)
+        };
         for warning in &scene.warnings {
             log::warn!("{warning}");
         }
@@ -378,12 +392,11 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         for (name, options) in &specs {
             methods.push(method::create(name, &ctx, scene, settings, options)?);
         }
-        let aspect = request.width as f32 / request.height as f32;
         let world0 = scene.world_from_node_at(0.0);
-        let camera0 = scene.camera_view(request.camera.as_deref(), aspect, &world0)?;
+        let camera0 = scene.camera_view(camera.as_deref(), aspect, &world0)?;
         let key = reference_key(
-            scene_spec,
-            request.camera.as_deref(),
+            &scene_key,
+            camera.as_deref(),
             request.width,
             request.height,
             request.ref_bounces,
@@ -448,7 +461,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             for f in 0..request.frames {
                 let time = f as f32 * request.frame_dt;
                 let world = scene.world_from_node_at(time);
-                let camera = scene.camera_view(request.camera.as_deref(), aspect, &world)?;
+                let camera = scene.camera_view(camera.as_deref(), aspect, &world)?;
                 let mut frame = method.render(&ctx, scene, &world, &camera)?;
                 frame.direct.sanitize();
                 frame.indirect.sanitize();

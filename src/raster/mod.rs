@@ -322,7 +322,9 @@ impl Rasterizer {
 
         if scene.lights.is_empty() {
             log::warn!(
-                "scene '{}' has no lights: direct light is black (emission only)",
+                "scene '{}' has no lights: direct light is black (emission only); add one with \
+                 --light point:X,Y,Z,INTENSITY | spot:… | sun:DX,DY,DZ,IRRADIANCE | \
+                 headlight:INTENSITY",
                 scene.name
             );
         }

@@ -7,6 +7,7 @@
 
 pub mod animation;
 pub mod builtin;
+pub mod edits;
 pub mod files;
 pub mod gltf_import;
 pub mod merge;
@@ -539,20 +540,49 @@ fn orthonormalize(m: Mat4) -> Mat4 {
     Mat4::from_rotation_translation(rotation, translation)
 }
 
+/// The vertical field of view of the framing default camera.
+pub const DEFAULT_YFOV_DEGREES: f32 = 45.0;
+
 /// A camera framing the bounds from the +z side, slightly above, with a 45° vertical fov.
 fn default_camera(bounds: &Aabb, radius: f32, aspect: f32) -> CameraView {
-    let yfov = 45f32.to_radians();
+    framing_camera(bounds, radius, aspect, DEFAULT_YFOV_DEGREES.to_radians())
+}
+
+/// A camera looking at the bounds' centre from the +z side, slightly above, with vertical
+/// field of view `yfov`, as close as it can be while all eight corners of the box stay inside
+/// the frustum: the box fills the frame's width or height instead of leaving the margin a
+/// bounding sphere would.
+pub fn framing_camera(bounds: &Aabb, radius: f32, aspect: f32, yfov: f32) -> CameraView {
     let center = if bounds.is_empty() {
         Vec3::ZERO
     } else {
         bounds.center()
     };
-    // Distance at which the bounding sphere fits the narrower of the two fields of view.
-    let half_vertical = yfov * 0.5;
-    let half_horizontal = (aspect.max(1e-3) * half_vertical.tan()).atan();
-    let fit = radius / half_vertical.min(half_horizontal).sin();
-    let dir = Vec3::new(0.0, 0.35, 1.0).normalize();
-    let eye = center + dir * fit * 1.05;
+    let backward = Vec3::new(0.0, 0.35, 1.0).normalize();
+    let right = Vec3::Y.cross(backward).normalize();
+    let up = backward.cross(right);
+    let tan_v = (yfov * 0.5).tan();
+    let tan_h = aspect.max(1e-3) * tan_v;
+    // A corner at offset c from the centre, seen from centre + backward·d, has view depth
+    // d − c·backward; it is inside the frustum when |c·right| ≤ tan_h·depth and
+    // |c·up| ≤ tan_v·depth, so the distance is the largest of those bounds over the corners.
+    let half = if bounds.is_empty() {
+        Vec3::splat(radius / 3f32.sqrt())
+    } else {
+        bounds.extent() * 0.5
+    };
+    let mut fit = 0.0f32;
+    for i in 0..8 {
+        let sign = |bit: usize| if i & bit == 0 { -1.0 } else { 1.0 };
+        let c = half * Vec3::new(sign(1), sign(2), sign(4));
+        let along = c.dot(backward);
+        fit = fit
+            .max(along + c.dot(right).abs() / tan_h)
+            .max(along + c.dot(up).abs() / tan_v);
+    }
+    // 2 % of margin so silhouettes do not touch the border; never inside the box.
+    let fit = (fit * 1.02).max(radius * 1.01);
+    let eye = center + backward * fit;
     let view_from_world = glam::camera::rh::view::look_at_mat4(eye, center, Vec3::Y);
     CameraView {
         world_from_view: view_from_world.inverse(),

@@ -63,6 +63,8 @@ pub struct ViewerRequest {
     /// Size of each view's region and the method's quality settings.
     pub settings: RenderSettings,
     pub camera: Option<String>,
+    /// Lights and a camera added to the scene (`--light`, `--camera-eye`, …).
+    pub edits: crate::scene::edits::SceneEdits,
     pub views: ViewRig,
     pub max_edge: f32,
     pub allow_external_paths: bool,
@@ -184,7 +186,7 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     if let Some(path) = &request.screenshot {
         crate::image_io::prepare_output(path).map_err(AppError::from)?;
     }
-    let scene = scene::load_with(
+    let mut scene = scene::load_with(
         &request.scene,
         &scene::LoadParams {
             max_edge: request.max_edge,
@@ -192,6 +194,16 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
         },
     )
     .map_err(AppError::from)?;
+    let aspect = request.settings.width as f32 / request.settings.height as f32;
+    let camera = request
+        .edits
+        .apply(&mut scene, request.camera.as_deref(), aspect)
+        .map_err(AppError::from)?;
+    // From here on the request names the camera the edits chose.
+    let request = &ViewerRequest {
+        camera,
+        ..request.clone()
+    };
     for warning in &scene.warnings {
         log::warn!("{warning}");
     }
