@@ -9,7 +9,7 @@ use crate::frame::memory::{self, MemorySample};
 use crate::frame::{record_frame, Method, View, ViewResult, ViewRig};
 use crate::gpu::timing::round3;
 use crate::gpu::{GpuContext, GpuError};
-use crate::image_io::{prepare_output, ImageError};
+use crate::image_io::{prepare_output, Image, ImageError};
 use crate::method::{self, MethodOptions};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, builtin::BuiltinParams, SceneError};
@@ -24,6 +24,8 @@ pub enum AppError {
     Render(#[from] RenderError),
     #[error(transparent)]
     Image(#[from] ImageError),
+    #[error(transparent)]
+    Cancelled(#[from] crate::progress::Cancelled),
 }
 
 /// Beyond ±64 stops (2^64) every pixel of a PNG is black or white.
@@ -46,6 +48,9 @@ pub struct RenderRequest {
     pub outputs: Vec<PathBuf>,
     /// PNG exposure in stops.
     pub exposure: f32,
+    /// Choose the PNG exposure from the first frame's image ([`image_io::key_exposure`]),
+    /// instead of `exposure`.
+    pub auto_exposure: bool,
     pub indirect_only: bool,
     /// Built-in scenes' tessellation (maximum edge length, metres).
     pub max_edge: f32,
@@ -76,6 +81,7 @@ impl Default for RenderRequest {
             edits: Default::default(),
             outputs: vec![],
             exposure: 0.0,
+            auto_exposure: false,
             indirect_only: false,
             max_edge: BuiltinParams::default().max_edge,
             time: 0.0,
@@ -158,6 +164,32 @@ fn with_stem_suffix(path: &std::path::Path, suffix: &str) -> PathBuf {
 /// `frame_NNNN.exr` for frame `index` in `dir`.
 pub fn frame_path(dir: &std::path::Path, index: u32) -> PathBuf {
     dir.join(format!("frame_{index:04}.exr"))
+}
+
+/// Warns when most of a PNG came out black, and says what exposure would show it.
+fn warn_if_dark(path: &std::path::Path, image: &Image, exposure: f32, auto: bool) {
+    let dark = crate::image_io::dark_fraction(image, exposure);
+    if dark < 0.9 {
+        return;
+    }
+    match crate::image_io::key_exposure(image) {
+        None => log::warn!(
+            "{}: the image is black (no light reaches the camera)",
+            path.display()
+        ),
+        Some(key) if !auto => log::warn!(
+            "{}: {:.0}% of the pixels are black at --exposure {exposure}; --auto-exposure \
+             would use {key:+.1} stops",
+            path.display(),
+            dark * 100.0
+        ),
+        Some(_) => log::warn!(
+            "{}: {:.0}% of the pixels are black even at the automatic exposure \
+             ({exposure:+.1} stops): a few bright pixels, the rest unlit",
+            path.display(),
+            dark * 100.0
+        ),
+    }
 }
 
 /// The views of a request at one pose: the rig applied to the scene camera.
@@ -243,7 +275,11 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     }
     let ctx = GpuContext::new()?;
     let settings = request.settings;
+    let preparing = crate::progress::Step::new(true, 1, &format!("preparing {}", request.method));
     let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
+    preparing.inc(1);
+    preparing.finish();
+    crate::progress::check()?;
     let first_world = scene.world_from_node_at(request.time);
     let mut views = Vec::new();
     for rig in rig_views(request, &scene, &first_world)? {
@@ -261,7 +297,12 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     let mut written = Vec::new();
     let mut last_images = Vec::new();
     let mut memory = Vec::new();
+    let mut exposure: Option<f32> = None;
+    let frames_step = crate::progress::Step::new(frames > 1, frames as u64, "frames");
     for index in 0..frames {
+        // Ctrl-C stops between frames and before a frame's files are written; frames already
+        // written are whole files.
+        crate::progress::check()?;
         let time = request.time + index as f32 / request.fps;
         let world_from_node = scene.world_from_node_at(time);
         for (view, rig) in views
@@ -271,6 +312,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             view.camera = rig.camera;
         }
         let frame = record_frame(method.as_mut(), &ctx, &scene, &world_from_node, &views)?;
+        crate::progress::check()?;
         last_images.clear();
         let write = request.write_images;
         for (view, result) in views.iter().zip(&frame.results).filter(|_| write) {
@@ -281,11 +323,25 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
                 direct.add(&indirect)
             };
             non_finite += image.sanitize();
+            // One exposure for the whole run (from the first image), so frames do not flicker.
+            let exposure = *exposure.get_or_insert_with(|| {
+                if request.auto_exposure {
+                    crate::image_io::key_exposure(&image).unwrap_or(0.0)
+                } else {
+                    request.exposure
+                }
+            });
             for path in output_paths(request, index, &view.name, multi_view) {
                 if index > 0 || multi_view {
                     prepare_output(&path)?;
                 }
-                image.write(&path, request.exposure)?;
+                image.write(&path, exposure)?;
+                let is_png = path
+                    .extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+                if is_png && index == 0 {
+                    warn_if_dark(&path, &image, exposure, request.auto_exposure);
+                }
                 written.push(path.display().to_string());
             }
             last_images.push(image);
@@ -300,7 +356,9 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             });
         }
         last = Some(frame);
+        frames_step.inc(1);
     }
+    frames_step.finish();
     if non_finite > 0 {
         log::warn!("{non_finite} pixels had non-finite radiance; written as black");
     }
@@ -309,7 +367,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         if let Some(first) = request.outputs.first() {
             let sheet = with_stem_suffix(first, "_views").with_extension("png");
             prepare_output(&sheet)?;
-            side_by_side(&last_images).write(&sheet, request.exposure)?;
+            side_by_side(&last_images).write(&sheet, exposure.unwrap_or(request.exposure))?;
             written.push(sheet.display().to_string());
         }
     }
@@ -336,6 +394,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "triangles": scene.triangle_count(),
         "indirect_only": request.indirect_only,
         "non_finite_pixels": non_finite,
+        "exposure": exposure.map(|e| (e * 1000.0).round() / 1000.0),
         "warnings": scene.warnings.len(),
         "outputs": written,
         "views": views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),

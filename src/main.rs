@@ -209,6 +209,10 @@ struct RenderArgs {
     /// PNG exposure in stops: png = sRGB(clamp(radiance × 2^E)); finite, within ±64.
     #[arg(long, default_value_t = 0.0)]
     exposure: f32,
+    /// Pick the PNG exposure from the image: its log-average luminance maps to 0.18 (one
+    /// exposure for all frames, from the first); the JSON line reports it.
+    #[arg(long, conflicts_with = "exposure")]
+    auto_exposure: bool,
     /// Write only the indirect part of the radiance (direct light removed).
     #[arg(long)]
     indirect_only: bool,
@@ -596,7 +600,41 @@ fn bake_bench(args: BakeBenchArgs) -> ExitCode {
     }
 }
 
+/// On a headless machine without `XDG_RUNTIME_DIR`, libwayland (which the Vulkan driver loads to
+/// probe for presentation) prints "XDG_RUNTIME_DIR is invalid or not set" twice for every
+/// device opened. A private runtime folder answers its check; there is no Wayland socket in it,
+/// so nothing connects. Runs before any thread starts, as changing the environment must.
+fn quiet_headless_runtime_dir() {
+    let valid = std::env::var_os("XDG_RUNTIME_DIR")
+        .is_some_and(|dir| std::path::Path::new(&dir).is_absolute());
+    if valid || std::env::var_os("WAYLAND_DISPLAY").is_some() {
+        return;
+    }
+    // One shared name: libwayland only needs an absolute path, not one this user owns.
+    let dir = std::env::temp_dir().join("valgi-runtime");
+    if std::fs::create_dir_all(&dir).is_ok() {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let _ = std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700));
+        }
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    }
+}
+
+/// Prints `e` and picks the exit status: 130 after Ctrl-C, 1 otherwise.
+fn failure(e: &dyn std::fmt::Display) -> ExitCode {
+    if valgi::progress::cancelled() {
+        eprintln!("cancelled: {e}");
+        ExitCode::from(valgi::progress::CANCELLED_EXIT_CODE)
+    } else {
+        eprintln!("error: {e}");
+        ExitCode::FAILURE
+    }
+}
+
 fn main() -> ExitCode {
+    quiet_headless_runtime_dir();
     env_logger::Builder::from_env(env_logger::Env::default().default_filter_or("warn")).init();
     let matches = with_method_flags(Cli::command()).get_matches();
     let cli = match Cli::from_arg_matches(&matches) {
@@ -653,6 +691,7 @@ fn main() -> ExitCode {
                 edits: args.scene_edits.edits(),
                 outputs,
                 exposure: args.exposure,
+                auto_exposure: args.auto_exposure,
                 indirect_only: args.indirect_only,
                 max_edge: args.max_edge,
                 time: args.time,
@@ -663,15 +702,13 @@ fn main() -> ExitCode {
                 write_images: !args.no_write,
                 memory_every: args.memory_every,
             };
+            valgi::progress::install_ctrl_c();
             match app::render(&request) {
                 Ok(report) => {
                     println!("{report}");
                     ExitCode::SUCCESS
                 }
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    ExitCode::FAILURE
-                }
+                Err(e) => failure(&e),
             }
         }
         Command::View(args) => {
@@ -837,22 +874,9 @@ fn main() -> ExitCode {
 /// `valgi bake`: progress bar on a terminal, Ctrl-C stops cleanly (no file is left).
 fn bake(args: BakeArgs) -> ExitCode {
     use std::io::IsTerminal;
-    use std::sync::atomic::{AtomicBool, Ordering};
-    use std::sync::Arc;
 
-    let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let cancel = cancel.clone();
-        // First Ctrl-C: stop at the next check; a second one: leave at once.
-        let handler = move || {
-            if cancel.swap(true, Ordering::Relaxed) {
-                std::process::exit(130);
-            }
-        };
-        if let Err(e) = ctrlc::set_handler(handler) {
-            log::warn!("Ctrl-C handler: {e}");
-        }
-    }
+    valgi::progress::install_ctrl_c();
+    let cancel = valgi::progress::cancel_flag();
     let bar = if std::io::stderr().is_terminal() {
         indicatif::ProgressBar::new(1)
     } else {
@@ -892,7 +916,7 @@ fn bake(args: BakeArgs) -> ExitCode {
         from_bounce: args.from_bounce,
         out: args.out,
     };
-    let result = valgi::atlas::bake_to_file(&request, &progress, &cancel);
+    let result = valgi::atlas::bake_to_file(&request, &progress, cancel);
     bar.finish_and_clear();
     match result {
         Ok(summary) => {
@@ -901,7 +925,7 @@ fn bake(args: BakeArgs) -> ExitCode {
         }
         Err(valgi::atlas::BakeError::Cancelled) => {
             eprintln!("cancelled: no atlas written");
-            ExitCode::from(130)
+            ExitCode::from(valgi::progress::CANCELLED_EXIT_CODE)
         }
         Err(e) => {
             eprintln!("error: {e}");
@@ -942,6 +966,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
         exposure: args.exposure,
         ..valgi::eval::EvalRequest::default()
     };
+    valgi::progress::install_ctrl_c();
     let (result, seconds) = valgi::eval::timed(|| valgi::eval::run(&request));
     match result {
         Ok(summary) => {
@@ -957,10 +982,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
             println!("{report}");
             ExitCode::SUCCESS
         }
-        Err(e) => {
-            eprintln!("error: {e}");
-            ExitCode::FAILURE
-        }
+        Err(e) => failure(&e),
     }
 }
 

@@ -432,3 +432,107 @@ fn a_light_and_camera_from_the_command_line_light_an_unlit_scene() {
         serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
     assert_eq!(report["lights"], 3, "{report}");
 }
+
+#[test]
+fn the_opengl_backend_is_refused_at_start_up_with_the_remedy() {
+    // Whether or not this machine has an OpenGL adapter, the answer is one clear error that
+    // names the remedy, never a panic on the first float render target.
+    let out = temp_out("cli-gl", "x.exr");
+    let output = valgi()
+        .args(tiny_render(&out, &[]))
+        .env("WGPU_BACKEND", "gl")
+        .output()
+        .expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "rendered on OpenGL: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("cannot run valgi") || stderr.contains("no GPU adapter found"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("mesa-vulkan-drivers"), "{stderr}");
+    assert!(!std::path::Path::new(&out).exists());
+}
+
+#[test]
+fn ctrl_c_stops_a_reference_render_cleanly_without_a_file() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-ctrl-c", "long.exr");
+    // Far more paths than can finish before the interrupt.
+    let mut child = valgi()
+        .args([
+            "render",
+            "--scene",
+            "cornell",
+            "--method",
+            "reference",
+            "--spp",
+            "200000",
+            "--width",
+            "48",
+            "--height",
+            "48",
+            "--out",
+            &out,
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start valgi");
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("run kill");
+    assert!(killed.success());
+    let started = std::time::Instant::now();
+    let output = loop {
+        if child.try_wait().expect("wait").is_some() {
+            break child.wait_with_output().expect("output");
+        }
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "still running 60 s after Ctrl-C"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    };
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(130), "{stderr}");
+    assert!(stderr.contains("cancelled"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(!std::path::Path::new(&out).exists(), "an image was written");
+    assert!(
+        !std::path::Path::new(&format!("{out}.partial")).exists(),
+        "a partial file was left"
+    );
+}
+
+#[test]
+fn auto_exposure_is_reported_and_a_black_png_is_named() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-exposure", "x.png");
+    let run = |extra: &[&str]| {
+        let output = valgi()
+            .args(tiny_render(&out, extra))
+            .output()
+            .expect("run valgi");
+        common::assert_success(&output);
+        let stdout = String::from_utf8_lossy(&output.stdout).to_string();
+        let report: serde_json::Value =
+            serde_json::from_str(stdout.lines().last().expect("JSON")).expect("JSON");
+        (report, String::from_utf8_lossy(&output.stderr).to_string())
+    };
+    let (auto, auto_err) = run(&["--auto-exposure"]);
+    let stops = auto["exposure"].as_f64().expect("exposure in the report");
+    assert!(stops.is_finite() && stops != 0.0, "{auto}");
+    assert!(!auto_err.contains("are black"), "{auto_err}");
+    let (dark, dark_err) = run(&["--exposure", "-20"]);
+    assert_eq!(dark["exposure"], -20.0);
+    assert!(
+        dark_err.contains("are black at --exposure -20") && dark_err.contains("--auto-exposure"),
+        "{dark_err}"
+    );
+}

@@ -31,6 +31,8 @@ pub enum EvalError {
     Output { path: PathBuf, message: String },
     #[error("{0}")]
     Settings(String),
+    #[error(transparent)]
+    Cancelled(#[from] crate::progress::Cancelled),
 }
 
 /// One `valgi eval` invocation.
@@ -221,6 +223,8 @@ pub fn cached_reference(
         }
     }
     let image = render();
+    // A reference stopped by Ctrl-C is incomplete: it must never enter the cache.
+    crate::progress::check()?;
     image.direct.write_exr(&direct_path)?;
     image.indirect.write_exr(&indirect_path)?;
     image
@@ -447,7 +451,13 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             ],
         }];
         let mut points = vec![];
+        let methods_step = crate::progress::Step::new(
+            request.progress,
+            specs.len() as u64,
+            &format!("{scene_label}: methods"),
+        );
         for ((name, options), method) in specs.iter().zip(methods.iter_mut()) {
+            methods_step.inc(1);
             let settings_text = options.to_string();
             let label = if settings_text.is_empty() {
                 name.clone()
@@ -459,6 +469,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             let mut first = None;
             let mut gpu_bytes = 0;
             for f in 0..request.frames {
+                crate::progress::check()?;
                 let time = f as f32 * request.frame_dt;
                 let world = scene.world_from_node_at(time);
                 let camera = scene.camera_view(camera.as_deref(), aspect, &world)?;

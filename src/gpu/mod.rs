@@ -25,6 +25,17 @@ pub enum GpuError {
     AdapterNameNotFound { wanted: String, available: String },
     #[error("could not create a device on '{adapter}': {message}")]
     Device { adapter: String, message: String },
+    /// The adapter lacks what every method needs; said at start-up, before any work.
+    #[error(
+        "the {backend} adapter '{adapter}' cannot run valgi: {missing}. Use a Vulkan, Metal or \
+         DX12 adapter; on a machine without a GPU install Mesa's software Vulkan driver: \
+         `apt-get install mesa-vulkan-drivers` (README's commands do this)"
+    )]
+    Unsupported {
+        adapter: String,
+        backend: String,
+        missing: String,
+    },
     #[error("GPU readback failed: {0}")]
     Readback(String),
     /// wgpu refused or could not back an allocation or a pipeline.
@@ -269,8 +280,42 @@ impl GpuContext {
         })
     }
 
+    /// What `adapter` lacks of the capabilities every method relies on (empty: none).
+    pub fn missing_capabilities(adapter: &wgpu::Adapter) -> Vec<String> {
+        let mut missing = Vec::new();
+        if adapter.get_info().backend == wgpu::Backend::Gl {
+            // naga's GLSL output has no textureLoad from depth textures, which the direct-light
+            // and VAL kernels use to read shadow maps and the G-buffer depth.
+            missing.push("its shaders cannot read depth textures with textureLoad (GLSL)".into());
+        }
+        let downlevel = adapter.get_downlevel_capabilities();
+        if !downlevel
+            .flags
+            .contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+        {
+            missing.push("no compute shaders".into());
+        }
+        let float_target = adapter.get_texture_format_features(wgpu::TextureFormat::Rgba32Float);
+        let needed = wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::STORAGE_BINDING;
+        if !float_target.allowed_usages.contains(needed) {
+            missing.push(format!(
+                "Rgba32Float textures allow only {:?}, and the radiance targets need {needed:?}",
+                float_target.allowed_usages
+            ));
+        }
+        missing
+    }
+
     async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {
         let adapter_info = adapter.get_info();
+        let missing = Self::missing_capabilities(&adapter);
+        if !missing.is_empty() {
+            return Err(GpuError::Unsupported {
+                adapter: adapter_info.name.clone(),
+                backend: format!("{:?}", adapter_info.backend),
+                missing: missing.join("; "),
+            });
+        }
         let available = adapter.features();
         let timestamps = available.contains(wgpu::Features::TIMESTAMP_QUERY);
         let mut required_features = wgpu::Features::empty();

@@ -110,13 +110,12 @@ impl Image {
     pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
         create_parent_folders(path)?;
         let w = self.width as usize;
-        exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
-            let p = self.pixels[y * w + x];
-            (p[0], p[1], p[2], p[3])
-        })
-        .map_err(|e| ImageError::Write {
-            path: path.to_path_buf(),
-            message: e.to_string(),
+        write_whole(path, |partial| {
+            exr::prelude::write_rgba_file(partial, w, self.height as usize, |x, y| {
+                let p = self.pixels[y * w + x];
+                (p[0], p[1], p[2], p[3])
+            })
+            .map_err(|e| e.to_string())
         })
     }
 
@@ -156,13 +155,65 @@ impl Image {
 
     pub fn write_png(&self, path: &Path, exposure: f32) -> Result<(), ImageError> {
         create_parent_folders(path)?;
-        self.tone_map(exposure)
-            .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| ImageError::Write {
-                path: path.to_path_buf(),
-                message: e.to_string(),
-            })
+        let tone_mapped = self.tone_map(exposure);
+        write_whole(path, |partial| {
+            tone_mapped
+                .save_with_format(partial, image::ImageFormat::Png)
+                .map_err(|e| e.to_string())
+        })
     }
+}
+
+/// Writes through `<path>.partial` renamed into place, so an interrupted or failed write (a
+/// full disk, Ctrl-C, a crash) never leaves a truncated image under the real name.
+fn write_whole(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), String>,
+) -> Result<(), ImageError> {
+    let mut partial_name = path.as_os_str().to_owned();
+    partial_name.push(".partial");
+    let partial = std::path::PathBuf::from(partial_name);
+    let result = write(&partial).and_then(|()| {
+        std::fs::rename(&partial, path).map_err(|e| format!("renaming into place: {e}"))
+    });
+    if result.is_err() {
+        let _ = std::fs::remove_file(&partial);
+    }
+    result.map_err(|message| ImageError::Write {
+        path: path.to_path_buf(),
+        message,
+    })
+}
+
+/// Exposure (stops) that maps the log-average luminance of the lit pixels to middle grey
+/// (0.18), Reinhard's key: robust to a few very bright pixels (an emitter, a highlight) that a
+/// plain mean would follow. `None` when no pixel has positive finite luminance.
+pub fn key_exposure(image: &Image) -> Option<f32> {
+    let (mut log_sum, mut count) = (0.0f64, 0u64);
+    for p in &image.pixels {
+        let luminance = 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
+        if luminance > 1e-12 && luminance.is_finite() {
+            log_sum += luminance.ln();
+            count += 1;
+        }
+    }
+    (count > 0).then(|| {
+        let log_average = (log_sum / count as f64).exp();
+        ((0.18 / log_average).log2() as f32).clamp(-30.0, 30.0)
+    })
+}
+
+/// Fraction of pixels whose every channel tone-maps to less than 2/255 at `exposure`.
+pub fn dark_fraction(image: &Image, exposure: f32) -> f64 {
+    let scale = 2f32.powf(exposure);
+    // sRGB(x) < 2/255 ⇔ x < 2/255/12.92 (the linear segment).
+    let threshold = 2.0 / 255.0 / 12.92;
+    let dark = image
+        .pixels
+        .iter()
+        .filter(|p| p[..3].iter().all(|&c| !(c * scale >= threshold)))
+        .count();
+    dark as f64 / image.pixels.len().max(1) as f64
 }
 
 /// The sRGB opto-electronic transfer function (linear → encoded), input in [0, 1].
@@ -229,6 +280,41 @@ fn ensure_writable(path: &Path) -> Result<(), ImageError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn key_exposure_maps_the_log_average_to_middle_grey() {
+        // Uniform luminance 0.045 = 0.18 / 4: two stops up.
+        let flat = Image::from_rgba(4, 4, vec![[0.045, 0.045, 0.045, 1.0]; 16]);
+        assert!((key_exposure(&flat).unwrap() - 2.0).abs() < 1e-4);
+        // One pixel 10⁵ times brighter moves the key by log2(10⁵)/16 ≈ 1.04 stops, where the
+        // plain mean would move by log2(10⁵/16) ≈ 12.6.
+        let mut hot = flat.clone();
+        hot.pixels[0] = [4500.0, 4500.0, 4500.0, 1.0];
+        let moved = 2.0 - key_exposure(&hot).unwrap();
+        assert!((moved - (1e5f32).log2() / 16.0).abs() < 1e-3, "{moved}");
+        // Black pixels are not averaged in; an all-black image has no key.
+        let mut half = flat.clone();
+        half.pixels[..8].fill([0.0; 4]);
+        assert!((key_exposure(&half).unwrap() - 2.0).abs() < 1e-4);
+        assert_eq!(key_exposure(&Image::new(2, 2)), None);
+    }
+
+    #[test]
+    fn dark_fraction_counts_pixels_below_two_codes() {
+        // 2/255 in sRGB is 6.07e-4 linear.
+        let img = Image::from_rgba(
+            4,
+            1,
+            vec![
+                [5e-4, 5e-4, 5e-4, 1.0],
+                [7e-4, 0.0, 0.0, 1.0],
+                [0.0; 4],
+                [f32::NAN, 0.0, 0.0, 1.0],
+            ],
+        );
+        assert_eq!(dark_fraction(&img, 0.0), 0.75);
+        assert_eq!(dark_fraction(&img, 1.0), 0.5);
+    }
 
     #[test]
     fn tone_map_is_exposure_clamp_oetf() {

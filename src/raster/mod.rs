@@ -56,6 +56,8 @@ pub enum RenderError {
     SceneTooLarge(#[from] SceneTooLarge),
     #[error("{0}")]
     Settings(String),
+    #[error(transparent)]
+    Cancelled(#[from] crate::progress::Cancelled),
 }
 
 pub const GBUFFER_NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;

@@ -9,7 +9,6 @@ pub use crate::sampling;
 pub use crate::trace as rt;
 
 use std::fmt;
-use std::io::IsTerminal;
 use std::str::FromStr;
 use std::time::Instant;
 
@@ -276,7 +275,7 @@ pub fn render_progressive(
     let mut excluded = std::time::Duration::ZERO;
     let mut done = 0u32;
     for spp in stops {
-        let bar = progress_bar(
+        let bar = crate::progress::Step::new(
             settings.progress,
             h as u64,
             &format!("path tracing rows ({spp} spp)"),
@@ -287,6 +286,11 @@ pub fn render_progressive(
             .enumerate()
             .for_each(|(y, row)| {
                 for (x, stats) in row.iter_mut().enumerate() {
+                    // After Ctrl-C the remaining pixels are skipped; callers see the flag
+                    // and discard the image.
+                    if crate::progress::cancelled() {
+                        return;
+                    }
                     let pixel = (y as u64) * w as u64 + x as u64;
                     for s in passes.clone() {
                         let mut rng = Rng::new(settings.seed, pixel, s as u64);
@@ -298,7 +302,7 @@ pub fn render_progressive(
                 }
                 bar.inc(1);
             });
-        bar.finish_and_clear();
+        bar.finish();
         done = spp;
         let resolving = Instant::now();
         let mut image = resolve(&stats, w, h, spp);
@@ -308,6 +312,9 @@ pub fn render_progressive(
         at(spp, image);
         // This checkpoint's image belongs to its own time, not to the next checkpoint's.
         excluded += resolve_time + handed_over.elapsed();
+        if crate::progress::cancelled() {
+            break;
+        }
     }
 }
 
@@ -377,21 +384,6 @@ fn sanitize(v: Vec3) -> Vec3 {
     } else {
         Vec3::ZERO
     }
-}
-
-/// A progress bar with ETA on stderr, hidden when `enabled` is false or stderr is no terminal.
-pub fn progress_bar(enabled: bool, len: u64, message: &str) -> indicatif::ProgressBar {
-    if !enabled || !std::io::stderr().is_terminal() {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len);
-    if let Ok(style) = indicatif::ProgressStyle::with_template(
-        "{msg} [{bar:40}] {pos}/{len} ({elapsed} elapsed, ETA {eta})",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar.set_message(message.to_string());
-    bar
 }
 
 /// Which light an irradiance estimate counts.
@@ -579,6 +571,7 @@ impl Method for ReferenceMethod {
             ..self.settings
         };
         let image = render(frame.scene, frame.world_from_node, &view.camera, &settings);
+        crate::progress::check()?;
         passes.add_cpu("path_trace", image.seconds * 1000.0);
         view.write_outputs(ctx, &image.direct, &image.indirect);
         self.last = Some(image);

@@ -1,0 +1,129 @@
+//! Long steps report progress and can be stopped.
+//!
+//! - [`Step`]: a progress bar with ETA on a terminal; when stderr is not a terminal (a log, CI),
+//!   one summary line per step when it finishes, so redirected output stays readable.
+//! - Ctrl-C ([`install_ctrl_c`]) raises one process-wide flag that long loops poll with
+//!   [`cancelled`]; they return [`Cancelled`] before writing anything, so no file is left
+//!   half-written. A second Ctrl-C leaves at once.
+
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+static CANCELLED: AtomicBool = AtomicBool::new(false);
+
+/// Exit status of a run stopped by Ctrl-C (128 + SIGINT, what shells report).
+pub const CANCELLED_EXIT_CODE: u8 = 130;
+
+/// The error of a step stopped by Ctrl-C.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("cancelled by Ctrl-C; no file was left half-written")]
+pub struct Cancelled;
+
+/// Makes Ctrl-C raise the cancel flag (the second one exits with status 130 at once).
+pub fn install_ctrl_c() {
+    let handler = || {
+        if CANCELLED.swap(true, Ordering::Relaxed) {
+            std::process::exit(CANCELLED_EXIT_CODE as i32);
+        }
+        eprintln!("\nCtrl-C: stopping at the next check (again to quit at once)");
+    };
+    if let Err(e) = ctrlc::set_handler(handler) {
+        log::warn!("no Ctrl-C handler: {e}");
+    }
+}
+
+/// The process-wide cancel flag, for code that takes an `&AtomicBool`.
+pub fn cancel_flag() -> &'static AtomicBool {
+    &CANCELLED
+}
+
+/// Whether Ctrl-C has been pressed.
+pub fn cancelled() -> bool {
+    CANCELLED.load(Ordering::Relaxed)
+}
+
+/// `Err(Cancelled)` once Ctrl-C has been pressed.
+pub fn check() -> Result<(), Cancelled> {
+    if cancelled() {
+        Err(Cancelled)
+    } else {
+        Ok(())
+    }
+}
+
+/// One long step: a bar on a terminal, else a summary line on stderr when it finishes.
+pub struct Step {
+    bar: indicatif::ProgressBar,
+    message: String,
+    started: Instant,
+    /// Print the summary line at the end (enabled and stderr is not a terminal).
+    summary: bool,
+    finished: bool,
+}
+
+impl Step {
+    /// A step of `len` units. `enabled = false` shows nothing at all (library callers that
+    /// report their own way, tests).
+    pub fn new(enabled: bool, len: u64, message: &str) -> Self {
+        let terminal = std::io::stderr().is_terminal();
+        let bar = if enabled && terminal {
+            let bar = indicatif::ProgressBar::new(len);
+            if let Ok(style) = indicatif::ProgressStyle::with_template(
+                "{msg} [{bar:40}] {pos}/{len} ({elapsed} elapsed, ETA {eta})",
+            ) {
+                bar.set_style(style.progress_chars("=> "));
+            }
+            bar.set_message(message.to_string());
+            bar
+        } else {
+            let bar = indicatif::ProgressBar::hidden();
+            bar.set_length(len);
+            bar
+        };
+        Self {
+            bar,
+            message: message.to_string(),
+            started: Instant::now(),
+            summary: enabled && !terminal,
+            finished: false,
+        }
+    }
+
+    pub fn inc(&self, units: u64) {
+        self.bar.inc(units);
+    }
+
+    pub fn set_position(&self, done: u64, len: u64) {
+        self.bar.set_length(len);
+        self.bar.set_position(done);
+    }
+
+    /// Clears the bar, or prints `message: done/len in T s`.
+    pub fn finish(mut self) {
+        self.end();
+    }
+
+    fn end(&mut self) {
+        if self.finished {
+            return;
+        }
+        self.finished = true;
+        self.bar.finish_and_clear();
+        if self.summary {
+            let (done, len) = (self.bar.position(), self.bar.length().unwrap_or(0));
+            let state = if cancelled() { ", cancelled" } else { "" };
+            eprintln!(
+                "{}: {done}/{len} in {:.1} s{state}",
+                self.message,
+                self.started.elapsed().as_secs_f64()
+            );
+        }
+    }
+}
+
+impl Drop for Step {
+    fn drop(&mut self) {
+        self.end();
+    }
+}
