@@ -211,7 +211,8 @@ pub fn dark_fraction(image: &Image, exposure: f32) -> f64 {
     let dark = image
         .pixels
         .iter()
-        .filter(|p| p[..3].iter().all(|&c| !(c * scale >= threshold)))
+        // NaN counts as dark: it is written black.
+        .filter(|p| p[..3].iter().all(|&c| c.is_nan() || c * scale < threshold))
         .count();
     dark as f64 / image.pixels.len().max(1) as f64
 }
