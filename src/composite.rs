@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::atlas::{load_atlas, AtlasLayer, AtlasOnVals, ATLAS_OPTION};
+use crate::atlas::{load_atlas, AtlasLayer, AtlasOnVals, ATLAS_OPTION, FIRST_BOUNCE_ATTRIBUTE};
 use crate::frame::Method;
 use crate::gpu::GpuContext;
 use crate::method::{Entry, MethodOptions, OptionSpec};
@@ -59,8 +59,23 @@ pub fn sparse_atlas(
     }
     let settings = SparseSettings::from_options(options)?;
     let atlas = load_atlas(Path::new(&path))?;
+    match &atlas.bounces {
+        // The sparse method computes bounce 1 itself: an atlas holding it would count it twice.
+        Some(bounces) if *bounces.start() == 1 => {
+            return Err(RenderError::Settings(format!(
+                "--atlas {path} holds bounces 1..={}, and 'sparse+atlas' computes bounce 1 \
+                 itself (it would count twice): bake it with `valgi bake --from-bounce 2`",
+                bounces.end()
+            )))
+        }
+        Some(_) => {}
+        None => log::warn!(
+            "--atlas {path} does not say which bounces it holds (no {FIRST_BOUNCE_ATTRIBUTE} \
+             header attribute); assuming it starts at bounce 2"
+        ),
+    }
     let mut sparse = SparseMethod::new(ctx, scene, render, settings)?;
-    let layer = AtlasLayer::new(ctx, scene, &atlas)?;
+    let layer = AtlasLayer::new(ctx, scene, &atlas.image)?;
     sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
     Ok(sparse)
 }

@@ -73,7 +73,11 @@ fn atlas_file(scene: &Scene, out: &Path) -> Result<PathBuf, AppError> {
         &AtomicBool::new(false),
     )
     .map_err(|e| RenderError::Settings(format!("atlas for the views bench: {e}")))?;
-    crate::atlas::bake::write_atlas_exr(&bake.atlas(1, bake_settings.bounces), &path)?;
+    crate::atlas::bake::write_atlas_exr(
+        &bake.atlas(1, bake_settings.bounces),
+        &path,
+        1..=bake_settings.bounces,
+    )?;
     Ok(path)
 }
 

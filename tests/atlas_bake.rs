@@ -1,6 +1,8 @@
 //! The light-atlas baker on the CPU: the closed box against the geometric series, the energy
 //! account, cancellation, bad input, and the EXR round trip.
 
+mod common;
+
 use std::sync::atomic::AtomicBool;
 
 use valgi::atlas::{bake, BakeError, BakeSettings};
@@ -161,10 +163,36 @@ fn atlas_exr_round_trips() {
     let dir = std::env::temp_dir().join(format!("valgi-atlas-rt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("box.exr");
-    valgi::atlas::bake::write_atlas_exr(&image, &path).unwrap();
+    valgi::atlas::bake::write_atlas_exr(&image, &path, 1..=3).unwrap();
     let back = valgi::image_io::Image::read_exr(&path).unwrap();
     assert_eq!((back.width, back.height), (image.width, image.height));
     assert_eq!(back.pixels, image.pixels, "32-bit float EXR is lossless");
+    // The header says which bounces the file holds.
+    let loaded = valgi::atlas::load_atlas(&path).unwrap();
+    assert_eq!(loaded.bounces, Some(1..=3));
+    assert_eq!(loaded.image.pixels, image.pixels);
+    // `sparse+atlas` adds its own first bounce, so it refuses an atlas that holds bounce 1
+    // instead of counting it twice; it takes the same file baked from bounce 2.
+    if let Some(ctx) = common::gpu() {
+        let scene = box_scene();
+        let mut options = valgi::method::MethodOptions::default();
+        options.set("atlas", path.to_str().unwrap());
+        let settings = valgi::raster::RenderSettings {
+            width: 16,
+            height: 16,
+            ..Default::default()
+        };
+        let err = match valgi::method::create("sparse+atlas", &ctx, &scene, settings, &options) {
+            Ok(_) => panic!("sparse+atlas took an atlas holding bounce 1"),
+            Err(e) => e.to_string(),
+        };
+        assert!(err.contains("--from-bounce 2"), "{err}");
+        valgi::atlas::bake::write_atlas_exr(&result.atlas(2, 3), &path, 2..=3).unwrap();
+        assert!(
+            valgi::method::create("sparse+atlas", &ctx, &scene, settings, &options).is_ok(),
+            "sparse+atlas refused an atlas from bounce 2"
+        );
+    }
     let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name())

@@ -37,7 +37,12 @@ fn bake_files(scene: &Scene, settings: &BakeSettings, name: &str, from: &[u32]) 
     from.iter()
         .map(|&f| {
             let path = dir.join(format!("{name}-from{f}.exr"));
-            valgi::atlas::bake::write_atlas_exr(&result.atlas(f, settings.bounces), &path).unwrap();
+            valgi::atlas::bake::write_atlas_exr(
+                &result.atlas(f, settings.bounces),
+                &path,
+                f..=settings.bounces,
+            )
+            .unwrap();
             path.display().to_string()
         })
         .collect()

@@ -28,7 +28,12 @@ fn bake_to(
     )
     .unwrap();
     let path = common::temp_dir("atlas-render").join(format!("{name}.exr"));
-    valgi::atlas::bake::write_atlas_exr(&result.atlas(1, settings.bounces), &path).unwrap();
+    valgi::atlas::bake::write_atlas_exr(
+        &result.atlas(1, settings.bounces),
+        &path,
+        1..=settings.bounces,
+    )
+    .unwrap();
     (result, path)
 }
 

@@ -38,8 +38,12 @@ fn atlas_for(scene_name: &str, from_bounce: u32) -> std::path::PathBuf {
     )
     .unwrap();
     let path = common::temp_dir("soak").join(format!("{scene_name}-{from_bounce}.exr"));
-    valgi::atlas::bake::write_atlas_exr(&result.atlas(from_bounce, settings.bounces), &path)
-        .unwrap();
+    valgi::atlas::bake::write_atlas_exr(
+        &result.atlas(from_bounce, settings.bounces),
+        &path,
+        from_bounce..=settings.bounces,
+    )
+    .unwrap();
     path
 }
 

@@ -624,22 +624,18 @@ impl Bake {
     }
 }
 
-/// Writes `image` to `path` as EXR through a temporary file in the same folder, renamed into
-/// place at the end, so an interrupted write never leaves a partial file at `path`.
-pub fn write_atlas_exr(image: &Image, path: &std::path::Path) -> Result<(), ImageError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "atlas.exr".into());
-    let tmp = path.with_file_name(format!(".{name}.partial-{}.exr", std::process::id()));
-    let result = image.write_exr(&tmp).and_then(|_| {
-        std::fs::rename(&tmp, path).map_err(|e| ImageError::Write {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
-    });
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+/// Writes `image` to `path` as EXR (whole or not at all) with the bounce range it holds in its
+/// header, so a method that adds its own first bounce can refuse an atlas that has it too.
+pub fn write_atlas_exr(
+    image: &Image,
+    path: &std::path::Path,
+    bounces: std::ops::RangeInclusive<u32>,
+) -> Result<(), ImageError> {
+    image.write_exr_with(
+        path,
+        &[
+            (super::FIRST_BOUNCE_ATTRIBUTE, *bounces.start() as i32),
+            (super::LAST_BOUNCE_ATTRIBUTE, *bounces.end() as i32),
+        ],
+    )
 }

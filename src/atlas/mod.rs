@@ -94,7 +94,11 @@ pub fn bake_to_file(
         return Err(BakeError::Cancelled);
     }
     let write_started = std::time::Instant::now();
-    bake::write_atlas_exr(&image, &request.out)?;
+    bake::write_atlas_exr(
+        &image,
+        &request.out,
+        request.from_bounce..=request.settings.bounces,
+    )?;
     let mut summary = result.summary();
     if let Some(obj) = summary.as_object_mut() {
         obj.insert("scene".into(), serde_json::json!(scene.name));
@@ -178,9 +182,33 @@ struct LayerMesh {
     sheet_face: bool,
 }
 
-/// Reads an atlas EXR written by `valgi bake` and checks it against the scene's layout.
-pub fn load_atlas(path: &Path) -> Result<Image, RenderError> {
-    Image::read_exr(path).map_err(|e| RenderError::Settings(format!("--atlas: {e}")))
+/// EXR header attributes of a baked atlas: the first and last bounce it holds.
+pub const FIRST_BOUNCE_ATTRIBUTE: &str = "valgiFirstBounce";
+pub const LAST_BOUNCE_ATTRIBUTE: &str = "valgiLastBounce";
+
+/// An atlas read from disk.
+pub struct LoadedAtlas {
+    pub image: Image,
+    /// The bounces it holds, from its header; `None` for a file without them (written before
+    /// the range was stored, or by another tool).
+    pub bounces: Option<std::ops::RangeInclusive<u32>>,
+}
+
+/// Reads an atlas EXR written by `valgi bake`, with its bounce range.
+pub fn load_atlas(path: &Path) -> Result<LoadedAtlas, RenderError> {
+    let fail = |e: crate::image_io::ImageError| RenderError::Settings(format!("--atlas: {e}"));
+    let image = Image::read_exr(path).map_err(fail)?;
+    let first =
+        crate::image_io::read_exr_int_attribute(path, FIRST_BOUNCE_ATTRIBUTE).map_err(fail)?;
+    let last =
+        crate::image_io::read_exr_int_attribute(path, LAST_BOUNCE_ATTRIBUTE).map_err(fail)?;
+    let bounces = match (first, last) {
+        (Some(first), Some(last)) if 1 <= first && first <= last => {
+            Some(first as u32..=last as u32)
+        }
+        _ => None,
+    };
+    Ok(LoadedAtlas { image, bounces })
 }
 
 /// GPU lookup of a baked atlas: rasterizes the light-map meshes from a view's camera into an
@@ -631,8 +659,19 @@ impl AtlasMethod {
             ));
         }
         let atlas = load_atlas(Path::new(&path))?;
+        if let Some(bounces) = atlas.bounces.as_ref().filter(|b| *b.start() > 1) {
+            log::warn!(
+                "--atlas {path} holds bounces {}..={} only (baked with --from-bounce {}): \
+                 method 'atlas' shows no bounce below {}; bake with --from-bounce 1, or use \
+                 'sparse+atlas', which adds bounce 1",
+                bounces.start(),
+                bounces.end(),
+                bounces.start(),
+                bounces.start()
+            );
+        }
         let raster = Rasterizer::new(ctx, scene, settings)?;
-        let layer = AtlasLayer::new(ctx, scene, &atlas)?;
+        let layer = AtlasLayer::new(ctx, scene, &atlas.image)?;
         Ok(Self { raster, layer })
     }
 

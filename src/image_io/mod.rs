@@ -108,14 +108,44 @@ impl Image {
     }
 
     pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
+        self.write_exr_with(path, &[])
+    }
+
+    /// Writes a 32-bit float RGBA EXR whose header also carries the integer attributes
+    /// `attributes` (name, value), read back by [`read_exr_int_attribute`].
+    pub fn write_exr_with(
+        &self,
+        path: &Path,
+        attributes: &[(&str, i32)],
+    ) -> Result<(), ImageError> {
+        use exr::prelude::*;
         create_parent_folders(path)?;
         let w = self.width as usize;
+        let mut layer_attributes = LayerAttributes::default();
+        for &(name, value) in attributes {
+            let name = Text::new_or_none(name).ok_or_else(|| ImageError::Write {
+                path: path.to_path_buf(),
+                message: format!("EXR attribute name '{name}' is not plain text"),
+            })?;
+            layer_attributes
+                .other
+                .insert(name, AttributeValue::I32(value));
+        }
+        let channels = SpecificChannels::rgba(|Vec2(x, y): Vec2<usize>| {
+            let p = self.pixels[y * w + x];
+            (p[0], p[1], p[2], p[3])
+        });
+        let layer = Layer::new(
+            (w, self.height as usize),
+            layer_attributes,
+            Encoding::default(),
+            channels,
+        );
         write_whole(path, |partial| {
-            exr::prelude::write_rgba_file(partial, w, self.height as usize, |x, y| {
-                let p = self.pixels[y * w + x];
-                (p[0], p[1], p[2], p[3])
-            })
-            .map_err(|e| e.to_string())
+            exr::prelude::Image::from_layer(layer)
+                .write()
+                .to_file(partial)
+                .map_err(|e| e.to_string())
         })
     }
 
@@ -183,6 +213,25 @@ fn write_whole(
         path: path.to_path_buf(),
         message,
     })
+}
+
+/// The integer header attribute `name` of an EXR file ([`Image::write_exr_with`]); `Ok(None)`
+/// when the file has no such attribute.
+pub fn read_exr_int_attribute(path: &Path, name: &str) -> Result<Option<i32>, ImageError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| ImageError::Read {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let Some(key) = exr::prelude::Text::new_or_none(name) else {
+        return Ok(None);
+    };
+    Ok(meta
+        .headers
+        .first()
+        .and_then(|header| match header.own_attributes.other.get(&key) {
+            Some(exr::meta::attribute::AttributeValue::I32(v)) => Some(*v),
+            _ => None,
+        }))
 }
 
 /// Exposure (stops) that maps the log-average luminance of the lit pixels to middle grey
