@@ -50,10 +50,13 @@ pub struct FmaParams {
     pub pad2: u32,
 }
 
+/// Threads per workgroup of the FMA-peak kernel (`bench_fma.wgsl`).
+pub const FMA_GROUP: u32 = 256;
+
 /// Fused multiply-adds per second of the trivial kernel (best of three runs).
 pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
     let device = &ctx.device;
-    let threads: u32 = 256 * 256;
+    let threads: u32 = FMA_GROUP * 256;
     let sink = device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("fma sink"),
         size: threads as u64 * 16,
@@ -95,7 +98,7 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
         passes.compute("fma", |pass| {
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(threads / 256, 1, 1);
+            pass.dispatch_workgroups(threads / FMA_GROUP, 1, 1);
         })?;
         let ms = passes.finish()?.get("fma").unwrap_or(0.0).max(1e-6);
         Ok(threads as f64 * iterations as f64 * 16.0 / (ms * 1e-3))

@@ -121,6 +121,20 @@ fn workgroup_sizes_match_the_dispatches() {
     expected.push(("negative_view.wgsl", "select_negatives", [select, 1, 1]));
     let positive = valgi::negative::POSITIVE_GROUP;
     expected.push(("negative_positives.wgsl", "cs_main", [positive, 1, 1]));
+    let rows = valgi::light::rsm::ROW_GROUP;
+    let scan = valgi::light::rsm::SCAN_GROUP;
+    let texels = valgi::peers::lpv::TEXEL_GROUP;
+    let block = valgi::peers::lpv::PROPAGATE_BLOCK;
+    expected.extend([
+        ("vals_from_rsm.wgsl", "count_rows", [rows, 1, 1]),
+        ("vals_from_rsm.wgsl", "scan_rows", [scan, 1, 1]),
+        ("vals_from_rsm.wgsl", "write_rows", [rows, 1, 1]),
+        ("vals_visibility.wgsl", "cs_main", [group, 1, 1]),
+        ("lpv_inject.wgsl", "cs_main", [texels, 1, 1]),
+        ("lpv_geometry.wgsl", "cs_rsm", [texels, 1, 1]),
+        ("lpv_propagate.wgsl", "cs_main", [block, block, block]),
+        ("bench_fma.wgsl", "cs_main", [valgi::bench::FMA_GROUP, 1, 1]),
+    ]);
     for (file, entry, size) in &expected {
         let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
         let point = module
@@ -129,5 +143,23 @@ fn workgroup_sizes_match_the_dispatches() {
             .find(|p| p.name == *entry)
             .unwrap_or_else(|| panic!("{file} has no entry point {entry}"));
         assert_eq!(point.workgroup_size, *size, "{file}::{entry}");
+    }
+    // Every compute entry point of every shader is listed: a new kernel declares the constant
+    // its dispatch divides by, instead of a literal the two sides could disagree on.
+    for (file, _) in shaders::FILES {
+        let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
+        for point in &module.entry_points {
+            if point.stage != naga::ShaderStage::Compute {
+                continue;
+            }
+            assert!(
+                expected
+                    .iter()
+                    .any(|(f, e, _)| f == file && *e == point.name),
+                "{file}::{} is a compute kernel whose workgroup size no dispatch constant \
+                 is checked against; add it to this list",
+                point.name
+            );
+        }
     }
 }

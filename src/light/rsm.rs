@@ -181,6 +181,13 @@ struct Append {
 /// Rows per workgroup of the append passes (`@workgroup_size(64, 1, 1)`).
 pub const APPEND_GROUP: u32 = 64;
 
+/// RSM rows per workgroup of the compaction's count and write passes (`count_rows`,
+/// `write_rows` in `vals_from_rsm.wgsl`).
+pub const ROW_GROUP: u32 = 64;
+
+/// Threads of the compaction's single scan workgroup (`scan_rows`; its `SCAN_GROUP`).
+pub const SCAN_GROUP: u32 = 256;
+
 /// `AppendSize` in `shaders/light/vals_append.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -652,7 +659,7 @@ impl Rsm {
         }
         if self.layer_count > 0 {
             // One thread per row; rows past 65535 workgroups wrap into a second dimension.
-            let groups = (self.resolution * self.layer_count).div_ceil(64);
+            let groups = (self.resolution * self.layer_count).div_ceil(ROW_GROUP);
             let (gx, gy) = if groups <= 65535 {
                 (groups, 1)
             } else {

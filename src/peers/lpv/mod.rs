@@ -24,6 +24,13 @@ use crate::scene::Scene;
 
 use math::{Face, Grid, Volume};
 
+/// RSM texels per workgroup of injection and of the geometry volume's RSM surfels
+/// (`cs_main` in `lpv_inject.wgsl`, `cs_rsm` in `lpv_geometry.wgsl`).
+pub const TEXEL_GROUP: u32 = 64;
+
+/// Cells per side of a propagation workgroup (`lpv_propagate.wgsl`: a 4³ block).
+pub const PROPAGATE_BLOCK: u32 = 4;
+
 /// `LpvParams` in `shaders/lpv/lpv_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -521,7 +528,7 @@ impl Method for LpvMethod {
         encoder.clear_buffer(&self.volumes[0], 0, None);
         encoder.clear_buffer(&self.gv_buffer, 0, None);
         // One invocation per RSM texel, in rows of at most 65535 workgroups.
-        let groups = self.rsm.capacity.div_ceil(64);
+        let groups = self.rsm.capacity.div_ceil(TEXEL_GROUP);
         let val_groups = (groups.min(65535), groups.div_ceil(65535));
         passes.compute("inject", |pass| {
             pass.set_pipeline(&self.inject_pipeline);
@@ -569,7 +576,11 @@ impl Method for LpvMethod {
             volume_size,
         );
         if self.settings.steps > 0 {
-            let groups = self.grid.dims.to_array().map(|n| n.div_ceil(4));
+            let groups = self
+                .grid
+                .dims
+                .to_array()
+                .map(|n| n.div_ceil(PROPAGATE_BLOCK));
             passes.compute("propagate", |pass| {
                 pass.set_pipeline(&self.propagate_pipeline);
                 for step in 0..self.settings.steps {
