@@ -245,6 +245,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             prepare_output(path)?;
         }
     }
+    let loading = crate::progress::Step::new(true, 1, &format!("loading {}", request.scene));
     let mut scene = scene::load_with(
         &request.scene,
         &scene::LoadParams {
@@ -252,6 +253,8 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             allow_external_paths: request.allow_external_paths,
         },
     )?;
+    loading.inc(1);
+    loading.finish();
     let aspect = request.settings.width as f32 / request.settings.height as f32;
     let camera = request
         .edits

@@ -873,23 +873,26 @@ fn main() -> ExitCode {
 
 /// `valgi bake`: progress bar on a terminal, Ctrl-C stops cleanly (no file is left).
 fn bake(args: BakeArgs) -> ExitCode {
-    use std::io::IsTerminal;
-
     valgi::progress::install_ctrl_c();
     let cancel = valgi::progress::cancel_flag();
-    let bar = if std::io::stderr().is_terminal() {
-        indicatif::ProgressBar::new(1)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>10} [{bar:40}] {pos}/{len} {elapsed}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-    );
+    // One progress step per bake stage: a bar on a terminal, a summary line otherwise.
+    let stage_step = std::sync::Mutex::new(None::<(String, valgi::progress::Step)>);
     let progress = |stage: &str, done: usize, total: usize| {
-        bar.set_message(stage.to_string());
-        bar.set_length(total as u64);
-        bar.set_position(done as u64);
+        let Ok(mut current) = stage_step.lock() else {
+            return;
+        };
+        if current.as_ref().is_none_or(|(name, _)| name != stage) {
+            if let Some((_, step)) = current.take() {
+                step.finish();
+            }
+            *current = Some((
+                stage.to_string(),
+                valgi::progress::Step::new(true, total as u64, &format!("bake: {stage}")),
+            ));
+        }
+        if let Some((_, step)) = current.as_ref() {
+            step.set_position(done as u64, total as u64);
+        }
     };
     let request = valgi::atlas::BakeRequest {
         scene: args.scene,
@@ -917,7 +920,11 @@ fn bake(args: BakeArgs) -> ExitCode {
         out: args.out,
     };
     let result = valgi::atlas::bake_to_file(&request, &progress, cancel);
-    bar.finish_and_clear();
+    if let Ok(mut current) = stage_step.lock() {
+        if let Some((_, step)) = current.take() {
+            step.finish();
+        }
+    }
     match result {
         Ok(summary) => {
             println!("{summary}");
