@@ -11,9 +11,7 @@ use bytemuck::{Pod, Zeroable};
 
 use crate::gpu::{GpuContext, Passes};
 use crate::method::Method;
-use crate::raster::{
-    compute_pipeline, storage_entry_rw, uniform_entry, RenderError, RenderSettings,
-};
+use crate::raster::{compute_pipeline, RenderError, RenderSettings};
 use crate::scene::{self, builtin::BuiltinParams, Scene};
 use crate::vals::math::OcclusionMode;
 use crate::vals::{SparseMethod, SparseSettings};
@@ -70,19 +68,22 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
         mapped_at_creation: false,
     });
     let cs = wgpu::ShaderStages::COMPUTE;
-    let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("fma"),
-        entries: &[uniform_entry(0, cs), storage_entry_rw(1, cs)],
-    });
-    let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some("fma"),
-        layout: &layout,
-        entries: &[
-            crate::raster::buffer_binding(0, &params),
-            crate::raster::buffer_binding(1, &sink),
+    let layout = crate::gpu::bindings::GroupLayout::new(
+        device,
+        "fma",
+        cs,
+        &[
+            crate::gpu::bindings::Slot::Uniform,
+            crate::gpu::bindings::Slot::StorageRw,
         ],
-    });
-    let pipeline = compute_pipeline(device, "fma peak", &ctx.shader("bench_fma.wgsl"), &layout);
+    );
+    let group = layout.bind(device, &[&params, &sink]);
+    let pipeline = compute_pipeline(
+        device,
+        "fma peak",
+        &ctx.shader("bench_fma.wgsl"),
+        &layout.layout,
+    );
     let run = |iterations: u32| -> Result<f64, RenderError> {
         ctx.queue.write_buffer(
             &params,

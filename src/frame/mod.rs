@@ -12,12 +12,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::{Mat4, Vec3};
 
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes, Scope};
 use crate::image_io::Image;
 use crate::raster::types::{FrameUniforms, ResolveParams};
 use crate::raster::{
-    buffer_binding, compute_pipeline, storage_texture_entry, texture_entry, uniform_entry,
-    view_binding, RenderError, DEPTH_FORMAT, GBUFFER_MATERIAL_FORMAT, GBUFFER_NORMAL_FORMAT,
+    compute_pipeline, RenderError, DEPTH_FORMAT, GBUFFER_MATERIAL_FORMAT, GBUFFER_NORMAL_FORMAT,
     RADIANCE_FORMAT,
 };
 use crate::scene::{CameraView, Scene};
@@ -104,6 +104,16 @@ static NEXT_VIEW_ID: AtomicU64 = AtomicU64::new(1);
 /// in their WGSL; `tests/shader_layout.rs` checks each entry point against it with naga).
 pub const PIXEL_TILE: u32 = 8;
 
+/// `resolve.wgsl`: its parameters, the SSAA radiance (direct, indirect) it box-filters, and the
+/// output-size targets it writes.
+const RESOLVE_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+    Slot::StorageTexture(RADIANCE_FORMAT),
+];
+
 /// One camera's share of a frame: its camera, targets and frame uniform.
 pub struct View {
     id: u64,
@@ -143,34 +153,31 @@ impl View {
         let frame_buffer = bytes.uniform::<FrameUniforms>(device, "frame uniforms");
         let resolve_params = bytes.uniform::<ResolveParams>(device, "resolve params");
         let cs = wgpu::ShaderStages::COMPUTE;
-        let resolve_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("resolve"),
-            entries: &[
-                uniform_entry(0, cs),
-                texture_entry(1, cs),
-                texture_entry(2, cs),
-                storage_texture_entry(3, cs),
-                storage_texture_entry(4, cs),
-            ],
-        });
+        let resolve_bgl = GroupLayout::new(device, "resolve", cs, RESOLVE_BINDINGS);
         let out_direct = targets.output_direct.create_view(&Default::default());
         let out_indirect = targets.output_indirect.create_view(&Default::default());
-        let resolve_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("resolve"),
-            layout: &resolve_bgl,
-            entries: &[
-                buffer_binding(0, &resolve_params),
-                view_binding(1, &targets.radiance_direct),
-                view_binding(2, &targets.radiance_indirect),
-                view_binding(3, &out_direct),
-                view_binding(4, &out_indirect),
+        let resolve_group = resolve_bgl.bind(
+            device,
+            &[
+                &resolve_params,
+                &targets.radiance_direct,
+                &targets.radiance_indirect,
+                &out_direct,
+                &out_indirect,
             ],
-        });
+        );
         let resolve_pipeline = ctx.scoped(
             "the resolve pipeline",
             None,
             crate::raster::PIPELINE_REMEDY,
-            || compute_pipeline(device, "resolve", &ctx.shader("resolve.wgsl"), &resolve_bgl),
+            || {
+                compute_pipeline(
+                    device,
+                    "resolve",
+                    &ctx.shader("resolve.wgsl"),
+                    &resolve_bgl.layout,
+                )
+            },
         )?;
         Ok(Self {
             id: NEXT_VIEW_ID.fetch_add(1, Ordering::Relaxed),

@@ -1,6 +1,7 @@
 //! Headless GPU access: device creation on any adapter, per-pass timing, readback, and a count
 //! of the bytes each method owns on the GPU.
 
+pub mod bindings;
 pub mod readback;
 pub mod resources;
 pub mod timing;

@@ -11,10 +11,22 @@ use glam::Mat4;
 use super::math::{self, KernelParams, Surfel};
 use super::rgbd::{Intrinsics, RgbdFrame};
 use crate::frame::PIXEL_TILE;
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::GpuVal;
 use crate::light::{ExternalVals, Val, ValSource};
-use crate::raster::{buffer_binding, storage_entry_rw, uniform_entry, RenderError};
+use crate::raster::RenderError;
+
+/// `depth_vals.wgsl`: its parameters, then the raw depth, colour, filtered depth, surfels and
+/// per-block candidates its three passes read and write.
+const BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+];
 
 /// Blocks per workgroup of the `reduce` pass (`@workgroup_size(64, 1, 1)`).
 pub const REDUCE_GROUP: u32 = 64;
@@ -235,32 +247,22 @@ impl DepthVals {
         let candidates = storage("mr candidates", blocks * val);
         let params_buffer = bytes.uniform::<DepthValParams>(device, "mr params");
         let cs = wgpu::ShaderStages::COMPUTE;
-        let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("depth vals"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry_rw(1, cs),
-                storage_entry_rw(2, cs),
-                storage_entry_rw(3, cs),
-                storage_entry_rw(4, cs),
-                storage_entry_rw(5, cs),
+        let bgl = GroupLayout::new(device, "depth vals", cs, BINDINGS);
+        let group = bgl.bind(
+            device,
+            &[
+                &params_buffer,
+                &depth_raw,
+                &color,
+                &depth_filtered,
+                &surfels,
+                &candidates,
             ],
-        });
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("depth vals"),
-            layout: &bgl,
-            entries: &[
-                buffer_binding(0, &params_buffer),
-                buffer_binding(1, &depth_raw),
-                buffer_binding(2, &color),
-                buffer_binding(3, &depth_filtered),
-                buffer_binding(4, &surfels),
-                buffer_binding(5, &candidates),
-            ],
-        });
+        );
         let module = ctx.shader("depth_vals.wgsl");
-        let pipelines = ["bilateral", "surfel", "reduce"]
-            .map(|entry| crate::raster::compute_pipeline_at(device, entry, &module, &bgl, entry));
+        let pipelines = ["bilateral", "surfel", "reduce"].map(|entry| {
+            crate::raster::compute_pipeline_at(device, entry, &module, &bgl.layout, entry)
+        });
         Ok(Self {
             intrinsics,
             settings,

@@ -14,14 +14,50 @@ pub mod cpu;
 use std::cell::Cell;
 
 use crate::frame::{FrameInput, Method, View, ViewCache, ViewResult, PIXEL_TILE};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::Rsm;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
-    buffer_binding, compute_pipeline_at, depth_texture_entry, storage_entry, storage_entry_rw,
-    storage_texture_entry, texture_entry, uniform_entry, view_binding, Rasterizer, RenderError,
-    RenderSettings,
+    compute_pipeline_at, Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT,
 };
+
+/// `negative_positives.wgsl`: the sample count and samples, the RSM's position, normal and
+/// flux arrays, and the positive lights it writes.
+const POSITIVES_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::TextureArray,
+    Slot::TextureArray,
+    Slot::TextureArray,
+    Slot::StorageRw,
+];
+
+/// `negative_view.wgsl`: frame and parameters, the G-buffer and the indirect target, the
+/// positive lights, then the per-view work buffers (points, low/full-resolution terms, tiles)
+/// the kernels write, the candidate list they read, and the negatives, their state, the
+/// per-resolution energies and the statistics they write.
+const VIEW_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Uniform,
+    Slot::DepthTexture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+    Slot::Storage,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::Storage,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+];
 use crate::scene::{Aabb, CameraView, Scene};
 use crate::shading::WorldLight;
 use bytemuck::{Pod, Zeroable};
@@ -349,7 +385,7 @@ pub struct NegativeMethod {
     positives_buffer: wgpu::Buffer,
     positives_group: wgpu::BindGroup,
     positives_pipeline: wgpu::ComputePipeline,
-    view_layout: wgpu::BindGroupLayout,
+    view_layout: GroupLayout,
     view_pipelines: Vec<(&'static str, wgpu::ComputePipeline)>,
     select_pipeline: wgpu::ComputePipeline,
     views: ViewCache<ViewState>,
@@ -405,73 +441,42 @@ impl NegativeMethod {
         let positives_buffer = buffer(&mut bytes, device, "positive lights", total * 48, STORAGE);
         let sample_count_buffer = bytes.uniform::<SampleCount>(device, "negative sample count");
         let cs = wgpu::ShaderStages::COMPUTE;
-        let array_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: cs,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let positives_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("negative positives"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
-                array_entry(2),
-                array_entry(3),
-                array_entry(4),
-                storage_entry_rw(5, cs),
+        let positives_layout =
+            GroupLayout::new(device, "negative positives", cs, POSITIVES_BINDINGS);
+        let positives_group = positives_layout.bind(
+            device,
+            &[
+                &sample_count_buffer,
+                &samples_buffer,
+                &rsm.array_views[0],
+                &rsm.array_views[1],
+                &rsm.array_views[2],
+                &positives_buffer,
             ],
-        });
-        let positives_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("negative positives"),
-            layout: &positives_layout,
-            entries: &[
-                buffer_binding(0, &sample_count_buffer),
-                buffer_binding(1, &samples_buffer),
-                view_binding(2, &rsm.array_views[0]),
-                view_binding(3, &rsm.array_views[1]),
-                view_binding(4, &rsm.array_views[2]),
-                buffer_binding(5, &positives_buffer),
-            ],
-        });
+        );
         let positives_pipeline = compute_pipeline_at(
             device,
             "negative positives",
             &ctx.shader("negative_positives.wgsl"),
-            &positives_layout,
+            &positives_layout.layout,
             "cs_main",
         );
-        let mut entries = vec![
-            uniform_entry(0, cs),
-            uniform_entry(1, cs),
-            depth_texture_entry(2, cs),
-            texture_entry(3, cs),
-            texture_entry(4, cs),
-            texture_entry(5, cs),
-            storage_texture_entry(6, cs),
-            storage_entry(7, cs),
-        ];
-        entries.extend((8..=12).map(|b| storage_entry_rw(b, cs)));
-        entries.push(storage_entry(13, cs));
-        entries.extend((14..=18).map(|b| storage_entry_rw(b, cs)));
-        let view_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("negative view"),
-            entries: &entries,
-        });
+        let view_layout = GroupLayout::new(device, "negative view", cs, VIEW_BINDINGS);
         let module = ctx.shader("negative_view.wgsl");
         let view_pipelines = VIEW_ENTRIES
             .iter()
-            .map(|e| (*e, compute_pipeline_at(device, e, &module, &view_layout, e)))
+            .map(|e| {
+                (
+                    *e,
+                    compute_pipeline_at(device, e, &module, &view_layout.layout, e),
+                )
+            })
             .collect();
         let select_pipeline = compute_pipeline_at(
             device,
             "select_negatives",
             &module,
-            &view_layout,
+            &view_layout.layout,
             "select_negatives",
         );
         Ok(Self {
@@ -583,31 +588,30 @@ impl NegativeMethod {
             wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
         );
         let t = &view.targets;
-        let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("negative view"),
-            layout: &self.view_layout,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &params),
-                view_binding(2, &t.depth),
-                view_binding(3, &t.normal),
-                view_binding(4, &t.diffuse),
-                view_binding(5, &t.specular),
-                view_binding(6, &t.radiance_indirect),
-                buffer_binding(7, &self.positives_buffer),
-                buffer_binding(8, &points),
-                buffer_binding(9, &low_points),
-                buffer_binding(10, &low_terms),
-                buffer_binding(11, &full_terms),
-                buffer_binding(12, &tiles_buffer),
-                buffer_binding(13, &candidates),
-                buffer_binding(14, &negatives),
-                buffer_binding(15, &negative_state),
-                buffer_binding(16, &low_en),
-                buffer_binding(17, &full_en),
-                buffer_binding(18, &stats),
+        let group = self.view_layout.bind(
+            device,
+            &[
+                &view.frame_buffer,
+                &params,
+                &t.depth,
+                &t.normal,
+                &t.diffuse,
+                &t.specular,
+                &t.radiance_indirect,
+                &self.positives_buffer,
+                &points,
+                &low_points,
+                &low_terms,
+                &full_terms,
+                &tiles_buffer,
+                &candidates,
+                &negatives,
+                &negative_state,
+                &low_en,
+                &full_en,
+                &stats,
             ],
-        });
+        );
         ViewState {
             params,
             points,

@@ -5,15 +5,27 @@
 //! the two is the sparse method's interpolation error alone.
 
 use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
 use crate::light::{ValParams, FLAG_GLOSSY};
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
-use crate::raster::{
-    buffer_binding, compute_pipeline, depth_texture_entry, storage_entry, storage_texture_entry,
-    texture_entry, uniform_entry, view_binding, Rasterizer, RenderError, RenderSettings,
-};
+use crate::raster::{compute_pipeline, Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT};
 use crate::scene::Scene;
+
+/// `brute_vals.wgsl`'s group: the view's frame uniform, the VAL parameters, the VALs and their
+/// count, the G-buffer (depth, normal, diffuse, specular) and the indirect target.
+const BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::DepthTexture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+];
 
 pub static ENTRY: Entry = Entry {
     name: "brute",
@@ -57,7 +69,7 @@ pub struct BruteMethod {
     tile: u32,
     params_buffer: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
-    layout: wgpu::BindGroupLayout,
+    layout: GroupLayout,
     vals: u32,
 }
 
@@ -86,21 +98,13 @@ impl BruteMethod {
             mapped_at_creation: false,
         });
         let cs = wgpu::ShaderStages::COMPUTE;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("brute"),
-            entries: &[
-                uniform_entry(0, cs),
-                uniform_entry(1, cs),
-                storage_entry(2, cs),
-                storage_entry(3, cs),
-                depth_texture_entry(4, cs),
-                texture_entry(5, cs),
-                texture_entry(6, cs),
-                texture_entry(7, cs),
-                storage_texture_entry(8, cs),
-            ],
-        });
-        let pipeline = compute_pipeline(device, "brute", &ctx.shader("brute_vals.wgsl"), &layout);
+        let layout = GroupLayout::new(device, "brute", cs, BINDINGS);
+        let pipeline = compute_pipeline(
+            device,
+            "brute",
+            &ctx.shader("brute_vals.wgsl"),
+            &layout.layout,
+        );
         Ok(Self {
             raster,
             rsm,
@@ -156,21 +160,20 @@ impl Method for BruteMethod {
     ) -> Result<ViewResult, RenderError> {
         self.raster.record_view_base(ctx, view, passes)?;
         let t = &view.targets;
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("brute"),
-            layout: &self.layout,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &self.params_buffer),
-                buffer_binding(2, &self.rsm.vals_buffer),
-                buffer_binding(3, &self.rsm.val_count_buffer),
-                view_binding(4, &t.depth),
-                view_binding(5, &t.normal),
-                view_binding(6, &t.diffuse),
-                view_binding(7, &t.specular),
-                view_binding(8, &t.radiance_indirect),
+        let group = self.layout.bind(
+            &ctx.device,
+            &[
+                &view.frame_buffer,
+                &self.params_buffer,
+                &self.rsm.vals_buffer,
+                &self.rsm.val_count_buffer,
+                &t.depth,
+                &t.normal,
+                &t.diffuse,
+                &t.specular,
+                &t.radiance_indirect,
             ],
-        });
+        );
         view.record_per_pixel(passes, "brute", &self.pipeline, &group)?;
         Ok(ViewResult::DirectAndIndirect)
     }

@@ -608,21 +608,16 @@ pub fn cleared(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachme
     })
 }
 
+// Layout entries for the groups still written entry by entry; they are the slots of
+// `gpu::bindings`, which new code uses directly.
+use crate::gpu::bindings::Slot;
+
 pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Uniform,
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
+    Slot::Uniform.entry(binding, visibility)
 }
 
 pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    storage_buffer_entry(binding, visibility, true)
+    Slot::Storage.entry(binding, visibility)
 }
 
 /// A storage buffer the shader writes (`var<storage, read_write>`).
@@ -630,24 +625,7 @@ pub fn storage_entry_rw(
     binding: u32,
     visibility: wgpu::ShaderStages,
 ) -> wgpu::BindGroupLayoutEntry {
-    storage_buffer_entry(binding, visibility, false)
-}
-
-fn storage_buffer_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-    read_only: bool,
-) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Buffer {
-            ty: wgpu::BufferBindingType::Storage { read_only },
-            has_dynamic_offset: false,
-            min_binding_size: None,
-        },
-        count: None,
-    }
+    Slot::StorageRw.entry(binding, visibility)
 }
 
 /// A 2D depth texture read with `textureLoad` (the G-buffer's depth).
@@ -655,16 +633,7 @@ pub fn depth_texture_entry(
     binding: u32,
     visibility: wgpu::ShaderStages,
 ) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Depth,
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
+    Slot::DepthTexture.entry(binding, visibility)
 }
 
 /// Vertex buffers of [`Vertex`] read for their position only (shadow maps, depth-equal
@@ -681,32 +650,14 @@ pub const POSITION_ONLY: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferL
 
 /// A float texture read with `textureLoad` (no filtering needed).
 pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    }
+    Slot::Texture.entry(binding, visibility)
 }
 
 pub fn storage_texture_entry(
     binding: u32,
     visibility: wgpu::ShaderStages,
 ) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility,
-        ty: wgpu::BindingType::StorageTexture {
-            access: wgpu::StorageTextureAccess::WriteOnly,
-            format: RADIANCE_FORMAT,
-            view_dimension: wgpu::TextureViewDimension::D2,
-        },
-        count: None,
-    }
+    Slot::StorageTexture(RADIANCE_FORMAT).entry(binding, visibility)
 }
 
 pub fn buffer_binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {

@@ -13,16 +13,54 @@ use bytemuck::{Pod, Zeroable};
 use glam::UVec3;
 
 use crate::frame::{FrameInput, Method, View, ViewResult, PIXEL_TILE};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::Rsm;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
-use crate::raster::{
-    buffer_binding, depth_texture_entry, storage_entry, storage_entry_rw, storage_texture_entry,
-    texture_entry, uniform_entry, view_binding, Rasterizer, RenderError, RenderSettings,
-};
+use crate::raster::{Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT};
 use crate::scene::Scene;
 
 use math::{Face, Grid, Volume};
+
+/// `lpv_inject.wgsl`: parameters, the VALs and their count, the radiance volume it adds to.
+const INJECT_BINDINGS: &[Slot] = &[Slot::Uniform, Slot::Storage, Slot::Storage, Slot::StorageRw];
+
+/// `lpv_geometry.wgsl`: parameters, the VALs and their count, the geometry volume it writes,
+/// and the first view's frame uniform and G-buffer (depth, normal, specular) for its surfels.
+const GEOMETRY_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::StorageRw,
+    Slot::Uniform,
+    Slot::DepthTexture,
+    Slot::Texture,
+    Slot::Texture,
+];
+
+/// `lpv_propagate.wgsl`: parameters, the face table, the source volume, the destination and
+/// accumulated volumes, and the geometry volume.
+const PROPAGATE_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::Storage,
+];
+
+/// `lpv_lookup.wgsl`: frame and parameters, the accumulated volume, the G-buffer and the
+/// indirect target.
+const LOOKUP_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::DepthTexture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+];
 
 /// RSM texels per workgroup of injection and of the geometry volume's RSM surfels
 /// (`cs_main` in `lpv_inject.wgsl`, `cs_rsm` in `lpv_geometry.wgsl`).
@@ -164,12 +202,12 @@ pub struct LpvMethod {
     inject_group: wgpu::BindGroup,
     geometry_rsm: wgpu::ComputePipeline,
     geometry_camera: wgpu::ComputePipeline,
-    geometry_layout: wgpu::BindGroupLayout,
+    geometry_layout: GroupLayout,
     propagate_pipeline: wgpu::ComputePipeline,
     /// b→a without occlusion (step 1), a→b, b→a (with occlusion when on).
     propagate_groups: [wgpu::BindGroup; 3],
     lookup_pipeline: wgpu::ComputePipeline,
-    lookup_layout: wgpu::BindGroupLayout,
+    lookup_layout: GroupLayout,
     surfel_stride: u32,
     /// The view whose G-buffer gave this frame's camera surfels (its G-buffer is drawn in
     /// the update, before the propagation, and not again in its record).
@@ -300,53 +338,32 @@ impl LpvMethod {
 
         let cs = wgpu::ShaderStages::COMPUTE;
         // Injection.
-        let inject_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lpv inject"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
-                storage_entry(2, cs),
-                storage_entry_rw(3, cs),
+        let inject_layout = GroupLayout::new(device, "lpv inject", cs, INJECT_BINDINGS);
+        let inject_group = inject_layout.bind(
+            device,
+            &[
+                &params_off,
+                &rsm.vals_buffer,
+                &rsm.val_count_buffer,
+                &volumes[0],
             ],
-        });
-        let inject_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lpv inject"),
-            layout: &inject_layout,
-            entries: &[
-                buffer_binding(0, &params_off),
-                buffer_binding(1, &rsm.vals_buffer),
-                buffer_binding(2, &rsm.val_count_buffer),
-                buffer_binding(3, &volumes[0]),
-            ],
-        });
+        );
         let inject_pipeline = pipeline(
             ctx,
             "lpv inject",
             "lpv_inject.wgsl",
             "cs_main",
-            &inject_layout,
+            &inject_layout.layout,
             sh,
         );
         // Geometry volume.
-        let geometry_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lpv geometry"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
-                storage_entry(2, cs),
-                storage_entry_rw(3, cs),
-                uniform_entry(4, cs),
-                depth_texture_entry(5, cs),
-                texture_entry(6, cs),
-                texture_entry(7, cs),
-            ],
-        });
+        let geometry_layout = GroupLayout::new(device, "lpv geometry", cs, GEOMETRY_BINDINGS);
         let geometry_rsm = pipeline(
             ctx,
             "lpv geometry rsm",
             "lpv_geometry.wgsl",
             "cs_rsm",
-            &geometry_layout,
+            &geometry_layout.layout,
             sh,
         );
         let geometry_camera = pipeline(
@@ -354,39 +371,28 @@ impl LpvMethod {
             "lpv geometry camera",
             "lpv_geometry.wgsl",
             "cs_camera",
-            &geometry_layout,
+            &geometry_layout.layout,
             sh,
         );
         // Propagation.
-        let propagate_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lpv propagate"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
-                storage_entry(2, cs),
-                storage_entry_rw(3, cs),
-                storage_entry_rw(4, cs),
-                storage_entry(5, cs),
-            ],
-        });
+        let propagate_layout = GroupLayout::new(device, "lpv propagate", cs, PROPAGATE_BINDINGS);
         let later = if settings.occlusion {
             &params_on
         } else {
             &params_off
         };
         let group = |params: &wgpu::Buffer, src: usize, dst: usize| {
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("lpv propagate"),
-                layout: &propagate_layout,
-                entries: &[
-                    buffer_binding(0, params),
-                    buffer_binding(1, &faces_buffer),
-                    buffer_binding(2, &volumes[src]),
-                    buffer_binding(3, &volumes[dst]),
-                    buffer_binding(4, &volumes[2]),
-                    buffer_binding(5, &gv_buffer),
+            propagate_layout.bind(
+                device,
+                &[
+                    params,
+                    &faces_buffer,
+                    &volumes[src],
+                    &volumes[dst],
+                    &volumes[2],
+                    &gv_buffer,
                 ],
-            })
+            )
         };
         let propagate_groups = [
             group(&params_off, 0, 1),
@@ -398,29 +404,17 @@ impl LpvMethod {
             "lpv propagate",
             "lpv_propagate.wgsl",
             "cs_main",
-            &propagate_layout,
+            &propagate_layout.layout,
             sh,
         );
         // Lookup.
-        let lookup_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("lpv lookup"),
-            entries: &[
-                uniform_entry(0, cs),
-                uniform_entry(1, cs),
-                storage_entry(2, cs),
-                depth_texture_entry(3, cs),
-                texture_entry(4, cs),
-                texture_entry(5, cs),
-                texture_entry(6, cs),
-                storage_texture_entry(7, cs),
-            ],
-        });
+        let lookup_layout = GroupLayout::new(device, "lpv lookup", cs, LOOKUP_BINDINGS);
         let lookup_pipeline = pipeline(
             ctx,
             "lpv lookup",
             "lpv_lookup.wgsl",
             "cs_main",
-            &lookup_layout,
+            &lookup_layout.layout,
             sh,
         );
         Ok(Self {
@@ -543,20 +537,19 @@ impl Method for LpvMethod {
             );
             self.raster.record_gbuffer(ctx, view, passes)?;
             let t = &view.targets;
-            let geometry_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("lpv geometry"),
-                layout: &self.geometry_layout,
-                entries: &[
-                    buffer_binding(0, &self.params_off),
-                    buffer_binding(1, &self.rsm.vals_buffer),
-                    buffer_binding(2, &self.rsm.val_count_buffer),
-                    buffer_binding(3, &self.gv_buffer),
-                    buffer_binding(4, &view.frame_buffer),
-                    view_binding(5, &t.depth),
-                    view_binding(6, &t.normal),
-                    view_binding(7, &t.specular),
+            let geometry_group = self.geometry_layout.bind(
+                &ctx.device,
+                &[
+                    &self.params_off,
+                    &self.rsm.vals_buffer,
+                    &self.rsm.val_count_buffer,
+                    &self.gv_buffer,
+                    &view.frame_buffer,
+                    &t.depth,
+                    &t.normal,
+                    &t.specular,
                 ],
-            });
+            );
             let s = self.surfel_stride;
             let (sx, sy) = (t.render_width.div_ceil(s), t.render_height.div_ceil(s));
             passes.compute("geometry", |pass| {
@@ -610,20 +603,19 @@ impl Method for LpvMethod {
             self.raster.record_view_base(ctx, view, passes)?;
         }
         let t = &view.targets;
-        let lookup_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("lpv lookup"),
-            layout: &self.lookup_layout,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &self.params_off),
-                buffer_binding(2, &self.volumes[2]),
-                view_binding(3, &t.depth),
-                view_binding(4, &t.normal),
-                view_binding(5, &t.diffuse),
-                view_binding(6, &t.specular),
-                view_binding(7, &t.radiance_indirect),
+        let lookup_group = self.lookup_layout.bind(
+            &ctx.device,
+            &[
+                &view.frame_buffer,
+                &self.params_off,
+                &self.volumes[2],
+                &t.depth,
+                &t.normal,
+                &t.diffuse,
+                &t.specular,
+                &t.radiance_indirect,
             ],
-        });
+        );
         view.record_per_pixel(passes, "lookup", &self.lookup_pipeline, &lookup_group)?;
         Ok(ViewResult::DirectAndIndirect)
     }

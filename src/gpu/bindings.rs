@@ -1,0 +1,162 @@
+//! Bind-group layouts and bind groups from one list.
+//!
+//! A technique declares the bindings of a shader's group once, as a `&'static [Slot]` in the
+//! order of the WGSL `@binding(i)` indices; [`GroupLayout::new`] makes the layout from it and
+//! [`GroupLayout::bind`] the groups, taking the resources in the same order. No binding index
+//! is written twice, so the layout and the groups cannot drift apart, and a group given the
+//! wrong number or kind of resources is refused where it is made, naming the slot.
+
+/// What a shader declares at one binding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Slot {
+    /// `var<uniform>`.
+    Uniform,
+    /// `var<storage, read>`.
+    Storage,
+    /// `var<storage, read_write>`.
+    StorageRw,
+    /// `texture_2d<f32>` read with `textureLoad` (no filtering).
+    Texture,
+    /// `texture_2d_array<f32>` read with `textureLoad`.
+    TextureArray,
+    /// `texture_depth_2d` read with `textureLoad`.
+    DepthTexture,
+    /// `texture_storage_2d<FORMAT, write>`.
+    StorageTexture(wgpu::TextureFormat),
+}
+
+impl Slot {
+    /// The layout entry of this slot at `binding`.
+    pub fn entry(self, binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+        let buffer = |ty| wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        };
+        let texture = |sample_type, view_dimension| wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension,
+            multisampled: false,
+        };
+        let float = wgpu::TextureSampleType::Float { filterable: false };
+        let d2 = wgpu::TextureViewDimension::D2;
+        let ty = match self {
+            Slot::Uniform => buffer(wgpu::BufferBindingType::Uniform),
+            Slot::Storage => buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+            Slot::StorageRw => buffer(wgpu::BufferBindingType::Storage { read_only: false }),
+            Slot::Texture => texture(float, d2),
+            Slot::TextureArray => texture(float, wgpu::TextureViewDimension::D2Array),
+            Slot::DepthTexture => texture(wgpu::TextureSampleType::Depth, d2),
+            Slot::StorageTexture(format) => wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format,
+                view_dimension: wgpu::TextureViewDimension::D2,
+            },
+        };
+        wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility,
+            ty,
+            count: None,
+        }
+    }
+
+    fn takes_buffer(self) -> bool {
+        matches!(self, Slot::Uniform | Slot::Storage | Slot::StorageRw)
+    }
+}
+
+/// A resource that can fill a [`Slot`]: a whole buffer or a texture view.
+pub trait Bindable {
+    fn resource(&self) -> wgpu::BindingResource<'_>;
+    fn is_buffer(&self) -> bool;
+}
+
+impl Bindable for wgpu::Buffer {
+    fn resource(&self) -> wgpu::BindingResource<'_> {
+        self.as_entire_binding()
+    }
+
+    fn is_buffer(&self) -> bool {
+        true
+    }
+}
+
+impl Bindable for wgpu::TextureView {
+    fn resource(&self) -> wgpu::BindingResource<'_> {
+        wgpu::BindingResource::TextureView(self)
+    }
+
+    fn is_buffer(&self) -> bool {
+        false
+    }
+}
+
+/// A bind-group layout with the slot list it was made from.
+pub struct GroupLayout {
+    pub layout: wgpu::BindGroupLayout,
+    label: &'static str,
+    slots: &'static [Slot],
+}
+
+impl GroupLayout {
+    pub fn new(
+        device: &wgpu::Device,
+        label: &'static str,
+        visibility: wgpu::ShaderStages,
+        slots: &'static [Slot],
+    ) -> Self {
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = slots
+            .iter()
+            .enumerate()
+            .map(|(i, slot)| slot.entry(i as u32, visibility))
+            .collect();
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &entries,
+        });
+        Self {
+            layout,
+            label,
+            slots,
+        }
+    }
+
+    /// A group binding `resources[i]` at binding i.
+    ///
+    /// # Panics
+    /// When the resources do not match the slots in number or kind: a programming error in
+    /// the technique, caught by its first test run.
+    pub fn bind(&self, device: &wgpu::Device, resources: &[&dyn Bindable]) -> wgpu::BindGroup {
+        assert_eq!(
+            resources.len(),
+            self.slots.len(),
+            "bind group '{}': {} resources for {} slots",
+            self.label,
+            resources.len(),
+            self.slots.len()
+        );
+        let entries: Vec<wgpu::BindGroupEntry> = resources
+            .iter()
+            .zip(self.slots)
+            .enumerate()
+            .map(|(i, (resource, slot))| {
+                assert_eq!(
+                    resource.is_buffer(),
+                    slot.takes_buffer(),
+                    "bind group '{}': binding {i} is a {slot:?} slot",
+                    self.label
+                );
+                wgpu::BindGroupEntry {
+                    binding: i as u32,
+                    resource: resource.resource(),
+                }
+            })
+            .collect();
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(self.label),
+            layout: &self.layout,
+            entries: &entries,
+        })
+    }
+}
