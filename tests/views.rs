@@ -79,6 +79,8 @@ fn stereo_views_share_one_update_and_match_mono_renders_from_each_eye() {
     let o = options(&[("rsm", "32"), ("sparse-points", "512"), ("glossy", "off")]);
     let mut m = method::create("sparse", &ctx, &scene, settings(SIZE), &o).unwrap();
     let eyes = views(&ctx, &scene, &ViewRig::Stereo { ipd: 0.05 });
+    // The views differ in their targets only: one resolve pipeline serves both.
+    assert!(eyes[0].shares_resolve_with(&eyes[1]));
     let frame = record_frame(m.as_mut(), &ctx, &scene, &world, &eyes).unwrap();
     let count = |label: &str| {
         frame

@@ -104,6 +104,47 @@ static NEXT_VIEW_ID: AtomicU64 = AtomicU64::new(1);
 /// in their WGSL; `tests/shader_layout.rs` checks each entry point against it with naga).
 pub const PIXEL_TILE: u32 = 8;
 
+/// The SSAA resolve kernel, one per device (see [`GpuContext::shared`]): views differ only in
+/// the resources they bind.
+pub struct ResolveKernel {
+    layout: GroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl ResolveKernel {
+    fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let layout = GroupLayout::new(
+            device,
+            "resolve",
+            wgpu::ShaderStages::COMPUTE,
+            RESOLVE_BINDINGS,
+        );
+        let pipeline = ctx.scoped(
+            "the resolve pipeline",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                compute_pipeline(
+                    device,
+                    "resolve",
+                    &ctx.shader("resolve.wgsl"),
+                    &layout.layout,
+                )
+            },
+        )?;
+        Ok(Self { layout, pipeline })
+    }
+}
+
+impl View {
+    /// Whether this view and `other` record their resolve with the same pipeline (they do
+    /// on one device: it is compiled once).
+    pub fn shares_resolve_with(&self, other: &View) -> bool {
+        std::sync::Arc::ptr_eq(&self.resolve, &other.resolve)
+    }
+}
+
 /// `resolve.wgsl`: its parameters, the SSAA radiance (direct, indirect) it box-filters, and the
 /// output-size targets it writes.
 const RESOLVE_BINDINGS: &[Slot] = &[
@@ -127,7 +168,8 @@ pub struct View {
     /// The `Frame` uniform (camera, render size) every per-view pass binds.
     pub frame_buffer: wgpu::Buffer,
     resolve_params: wgpu::Buffer,
-    resolve_pipeline: wgpu::ComputePipeline,
+    /// The device's one resolve pipeline and layout.
+    resolve: std::sync::Arc<ResolveKernel>,
     resolve_group: wgpu::BindGroup,
     bytes: GpuBytes,
 }
@@ -152,11 +194,10 @@ impl View {
         let mut bytes = GpuBytes::default();
         let frame_buffer = bytes.uniform::<FrameUniforms>(device, "frame uniforms");
         let resolve_params = bytes.uniform::<ResolveParams>(device, "resolve params");
-        let cs = wgpu::ShaderStages::COMPUTE;
-        let resolve_bgl = GroupLayout::new(device, "resolve", cs, RESOLVE_BINDINGS);
+        let resolve = ctx.shared(|| ResolveKernel::new(ctx))?;
         let out_direct = targets.output_direct.create_view(&Default::default());
         let out_indirect = targets.output_indirect.create_view(&Default::default());
-        let resolve_group = resolve_bgl.bind(
+        let resolve_group = resolve.layout.bind(
             device,
             &[
                 &resolve_params,
@@ -166,19 +207,6 @@ impl View {
                 &out_indirect,
             ],
         );
-        let resolve_pipeline = ctx.scoped(
-            "the resolve pipeline",
-            None,
-            crate::raster::PIPELINE_REMEDY,
-            || {
-                compute_pipeline(
-                    device,
-                    "resolve",
-                    &ctx.shader("resolve.wgsl"),
-                    &resolve_bgl.layout,
-                )
-            },
-        )?;
         Ok(Self {
             id: NEXT_VIEW_ID.fetch_add(1, Ordering::Relaxed),
             name: name.to_string(),
@@ -189,7 +217,7 @@ impl View {
             targets,
             frame_buffer,
             resolve_params,
-            resolve_pipeline,
+            resolve,
             resolve_group,
             bytes,
         })
@@ -241,7 +269,7 @@ impl View {
             .write_buffer(&self.resolve_params, 0, bytemuck::bytes_of(&params));
         let (w, h) = (self.width, self.height);
         passes.compute("resolve", |pass| {
-            pass.set_pipeline(&self.resolve_pipeline);
+            pass.set_pipeline(&self.resolve.pipeline);
             pass.set_bind_group(0, &self.resolve_group, &[]);
             pass.dispatch_workgroups(w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
         })

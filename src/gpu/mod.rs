@@ -120,9 +120,48 @@ pub struct GpuContext {
     /// a submission per pass).
     pub timestamps: bool,
     uncaptured: UncapturedErrors,
+    /// Objects made once per device and shared by everything that asks for them (the resolve
+    /// pipeline every view uses), one per type.
+    shared: std::sync::Mutex<
+        std::collections::HashMap<
+            std::any::TypeId,
+            std::sync::Arc<dyn std::any::Any + Send + Sync>,
+        >,
+    >,
 }
 
 impl GpuContext {
+    /// The device's one `T`, made by `make` the first time it is asked for: pipelines that do
+    /// not depend on their user (every view's resolve) are compiled once, not per user.
+    pub fn shared<T, E>(&self, make: impl FnOnce() -> Result<T, E>) -> Result<std::sync::Arc<T>, E>
+    where
+        T: std::any::Any + Send + Sync,
+    {
+        let key = std::any::TypeId::of::<T>();
+        let found = self
+            .shared
+            .lock()
+            .ok()
+            .and_then(|map| map.get(&key).cloned());
+        if let Some(any) = found {
+            if let Ok(value) = any.downcast::<T>() {
+                return Ok(value);
+            }
+        }
+        // Made outside the lock: `make` may itself ask for other shared objects.
+        let value = std::sync::Arc::new(make()?);
+        if let Ok(mut map) = self.shared.lock() {
+            let stored = map
+                .entry(key)
+                .or_insert_with(|| value.clone() as std::sync::Arc<dyn std::any::Any + Send + Sync>)
+                .clone();
+            if let Ok(stored) = stored.downcast::<T>() {
+                return Ok(stored);
+            }
+        }
+        Ok(value)
+    }
+
     /// Uploads one mip level of a 2D texture: `data` is `width × height` texels of
     /// `bytes_per_texel` bytes, rows packed.
     pub fn write_texture_2d(
@@ -358,6 +397,7 @@ impl GpuContext {
             adapter_info,
             timestamps,
             uncaptured,
+            shared: Default::default(),
         })
     }
 
