@@ -175,7 +175,18 @@ fn a_small_emitters_proxy_gives_the_form_factor_irradiance_and_its_power() {
             );
         }
     }
-    // No light behind the emitter (its lobe) and none when the proxy is off.
+    // A budget out of range is an error naming the option.
+    let err = scene::load_with(
+        "emissive-quad",
+        &LoadParams {
+            emitter_lights: emitters::MAX_EMITTER_LIGHTS + 1,
+            ..LoadParams::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("--emitter-lights 65"), "{err}");
+    // No light behind the emitter (its lobe).
     let (_, above) = light.incident(Vec3::new(0.0, 2.0 * height, 0.0));
     assert_eq!(above, Vec3::ZERO);
 }

@@ -652,6 +652,32 @@ mod tests {
     }
 
     #[test]
+    fn the_emissive_texture_scales_the_intensity() {
+        let mut mesh = cube(0);
+        mesh.uv0 = vec![glam::Vec2::splat(0.25); mesh.positions.len()];
+        let mut material = emissive("e", Vec3::splat(2.0));
+        material.emissive_texture = Some(0);
+        let mut scene = scene_of(vec![mesh], vec![material]);
+        // Linear texels 0.5 (left half, where the uvs are) and 1 (right half).
+        scene.textures.push(crate::scene::Texture {
+            name: "half".into(),
+            width: 2,
+            height: 1,
+            rgba8: vec![128, 64, 255, 255, 255, 255, 255, 255],
+            color_space: crate::scene::ColorSpace::Linear,
+        });
+        let triangles = emissive_triangles(&scene, &scene.world_from_node());
+        // uv 0.25 is the first texel's centre: L_e = 2 × texel.
+        let expected = Vec3::new(128.0, 64.0, 255.0) / 255.0 * 2.0;
+        for t in &triangles {
+            assert!((t.radiance - expected).abs().max_element() < 1e-5, "{}", t.radiance);
+        }
+        let clustering = cluster(&triangles, 6);
+        let total: Vec3 = clustering.clusters.iter().map(|c| c.intensity).sum();
+        assert!((total - expected * 6.0).abs().max_element() < 1e-4);
+    }
+
+    #[test]
     fn double_sided_emitters_light_both_ways() {
         let mut quad = Mesh {
             name: "quad".into(),
