@@ -427,3 +427,93 @@ const BACKDROP_SHARE: std::ops::Range<f64> = 0.9..1.45;
 /// How far from the reference a light per face may be. Measured: 1.090 of it (the faces are
 /// 1 m squares 1.5 m from the backdrop, where a point emitter is a fair but not exact stand-in).
 const EVERY_FACE_TOLERANCE: f64 = 0.15;
+
+#[test]
+fn the_direct_pass_lights_with_emitters_as_its_cpu_twin_does() {
+    let Some(ctx) = common::gpu() else { return };
+    let size = 32;
+    let scene = load_coarse("emissive-quad", emitters::DEFAULT_EMITTER_LIGHTS, 0.25);
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    let image = direct_image(&ctx, &scene, "direct", size, &[]);
+    let tracer = Tracer::new(&scene, &world);
+    let (mut compared, mut close) = (0, 0);
+    for y in 0..size {
+        for x in 0..size {
+            let (o, d) = reference::camera_ray(&camera, size, size, x as f32 + 0.5, y as f32 + 0.5);
+            let Some(hit) = tracer.intersect(o, d, f32::INFINITY) else {
+                continue;
+            };
+            if hit.emission != Vec3::ZERO {
+                continue;
+            }
+            // `shading::WorldLight::reflected` with ray-traced visibility: the shadow maps
+            // are the GPU's only other ingredient.
+            let mut twin = Vec3::ZERO;
+            for light in &tracer.lights {
+                let (wi, _) = light.incident(hit.position);
+                let origin = tracer.spawn(&hit, wi);
+                let t_max = (light.position - origin).length() - tracer.epsilon;
+                if tracer.unoccluded(origin, wi, t_max) {
+                    twin +=
+                        light.reflected(hit.position, hit.normal, o, hit.rho_d, hit.rho_s, hit.k);
+                }
+            }
+            let gpu = Vec3::from_slice(&image.get(x, y)[..3]);
+            compared += 1;
+            if (gpu - twin).abs().max_element() <= 0.01 * twin.max_element() + 1e-5 {
+                close += 1;
+            }
+        }
+    }
+    eprintln!("{close} of {compared} pixels within 1% of the CPU twin");
+    assert!(compared > (size * size / 2) as usize);
+    // Pixels straddling a wall edge see another surface at the pixel centre than the ray.
+    assert!(
+        close as f64 > 0.95 * compared as f64,
+        "{close} of {compared}"
+    );
+}
+
+#[test]
+fn an_emitters_rsm_reflects_rho_times_pi_i0_in_a_closed_box() {
+    let Some(ctx) = common::gpu() else { return };
+    // box-point's 1 W/sr point light made an emitter facing down: every direction of its lobe
+    // hits a wall of albedo 0.5, so the RSM holds Φ = 0.5·π·1 W (a point light's is 0.5·4π).
+    let mut scene = valgi::scene::builtin::load(
+        "box-point",
+        &valgi::scene::builtin::BuiltinParams { max_edge: 0.5 },
+    )
+    .unwrap();
+    let node = scene.lights[0].node;
+    scene.nodes[node].local.rotation = glam::Quat::from_rotation_arc(Vec3::NEG_Z, Vec3::NEG_Y);
+    scene.lights[0].kind = LightKind::Emitter;
+    let settings = valgi::vals::SparseSettings {
+        rsm: 64,
+        sparse_points: 64,
+        ..Default::default()
+    };
+    let mut method =
+        valgi::vals::SparseMethod::new(&ctx, &scene, common::small_render_settings(32), settings)
+            .unwrap();
+    method.last_stage = valgi::vals::Stage::Gather;
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).unwrap();
+    use valgi::method::Method;
+    method.render(&ctx, &scene, &world, &camera).unwrap();
+    let vals = method.rsm.read_vals(&ctx).unwrap();
+    let total: Vec3 = vals.iter().map(|v| v.flux).sum();
+    let expected = 0.5 * PI;
+    eprintln!("emitter RSM flux {total} vs {expected}");
+    assert!(
+        (total.x - expected).abs() < 2e-3 * expected,
+        "reflected flux {total} vs {expected}"
+    );
+    // Nothing comes from behind the lobe: the upper half of the box holds no flux.
+    let above: f32 = vals
+        .iter()
+        .filter(|v| v.position.y > 1e-3)
+        .map(|v| v.flux.x)
+        .sum();
+    assert_eq!(above, 0.0);
+}

@@ -180,7 +180,7 @@ pub fn emitter_light(tracer: &Tracer, hit: &Hit, wo: Vec3, rng: &mut Rng) -> Vec
     };
     let to_y = y.position - hit.position;
     let d2 = to_y.length_squared();
-    if !(d2 > 0.0) || y.pdf_area <= 0.0 || y.radiance.max_element() <= 0.0 {
+    if !d2.is_finite() || d2 <= 0.0 || y.pdf_area <= 0.0 || y.radiance.max_element() <= 0.0 {
         return Vec3::ZERO;
     }
     let wi = to_y / d2.sqrt();

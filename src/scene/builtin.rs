@@ -731,7 +731,10 @@ mod tests {
             if *name == "emissive-quad" {
                 // Lit by its emissive quad alone, which `scene::load` turns into lights.
                 assert!(scene.lights.is_empty());
-                assert!(scene.materials.iter().any(|m| m.emissive.max_element() > 0.0));
+                assert!(scene
+                    .materials
+                    .iter()
+                    .any(|m| m.emissive.max_element() > 0.0));
                 let loaded = crate::scene::load(name, &params).unwrap();
                 assert_eq!(
                     loaded.lights.len(),

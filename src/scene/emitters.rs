@@ -124,7 +124,7 @@ pub fn emissive_triangles(scene: &Scene, world_from_node: &[Mat4]) -> Vec<Emissi
             let corners = corners.map(|k| m.transform_point3(mesh.positions[k]));
             let cross = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
             let area = 0.5 * cross.length();
-            if !(area > 0.0 && area.is_finite()) {
+            if !area.is_finite() || area <= 0.0 {
                 continue;
             }
             let first_index = t * 3;
@@ -670,7 +670,11 @@ mod tests {
         // uv 0.25 is the first texel's centre: L_e = 2 × texel.
         let expected = Vec3::new(128.0, 64.0, 255.0) / 255.0 * 2.0;
         for t in &triangles {
-            assert!((t.radiance - expected).abs().max_element() < 1e-5, "{}", t.radiance);
+            assert!(
+                (t.radiance - expected).abs().max_element() < 1e-5,
+                "{}",
+                t.radiance
+            );
         }
         let clustering = cluster(&triangles, 6);
         let total: Vec3 = clustering.clusters.iter().map(|c| c.intensity).sum();
