@@ -64,6 +64,8 @@ pub struct RenderRequest {
     pub views: ViewRig,
     /// Let the scene file reference files outside its folder (absolute paths, `..`).
     pub allow_external_paths: bool,
+    /// Most proxy lights the emissive surfaces become (0 = none; see `scene::emitters`).
+    pub emitter_lights: u32,
     /// Write the images (false: render and time the frames only, as a soak run does).
     pub write_images: bool,
     /// Sample the resident set and the GPU bytes every this many frames (0: never).
@@ -89,6 +91,7 @@ impl Default for RenderRequest {
             fps: 30.0,
             views: ViewRig::Mono,
             allow_external_paths: false,
+            emitter_lights: scene::emitters::DEFAULT_EMITTER_LIGHTS,
             write_images: true,
             memory_every: 0,
         }
@@ -251,6 +254,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         &scene::LoadParams {
             max_edge: request.max_edge,
             allow_external_paths: request.allow_external_paths,
+            emitter_lights: request.emitter_lights,
         },
     )?;
     loading.inc(1);

@@ -249,6 +249,11 @@ struct RenderArgs {
     /// (absolute paths, `..`); device files stay refused.
     #[arg(long)]
     allow_external_paths: bool,
+    /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
+    /// triangles, each a Lambertian point emitter of the cluster's power (the reference samples
+    /// the triangles themselves).
+    #[arg(long, default_value_t = valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS)]
+    emitter_lights: u32,
     /// Render and time the frames without reading them back or writing images (a soak run).
     #[arg(long)]
     no_write: bool,
@@ -304,6 +309,11 @@ struct ViewArgs {
     screenshot: Option<PathBuf>,
     #[arg(long)]
     allow_external_paths: bool,
+    /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
+    /// triangles, each a Lambertian point emitter of the cluster's power (the reference samples
+    /// the triangles themselves).
+    #[arg(long, default_value_t = valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS)]
+    emitter_lights: u32,
 }
 
 #[derive(clap::Args)]
@@ -339,6 +349,11 @@ struct EvalArgs {
     /// Tessellation of built-in scenes (metres).
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
+    /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
+    /// triangles, each a Lambertian point emitter of the cluster's power (the reference samples
+    /// the triangles themselves).
+    #[arg(long, default_value_t = valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS)]
+    emitter_lights: u32,
     /// Exposure in stops for FLIP and sheets of the full images (default: automatic).
     #[arg(long)]
     exposure: Option<f32>,
@@ -699,6 +714,7 @@ fn main() -> ExitCode {
                 fps: args.fps,
                 views,
                 allow_external_paths: args.allow_external_paths,
+                emitter_lights: args.emitter_lights,
                 write_images: !args.no_write,
                 memory_every: args.memory_every,
             };
@@ -736,6 +752,7 @@ fn main() -> ExitCode {
                     views: valgi::frame::ViewRig::parse(&args.views)?,
                     max_edge: args.max_edge,
                     allow_external_paths: args.allow_external_paths,
+                    emitter_lights: args.emitter_lights,
                     time: args.time,
                     exposure: args.exposure,
                     frames: args.frames,
@@ -970,6 +987,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
         ref_bounces,
         frames: args.frames,
         max_edge: args.max_edge,
+        emitter_lights: args.emitter_lights,
         exposure: args.exposure,
         ..valgi::eval::EvalRequest::default()
     };

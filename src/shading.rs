@@ -36,6 +36,12 @@ pub fn range_window(range: Option<f32>, distance: f32) -> f32 {
     }
 }
 
+/// Lambertian emitter lobe `max(0, n̄·ω)`: the share of an emitter proxy's I0 sent toward the
+/// unit direction `to_surface` (n̄ = `axis`, the direction the light points along).
+pub fn emitter_lobe(axis: Vec3, to_surface: Vec3) -> f32 {
+    axis.dot(to_surface).max(0.0)
+}
+
 /// A punctual light placed in the world.
 #[derive(Clone, Copy, Debug)]
 pub struct WorldLight {
@@ -43,7 +49,7 @@ pub struct WorldLight {
     pub position: Vec3,
     /// Unit direction the light points along.
     pub direction: Vec3,
-    /// W/sr (point, spot) or W/m² (directional), per channel.
+    /// W/sr (point, spot; I0 of an emitter) or W/m² (directional), per channel.
     pub intensity: Vec3,
     pub range: Option<f32>,
 }
@@ -76,7 +82,7 @@ impl WorldLight {
     pub fn incident(&self, p: Vec3) -> (Vec3, Vec3) {
         match self.kind {
             LightKind::Directional => (-self.direction, self.intensity),
-            LightKind::Point | LightKind::Spot { .. } => {
+            LightKind::Point | LightKind::Spot { .. } | LightKind::Emitter => {
                 let to_light = self.position - p;
                 let d2 = to_light.length_squared().max(1e-12);
                 let d = d2.sqrt();
@@ -92,6 +98,8 @@ impl WorldLight {
                         outer_cone_angle,
                         self.direction.dot(-wi),
                     );
+                } else if self.kind == LightKind::Emitter {
+                    falloff *= emitter_lobe(self.direction, -wi);
                 }
                 (wi, self.intensity * falloff)
             }

@@ -14,9 +14,82 @@ use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
+use crate::scene::emitters::{emission_at, emissive_triangles, EmissiveTriangle};
 use crate::scene::merge::flat_region_indices;
-use crate::scene::{ColorSpace, Material, Scene, Texture};
+use crate::scene::{Material, Scene};
 use crate::shading::WorldLight;
+
+/// The scene's emissive triangles for next-event estimation: a triangle picked with
+/// probability ∝ its L_e·A (summed over channels), then a uniform point on it, so the
+/// area density of a point is `p(tri) / A`.
+pub struct EmitterSampler {
+    pub triangles: Vec<EmissiveTriangle>,
+    /// Normalized cumulative weights: triangle i covers (cdf[i−1], cdf[i]].
+    cdf: Vec<f32>,
+}
+
+/// A point on an emitter drawn by [`EmitterSampler::sample`].
+#[derive(Clone, Copy, Debug)]
+pub struct EmitterPoint {
+    pub position: Vec3,
+    /// Unit normal of the emitting side.
+    pub normal: Vec3,
+    /// Emitted radiance at the point (emissive texture read there), W/(m²·sr).
+    pub radiance: Vec3,
+    /// Area density of the point, 1/m².
+    pub pdf_area: f32,
+}
+
+impl EmitterSampler {
+    pub fn new(scene: &Scene, world_from_node: &[Mat4]) -> Self {
+        let triangles = emissive_triangles(scene, world_from_node);
+        let mut cdf = Vec::with_capacity(triangles.len());
+        let mut total = 0.0f64;
+        for t in &triangles {
+            total += t.weight() as f64;
+            cdf.push(total);
+        }
+        let cdf = cdf.iter().map(|c| (c / total.max(1e-300)) as f32).collect();
+        Self { triangles, cdf }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Probability of picking triangle `i`.
+    fn pmf(&self, i: usize) -> f32 {
+        let below = if i == 0 { 0.0 } else { self.cdf[i - 1] };
+        self.cdf[i] - below
+    }
+
+    /// A point on the emitters from three uniform numbers in [0, 1).
+    pub fn sample(&self, scene: &Scene, u: [f32; 3]) -> Option<EmitterPoint> {
+        if self.is_empty() {
+            return None;
+        }
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u[0])
+            .min(self.cdf.len() - 1);
+        let pmf = self.pmf(i);
+        let t = &self.triangles[i];
+        if pmf <= 0.0 {
+            return None;
+        }
+        // Uniform on the triangle: b = (1 − √u1, √u1 (1 − u2), √u1 u2).
+        let su = u[1].sqrt();
+        let bary = Vec3::new(1.0 - su, su * (1.0 - u[2]), su * u[2]);
+        let position = t.corners[0] * bary.x + t.corners[1] * bary.y + t.corners[2] * bary.z;
+        let mesh = &scene.meshes[scene.instances[t.instance].mesh];
+        Some(EmitterPoint {
+            position,
+            normal: t.normal,
+            radiance: emission_at(scene, mesh, t.first_index, bary).max(Vec3::ZERO),
+            pdf_area: pmf / t.area,
+        })
+    }
+}
 
 /// One instance's vertices in world space.
 struct PlacedMesh {
@@ -54,7 +127,10 @@ pub struct Tracer<'a> {
     /// fewer triangles on the tessellated built-in scenes.
     indices: Vec<Vec<u32>>,
     bvh: Option<CwBvh>,
+    /// Every light of the scene, emitter proxies included (the methods' view of the light).
     pub lights: Vec<WorldLight>,
+    /// The emissive triangles themselves, for the reference's next-event estimation.
+    pub emitters: EmitterSampler,
     /// Offset for secondary-ray origins, metres (scaled with the scene).
     pub epsilon: f32,
 }
@@ -141,8 +217,14 @@ impl<'a> Tracer<'a> {
             indices,
             bvh,
             lights: WorldLight::from_scene(scene, world_from_node),
+            emitters: EmitterSampler::new(scene, world_from_node),
             epsilon: 1e-4 * size,
         }
+    }
+
+    /// The scene the tracer places.
+    pub fn scene(&self) -> &'a Scene {
+        self.scene
     }
 
     /// Triangles in the BVH (after merging flat regions).
@@ -188,12 +270,26 @@ impl<'a> Tracer<'a> {
         })
     }
 
-    /// Irradiance from the punctual lights at `x` on the side of the unit normal `n`, with
-    /// ray-traced visibility (the shadow ray starts `epsilon` off the surface).
+    /// Irradiance from the punctual lights (emitter proxies included) at `x` on the side of
+    /// the unit normal `n`, with ray-traced visibility (the shadow ray starts `epsilon` off the
+    /// surface).
     pub fn direct_irradiance(&self, x: Vec3, n: Vec3) -> Vec3 {
+        self.irradiance_from_lights(x, n, true)
+    }
+
+    /// [`Tracer::direct_irradiance`] without the emitter proxies: the reference's punctual
+    /// lights (it reaches the emissive surfaces themselves by sampling them).
+    pub fn punctual_irradiance(&self, x: Vec3, n: Vec3) -> Vec3 {
+        self.irradiance_from_lights(x, n, false)
+    }
+
+    fn irradiance_from_lights(&self, x: Vec3, n: Vec3, with_proxies: bool) -> Vec3 {
         let origin = x + n * self.epsilon;
         let mut e = Vec3::ZERO;
         for light in &self.lights {
+            if !with_proxies && light.kind.is_emission_proxy() {
+                continue;
+            }
             let (wi, irradiance) = light.incident(x);
             let cos = n.dot(wi);
             if cos <= 0.0 || irradiance == Vec3::ZERO {
@@ -263,7 +359,7 @@ impl<'a> Tracer<'a> {
         let sample = |texture: Option<usize>, default: Vec4| -> Vec4 {
             texture
                 .and_then(|t| self.scene.textures.get(t))
-                .map(|t| sample_bilinear(t, uv))
+                .map(|t| t.sample_bilinear(uv))
                 .unwrap_or(default)
         };
         // Normal map, as in gbuffer.wgsl.
@@ -310,48 +406,5 @@ impl<'a> Tracer<'a> {
             k: Material::phong_exponent(roughness),
             emission: material.emissive * emissive_tex.truncate(),
         }
-    }
-}
-
-/// Bilinear texture lookup with repeat wrapping (the GPU sampler's address mode; the GPU also
-/// filters across mip levels, which the reference, sampling a pixel many times, does not need).
-fn sample_bilinear(texture: &Texture, uv: Vec2) -> Vec4 {
-    let (w, h) = (texture.width.max(1) as i64, texture.height.max(1) as i64);
-    if texture.rgba8.len() < (w * h * 4) as usize || !uv.is_finite() {
-        return Vec4::ONE;
-    }
-    let x = uv.x * w as f32 - 0.5;
-    let y = uv.y * h as f32 - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    let texel = |ix: i64, iy: i64| -> Vec4 {
-        let (ix, iy) = (ix.rem_euclid(w), iy.rem_euclid(h));
-        let o = ((iy * w + ix) * 4) as usize;
-        let px = &texture.rgba8[o..o + 4];
-        let decode = |v: u8| {
-            let c = v as f32 / 255.0;
-            match texture.color_space {
-                ColorSpace::Srgb => srgb_to_linear(c),
-                ColorSpace::Linear => c,
-            }
-        };
-        Vec4::new(
-            decode(px[0]),
-            decode(px[1]),
-            decode(px[2]),
-            px[3] as f32 / 255.0,
-        )
-    };
-    let (x0, y0) = (x0 as i64, y0 as i64);
-    let top = texel(x0, y0).lerp(texel(x0 + 1, y0), fx);
-    let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), fx);
-    top.lerp(bottom, fy)
-}
-
-fn srgb_to_linear(c: f32) -> f32 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }

@@ -641,6 +641,7 @@ fn lights_added_by_edits_shade_like_the_scenes_own() {
                 direction: own.direction,
                 irradiance: own.intensity,
             },
+            LightKind::Emitter => unreachable!("{name} has no emissive surfaces"),
         };
         let mut doubled_scene = scene.clone();
         let edits = SceneEdits {

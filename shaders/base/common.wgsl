@@ -7,6 +7,9 @@ const PI: f32 = 3.14159265358979;
 const LIGHT_POINT: u32 = 0u;
 const LIGHT_SPOT: u32 = 1u;
 const LIGHT_DIRECTIONAL: u32 = 2u;
+// A Lambertian emitter standing for emissive triangles: a point light whose intensity is
+// I0·max(0, n̄·ω), n̄ = direction.xyz.
+const LIGHT_EMITTER: u32 = 3u;
 
 struct Frame {
     clip_from_world: mat4x4<f32>,
@@ -19,14 +22,15 @@ struct Frame {
 }
 
 struct Light {
-    // xyz: world position (point, spot).
+    // xyz: world position (point, spot, emitter).
     position: vec4<f32>,
-    // xyz: unit direction the light points along (spot, directional); w: range (0 = none).
+    // xyz: unit direction the light points along (spot, directional; an emitter's n̄); w: range
+    // (0 = none).
     direction: vec4<f32>,
-    // rgb: W/sr (point, spot) or W/m² (directional).
+    // rgb: W/sr (point, spot; I0 of an emitter) or W/m² (directional).
     intensity: vec4<f32>,
     kind: u32,
-    // First layer in the shadow-map array; point lights use six consecutive layers.
+    // First layer in the shadow-map array; point lights and emitters use six consecutive layers.
     shadow_layer: u32,
     // KHR_lights_punctual cone: attenuation = saturate(cos·scale + offset)².
     cone_scale: f32,
@@ -70,6 +74,11 @@ fn spot_attenuation(light: Light, to_surface: vec3<f32>) -> f32 {
     let cd = dot(light.direction.xyz, to_surface);
     let a = clamp(cd * light.cone_scale + light.cone_offset, 0.0, 1.0);
     return a * a;
+}
+
+// Lambertian emitter lobe max(0, n̄·ω) toward the unit direction to_surface.
+fn emitter_lobe(light: Light, to_surface: vec3<f32>) -> f32 {
+    return max(dot(light.direction.xyz, to_surface), 0.0);
 }
 
 // KHR_lights_punctual range window clamp(1 − (d/range)⁴, 0, 1), 1 when the glTF sets no range.

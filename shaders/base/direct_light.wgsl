@@ -1,4 +1,4 @@
-// Direct lighting per pixel from the G-buffer: every punctual light with its filtered
+// Direct lighting per pixel from the G-buffer: every punctual light (emitter proxies included) with its filtered
 // shadow-map visibility, through the material model of DESIGN §3, plus emission.
 #include "common.wgsl"
 
@@ -107,6 +107,9 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
                 falloff *= spot_attenuation(light, -wi);
             } else {
                 layer += cube_face(-wi);
+                if (light.kind == LIGHT_EMITTER) {
+                    falloff *= emitter_lobe(light, -wi);
+                }
             }
             irradiance_normal = light.intensity.rgb * falloff;
         }

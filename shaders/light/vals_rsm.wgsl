@@ -92,6 +92,8 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front_facing: bool) -> RsmOut {
         var intensity = light.intensity.rgb * range_window(light.direction.w, dist);
         if (light.kind == LIGHT_SPOT) {
             intensity *= spot_attenuation(light, -to_light);
+        } else if (light.kind == LIGHT_EMITTER) {
+            intensity *= emitter_lobe(light, -to_light);
         }
         flux = rho_d * intensity * omega;
         area = omega * dist * dist;

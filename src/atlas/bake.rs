@@ -320,6 +320,8 @@ pub fn light_power(light: &WorldLight) -> Option<Vec3> {
             Some(light.intensity * solid as f32)
         }
         LightKind::Directional => None,
+        // ∫ I0·max(0, n̄·ω) dω = π·I0.
+        LightKind::Emitter => Some(light.intensity * std::f32::consts::PI),
     }
 }
 

@@ -58,6 +58,8 @@ pub struct EvalRequest {
     pub frames: u32,
     pub frame_dt: f32,
     pub max_edge: f32,
+    /// Most proxy lights the emissive surfaces become (0 = none); the reference ignores it.
+    pub emitter_lights: u32,
     /// Tone-map exposure (stops) for FLIP and sheets of full images; `None` = automatic.
     pub exposure: Option<f32>,
     pub progress: bool,
@@ -79,6 +81,7 @@ impl Default for EvalRequest {
             frames: 1,
             frame_dt: 1.0 / 30.0,
             max_edge: BuiltinParams::default().max_edge,
+            emitter_lights: scene::emitters::DEFAULT_EMITTER_LIGHTS,
             exposure: None,
             progress: true,
         }
@@ -187,7 +190,7 @@ pub fn reference_key(
     time: f32,
 ) -> String {
     format!(
-        "v1 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}",
+        "v2 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}",
         camera.unwrap_or("-")
     )
 }
@@ -353,14 +356,16 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         path: cache_dir.clone(),
         message: e.to_string(),
     })?;
-    let params = BuiltinParams {
+    let params = scene::LoadParams {
         max_edge: request.max_edge,
+        emitter_lights: request.emitter_lights,
+        ..scene::LoadParams::default()
     };
     let aspect = request.width as f32 / request.height as f32;
     // Each scene with the command line's edits, and the camera they leave it with.
     let mut scenes: Vec<(Scene, Option<String>)> = Vec::with_capacity(request.scenes.len());
     for spec in &request.scenes {
-        let mut scene = scene::load(spec, &params)?;
+        let mut scene = scene::load_with(spec, &params)?;
         let camera = request
             .edits
             .apply(&mut scene, request.camera.as_deref(), aspect)?;

@@ -17,7 +17,7 @@ use crate::raster::{
     buffer_binding, cleared, storage_entry, uniform_entry, view_binding, RenderError,
     ScenePipeline, DEPTH_FORMAT,
 };
-use crate::scene::{Aabb, LightKind, Scene};
+use crate::scene::{Aabb, Scene};
 
 use super::{ExternalVals, Val};
 
@@ -225,11 +225,7 @@ impl Rsm {
                 limits.max_texture_dimension_2d
             )));
         }
-        let layer_count: u32 = scene
-            .lights
-            .iter()
-            .map(|l| if l.kind == LightKind::Point { 6 } else { 1 })
-            .sum();
+        let layer_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
         if layer_count > limits.max_texture_array_layers {
             return Err(RenderError::Settings(format!(
                 "scene '{}' needs {layer_count} RSM layers; the device allows {}",
@@ -589,7 +585,10 @@ impl Rsm {
         }
         let mut layer = 0usize;
         for (light_index, light) in setup.lights.iter().enumerate() {
-            let layers = if light.kind == crate::raster::types::LIGHT_POINT {
+            let layers = if matches!(
+                light.kind,
+                crate::raster::types::LIGHT_POINT | crate::raster::types::LIGHT_EMITTER
+            ) {
                 6
             } else {
                 1

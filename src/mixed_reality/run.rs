@@ -205,6 +205,7 @@ pub fn run(request: &MrRequest) -> Result<serde_json::Value, MrError> {
         &resolve_object(&request.object)?,
         &LoadParams {
             max_edge: 0.05,
+            emitter_lights: crate::scene::emitters::DEFAULT_EMITTER_LIGHTS,
             allow_external_paths: true,
         },
     )?;

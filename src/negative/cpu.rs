@@ -13,7 +13,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 
 use crate::raster::shadows::LightSetup;
-use crate::raster::types::{LIGHT_DIRECTIONAL, LIGHT_POINT};
+use crate::raster::types::{LIGHT_DIRECTIONAL, LIGHT_EMITTER, LIGHT_POINT};
 use crate::scene::CameraView;
 use crate::shading::WorldLight;
 use crate::trace::Tracer;
@@ -121,7 +121,8 @@ const MAX_CANDIDATES: u32 = 1 << 22;
 ///   image x and y = the frame's x and y), the first N with Φ_3(i) ≥ (1 + cos θ_outer)/2
 ///   kept, each projected to its RSM texel. The set depends on N, the cone and the RSM alone,
 ///   so a camera move cannot change it and a turning spot carries it along.
-/// - Point: the first N Halton directions in world axes, each on the cube face that sees it.
+/// - Point (and emitter): the first N Halton directions in world axes, each on the cube face
+///   that sees it.
 /// - Directional: 2-D Halton (Φ_2, Φ_3) over the orthographic RSM square.
 pub fn positive_samples(
     setup: &LightSetup,
@@ -140,7 +141,8 @@ pub fn positive_samples(
             flux_scale,
             ..Default::default()
         };
-        if gpu.kind == LIGHT_POINT {
+        // An emitter's cube is a point light's; the directions behind its lobe carry no flux.
+        if gpu.kind == LIGHT_POINT || gpu.kind == LIGHT_EMITTER {
             let faces: Vec<Mat4> = (0..6)
                 .map(|f| {
                     Mat4::from_cols_array_2d(&setup.views[(layer + f) as usize].clip_from_world)

@@ -107,14 +107,7 @@ impl Rasterizer {
                  (the device's largest 2D texture side)"
             )));
         }
-        let layer_count: u32 = scene
-            .lights
-            .iter()
-            .map(|l| match l.kind {
-                crate::scene::LightKind::Point => 6,
-                _ => 1,
-            })
-            .sum();
+        let layer_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
         if layer_count > limits.max_texture_array_layers {
             return Err(RenderError::Settings(format!(
                 "scene '{}' has {} lights needing {layer_count} shadow-map layers; the device allows {}",

@@ -1,10 +1,12 @@
 //! Shadow-map views for every light, all in one depth texture array: a spot light takes one
-//! perspective layer, a point light six (a cube's faces as layers), a directional light one
+//! perspective layer, a point light or an emitter six (a cube's faces as layers), a directional light one
 //! orthographic layer fitted to the scene's bounding sphere.
 
 use glam::{Mat4, Vec3};
 
-use super::types::{GpuLight, ShadowView, LIGHT_DIRECTIONAL, LIGHT_POINT, LIGHT_SPOT};
+use super::types::{
+    GpuLight, ShadowView, LIGHT_DIRECTIONAL, LIGHT_EMITTER, LIGHT_POINT, LIGHT_SPOT,
+};
 use crate::scene::{Aabb, LightKind, Scene};
 use crate::shading::WorldLight;
 
@@ -40,12 +42,19 @@ pub fn setup_lights(
         let far = ((position - center).length() + radius) * 1.01;
         let near = (far * 1e-4).max(1e-5);
         let (kind, cone_scale, cone_offset) = match light.kind {
-            LightKind::Point => {
+            LightKind::Point | LightKind::Emitter => {
+                // An emitter's lobe covers a hemisphere: a cube like a point light's keeps the
+                // shader's face choice the same for both.
                 let fov = 2.0 * (1.0 + 2.0 * margin_texels / res).atan();
                 for (forward, up) in CUBE_FACES {
                     views.push(perspective_view(position, forward, up, fov, near, far, res));
                 }
-                (LIGHT_POINT, 0.0, 1.0)
+                let kind = if light.kind == LightKind::Emitter {
+                    LIGHT_EMITTER
+                } else {
+                    LIGHT_POINT
+                };
+                (kind, 0.0, 1.0)
             }
             LightKind::Spot {
                 inner_cone_angle,

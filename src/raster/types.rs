@@ -17,6 +17,9 @@ pub struct FrameUniforms {
 pub const LIGHT_POINT: u32 = 0;
 pub const LIGHT_SPOT: u32 = 1;
 pub const LIGHT_DIRECTIONAL: u32 = 2;
+/// A Lambertian emitter (proxy of emissive triangles): a point light with the lobe
+/// `max(0, n̄·ω)`, n̄ = `direction.xyz`.
+pub const LIGHT_EMITTER: u32 = 3;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]

@@ -129,17 +129,22 @@ pub struct PathSample {
     pub hit: bool,
     /// Emission of the first surface.
     pub emission: Vec3,
-    /// Punctual lights at the first surface (next-event estimation, exact visibility).
+    /// Punctual lights and emissive triangles at the first surface (next-event estimation,
+    /// exact visibility).
     pub direct: Vec3,
     /// Everything that arrives after at least one bounce.
     pub indirect: Vec3,
 }
 
 /// Radiance leaving `hit` toward `wo` straight from the punctual lights, with ray-traced
-/// visibility: `Σ_l f_r · E_l · cos θ · V`.
+/// visibility: `Σ_l f_r · E_l · cos θ · V`. Emitter proxies are skipped: [`emitter_light`]
+/// samples the surfaces they stand for.
 pub fn direct_light(tracer: &Tracer, hit: &Hit, wo: Vec3) -> Vec3 {
     let mut sum = Vec3::ZERO;
     for light in &tracer.lights {
+        if light.kind.is_emission_proxy() {
+            continue;
+        }
         let (wi, irradiance) = light.incident(hit.position);
         let cos = hit.normal.dot(wi);
         if cos <= 0.0 || irradiance.max_element() <= 0.0 {
@@ -160,6 +165,40 @@ pub fn direct_light(tracer: &Tracer, hit: &Hit, wo: Vec3) -> Vec3 {
     sum
 }
 
+/// Radiance leaving `hit` toward `wo` straight from the emissive triangles, one sample of
+/// next-event estimation by area: `f_r · L_e(y) · cos θ_x · cos θ_y / d² · V / p_A(y)`, with
+/// y drawn by [`crate::trace::EmitterSampler`]. A scene without emitters draws no random
+/// numbers (its paths stay as they were).
+pub fn emitter_light(tracer: &Tracer, hit: &Hit, wo: Vec3, rng: &mut Rng) -> Vec3 {
+    if tracer.emitters.is_empty() {
+        return Vec3::ZERO;
+    }
+    let u = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+    let Some(y) = tracer.emitters.sample(tracer.scene(), u) else {
+        return Vec3::ZERO;
+    };
+    let to_y = y.position - hit.position;
+    let d2 = to_y.length_squared();
+    if !d2.is_finite() || d2 <= 0.0 || y.pdf_area <= 0.0 || y.radiance.max_element() <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let wi = to_y / d2.sqrt();
+    let cos_x = hit.normal.dot(wi);
+    let cos_y = -y.normal.dot(wi);
+    if cos_x <= 0.0 || cos_y <= 0.0 {
+        return Vec3::ZERO;
+    }
+    let origin = tracer.spawn(hit, wi);
+    // Stop short of y so that its own triangle does not count as a blocker.
+    let t_max = (y.position - origin).length() - 2.0 * tracer.epsilon;
+    if !tracer.unoccluded(origin, wi, t_max) {
+        return Vec3::ZERO;
+    }
+    crate::shading::brdf(hit.rho_d, hit.rho_s, hit.k, hit.normal, wi, wo)
+        * y.radiance
+        * (cos_x * cos_y / (d2 * y.pdf_area))
+}
+
 /// Traces one path from `origin` along `dir`.
 pub fn trace_path(
     tracer: &Tracer,
@@ -174,7 +213,7 @@ pub fn trace_path(
     let mut out = PathSample {
         hit: true,
         emission: first.emission,
-        direct: direct_light(tracer, &first, -dir),
+        direct: direct_light(tracer, &first, -dir) + emitter_light(tracer, &first, -dir, rng),
         indirect: Vec3::ZERO,
     };
     let (mut hit, mut wo) = (first, -dir);
@@ -199,7 +238,15 @@ pub fn trace_path(
         let Some(next) = tracer.intersect(tracer.spawn(&hit, wi), wi, f32::INFINITY) else {
             break;
         };
-        out.indirect += throughput * (next.emission + direct_light(tracer, &next, -wi));
+        // The emitters' light reaches `next` by next-event estimation only; the emission a
+        // bounce lands on would count it twice (with emitters in the scene).
+        let landed = if tracer.emitters.is_empty() {
+            next.emission
+        } else {
+            Vec3::ZERO
+        };
+        out.indirect += throughput
+            * (landed + direct_light(tracer, &next, -wi) + emitter_light(tracer, &next, -wi, rng));
         hit = next;
         wo = -wi;
         bounce += 1;
@@ -419,7 +466,7 @@ pub fn irradiance_at(
             let origin = x + n * tracer.epsilon;
             let mut e = Vec3::ZERO;
             if settings.direct {
-                e += tracer.direct_irradiance(x, n);
+                e += tracer.punctual_irradiance(x, n);
             }
             let gather_emission = settings.direct;
             let gather_indirect = settings.bounces != Bounces::Limited(0);

@@ -65,6 +65,10 @@ const BASIC: &[(&str, &str)] = &[
         "closed 2 m cube of albedo 0.5 (inward-facing) with a 1 W/sr point light at its centre",
     ),
     (
+        "emissive-quad",
+        "open 2 m box (albedo 0.5) lit only by a 0.6 m emissive quad under its ceiling (L_e = 4 W/(m²·sr))",
+    ),
+    (
         "lpv-diagonal",
         "seed 004's diagonal-propagation test: a spot-lit panel in one corner of a 4 m plane facing its centre",
     ),
@@ -150,6 +154,7 @@ fn build(name: &str, max_edge: f32) -> Result<Scene, SceneError> {
         "plane-directional" => Ok(plane(name, PlaneLight::Directional, true, max_edge)),
         "box-point" => Ok(closed_box(name, max_edge)),
         "lpv-diagonal" => Ok(lpv_diagonal(name, max_edge)),
+        "emissive-quad" => Ok(emissive_quad(name, max_edge)),
         _ => procedural::load(name, max_edge)
             .unwrap_or_else(|| Err(SceneError::UnknownBuiltin { name: name.into() })),
     }
@@ -625,6 +630,81 @@ fn closed_box(name: &str, max_edge: f32) -> Scene {
     b.scene
 }
 
+/// An open box (no +z wall) whose only light is an emissive quad just under the ceiling,
+/// seen from outside through the open side: the light of emissive surfaces, every method.
+fn emissive_quad(name: &str, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let grey = b.material(Material::lambert("grey", Vec3::splat(0.5)));
+    let lamp = b.material(Material {
+        emissive: Vec3::splat(4.0),
+        ..Material::lambert("lamp", Vec3::ZERO)
+    });
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let mut walls = MeshBuilder::new("walls", grey);
+    let faces = [
+        [
+            c(1., -1., -1.),
+            c(1., 1., -1.),
+            c(1., 1., 1.),
+            c(1., -1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., -1., 1.),
+            c(-1., 1., 1.),
+            c(-1., 1., -1.),
+        ],
+        [
+            c(-1., 1., -1.),
+            c(-1., 1., 1.),
+            c(1., 1., 1.),
+            c(1., 1., -1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(1., -1., -1.),
+            c(1., -1., 1.),
+            c(-1., -1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., 1., -1.),
+            c(1., 1., -1.),
+            c(1., -1., -1.),
+        ],
+    ];
+    for [p0, p1, p2, p3] in faces {
+        walls.add_quad(p0, p1, p2, p3, Vec3::ZERO, max_edge);
+    }
+    b.object("walls", walls.build(), Trs::default());
+    let mut quad = MeshBuilder::new("lamp", lamp);
+    let (h, y) = (0.3, 0.99);
+    quad.add_quad(
+        c(-h, y, -h),
+        c(h, y, -h),
+        c(h, y, h),
+        c(-h, y, h),
+        Vec3::ZERO,
+        max_edge,
+    );
+    b.object("lamp", quad.build(), Trs::default());
+    b.camera(
+        Camera {
+            name: "front".into(),
+            node: 0,
+            yfov: 50f32.to_radians(),
+            aspect: None,
+            znear: 0.05,
+            zfar: Some(10.0),
+        },
+        Trs {
+            translation: Vec3::new(0.0, 0.0, 3.2),
+            ..Trs::default()
+        },
+    );
+    b.scene
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -648,7 +728,21 @@ mod tests {
             let scene = load(name, &params).unwrap();
             assert_eq!(scene.name, *name);
             assert!(!scene.meshes.is_empty());
-            assert_eq!(scene.lights.len(), 1, "{name}");
+            if *name == "emissive-quad" {
+                // Lit by its emissive quad alone, which `scene::load` turns into lights.
+                assert!(scene.lights.is_empty());
+                assert!(scene
+                    .materials
+                    .iter()
+                    .any(|m| m.emissive.max_element() > 0.0));
+                let loaded = crate::scene::load(name, &params).unwrap();
+                assert_eq!(
+                    loaded.lights.len(),
+                    crate::scene::emitters::DEFAULT_EMITTER_LIGHTS as usize
+                );
+            } else {
+                assert_eq!(scene.lights.len(), 1, "{name}");
+            }
             assert!(!scene.cameras.is_empty(), "{name}");
             for mesh in &scene.meshes {
                 assert_eq!(mesh.normals.len(), mesh.positions.len());

@@ -8,6 +8,7 @@
 pub mod animation;
 pub mod builtin;
 pub mod edits;
+pub mod emitters;
 pub mod files;
 pub mod gltf_import;
 pub mod merge;
@@ -124,6 +125,51 @@ pub struct Texture {
     pub color_space: ColorSpace,
 }
 
+impl Texture {
+    /// Bilinear lookup in linear RGBA with repeat wrapping (the GPU sampler's address mode,
+    /// without its mip filtering). A texture whose texels are missing reads as white.
+    pub fn sample_bilinear(&self, uv: Vec2) -> Vec4 {
+        let (w, h) = (self.width.max(1) as i64, self.height.max(1) as i64);
+        if self.rgba8.len() < (w * h * 4) as usize || !uv.is_finite() {
+            return Vec4::ONE;
+        }
+        let x = uv.x * w as f32 - 0.5;
+        let y = uv.y * h as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let texel = |ix: i64, iy: i64| -> Vec4 {
+            let (ix, iy) = (ix.rem_euclid(w), iy.rem_euclid(h));
+            let o = ((iy * w + ix) * 4) as usize;
+            let px = &self.rgba8[o..o + 4];
+            let decode = |v: u8| {
+                let c = v as f32 / 255.0;
+                match self.color_space {
+                    ColorSpace::Srgb => srgb_to_linear(c),
+                    ColorSpace::Linear => c,
+                }
+            };
+            Vec4::new(
+                decode(px[0]),
+                decode(px[1]),
+                decode(px[2]),
+                px[3] as f32 / 255.0,
+            )
+        };
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = texel(x0, y0).lerp(texel(x0 + 1, y0), fx);
+        let bottom = texel(x0, y0 + 1).lerp(texel(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
 /// glTF metallic-roughness material with the extensions valgi reads. The reduction to the
 /// shading model of DESIGN §3 lives in [`Material::diffuse_albedo`] and friends, so every
 /// method and the reference derive ρ_d, ρ_s and k the same way.
@@ -213,6 +259,28 @@ pub enum LightKind {
         outer_cone_angle: f32,
     },
     Directional,
+    /// A proxy for a cluster of emissive triangles ([`emitters`]): a Lambertian emitter whose
+    /// radiant intensity is `I0 · max(0, n̄·ω)` (`intensity × color` = I0, W/sr; n̄ = the
+    /// light's direction), so its power is π·I0, the cluster's. Every method but the reference
+    /// lights with it; the reference samples the emissive triangles themselves.
+    Emitter,
+}
+
+impl LightKind {
+    /// True for lights derived from emissive surfaces, which the reference skips (it samples
+    /// the surfaces they stand for).
+    pub fn is_emission_proxy(&self) -> bool {
+        matches!(self, LightKind::Emitter)
+    }
+
+    /// Shadow-map (and RSM) layers the light needs: a cube's six faces for the lights that
+    /// shine from a point into many directions, one view otherwise.
+    pub fn shadow_layers(&self) -> u32 {
+        match self {
+            LightKind::Point | LightKind::Emitter => 6,
+            LightKind::Spot { .. } | LightKind::Directional => 1,
+        }
+    }
 }
 
 /// A KHR_lights_punctual light attached to a node. It sits at the node's origin and points
@@ -223,7 +291,7 @@ pub struct Light {
     pub node: usize,
     pub kind: LightKind,
     pub color: Vec3,
-    /// W/sr (point, spot) or W/m² (directional), multiplied by `color`.
+    /// W/sr (point, spot, emitter: I0) or W/m² (directional), multiplied by `color`.
     pub intensity: f32,
     /// Distance at which the light's influence reaches zero (KHR smooth window), when set.
     pub range: Option<f32>,
@@ -607,6 +675,9 @@ pub struct LoadParams {
     /// Admit buffer, image and mesh references outside the scene file's folder (absolute
     /// paths, `..`); device files and other non-regular files stay refused either way.
     pub allow_external_paths: bool,
+    /// Most lights the scene's emissive triangles become ([`emitters`]), in total; 0 = none
+    /// (emissive surfaces then light nothing but through the reference's paths).
+    pub emitter_lights: u32,
 }
 
 impl Default for LoadParams {
@@ -614,6 +685,7 @@ impl Default for LoadParams {
         Self {
             max_edge: builtin::BuiltinParams::default().max_edge,
             allow_external_paths: false,
+            emitter_lights: emitters::DEFAULT_EMITTER_LIGHTS,
         }
     }
 }
@@ -650,14 +722,20 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    emitters::check_budget(params.emitter_lights).map_err(|message| SceneError::Other {
+        path: spec.to_string(),
+        message,
+    })?;
     let is_path = extension.is_some() || spec.contains('/') || spec.contains('\\');
     if !is_path {
-        return builtin::load(
+        let mut scene = builtin::load(
             spec,
             &builtin::BuiltinParams {
                 max_edge: params.max_edge,
             },
-        );
+        )?;
+        emitters::add_emitter_lights(&mut scene, params.emitter_lights);
+        return Ok(scene);
     }
     let policy = params.policy();
     let mut scene = match extension.as_deref() {
@@ -686,6 +764,7 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
     };
     let warnings = mesh::tessellate_instanced(&mut scene, params.max_edge, spec);
     scene.warnings.extend(warnings);
+    emitters::add_emitter_lights(&mut scene, params.emitter_lights);
     Ok(scene)
 }
 

@@ -68,6 +68,8 @@ pub struct ViewerRequest {
     pub views: ViewRig,
     pub max_edge: f32,
     pub allow_external_paths: bool,
+    /// Most proxy lights the emissive surfaces become (0 = none).
+    pub emitter_lights: u32,
     /// Animation time of the first frame, seconds.
     pub time: f32,
     pub exposure: f32,
@@ -191,6 +193,7 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
         &scene::LoadParams {
             max_edge: request.max_edge,
             allow_external_paths: request.allow_external_paths,
+            emitter_lights: request.emitter_lights,
         },
     )
     .map_err(AppError::from)?;

@@ -188,6 +188,8 @@ fn emission(
     };
     match light.kind {
         LightKind::Point => (light.position, around(1.0 - 2.0 * u1), 1.0),
+        // Cosine-distributed about n̄ (pdf cos θ/π), as the Lambertian lobe sends its power.
+        LightKind::Emitter => (light.position, around(u1.sqrt()), 1.0),
         LightKind::Spot {
             inner_cone_angle,
             outer_cone_angle,
