@@ -21,6 +21,10 @@ pub enum Slot {
     TextureArray,
     /// `texture_depth_2d` read with `textureLoad`.
     DepthTexture,
+    /// `texture_depth_2d_array` (shadow-map layers).
+    DepthTextureArray,
+    /// `sampler_comparison`.
+    ComparisonSampler,
     /// `texture_storage_2d<FORMAT, write>`.
     StorageTexture(wgpu::TextureFormat),
 }
@@ -47,6 +51,13 @@ impl Slot {
             Slot::Texture => texture(float, d2),
             Slot::TextureArray => texture(float, wgpu::TextureViewDimension::D2Array),
             Slot::DepthTexture => texture(wgpu::TextureSampleType::Depth, d2),
+            Slot::DepthTextureArray => texture(
+                wgpu::TextureSampleType::Depth,
+                wgpu::TextureViewDimension::D2Array,
+            ),
+            Slot::ComparisonSampler => {
+                wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison)
+            }
             Slot::StorageTexture(format) => wgpu::BindingType::StorageTexture {
                 access: wgpu::StorageTextureAccess::WriteOnly,
                 format,
@@ -61,15 +72,27 @@ impl Slot {
         }
     }
 
-    fn takes_buffer(self) -> bool {
-        matches!(self, Slot::Uniform | Slot::Storage | Slot::StorageRw)
+    fn takes(self) -> ResourceKind {
+        match self {
+            Slot::Uniform | Slot::Storage | Slot::StorageRw => ResourceKind::Buffer,
+            Slot::ComparisonSampler => ResourceKind::Sampler,
+            _ => ResourceKind::TextureView,
+        }
     }
 }
 
-/// A resource that can fill a [`Slot`]: a whole buffer or a texture view.
+/// What kind of resource a [`Slot`] takes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ResourceKind {
+    Buffer,
+    TextureView,
+    Sampler,
+}
+
+/// A resource that can fill a [`Slot`]: a whole buffer, a texture view or a sampler.
 pub trait Bindable {
     fn resource(&self) -> wgpu::BindingResource<'_>;
-    fn is_buffer(&self) -> bool;
+    fn kind(&self) -> ResourceKind;
 }
 
 impl Bindable for wgpu::Buffer {
@@ -77,8 +100,8 @@ impl Bindable for wgpu::Buffer {
         self.as_entire_binding()
     }
 
-    fn is_buffer(&self) -> bool {
-        true
+    fn kind(&self) -> ResourceKind {
+        ResourceKind::Buffer
     }
 }
 
@@ -87,8 +110,18 @@ impl Bindable for wgpu::TextureView {
         wgpu::BindingResource::TextureView(self)
     }
 
-    fn is_buffer(&self) -> bool {
-        false
+    fn kind(&self) -> ResourceKind {
+        ResourceKind::TextureView
+    }
+}
+
+impl Bindable for wgpu::Sampler {
+    fn resource(&self) -> wgpu::BindingResource<'_> {
+        wgpu::BindingResource::Sampler(self)
+    }
+
+    fn kind(&self) -> ResourceKind {
+        ResourceKind::Sampler
     }
 }
 
@@ -142,8 +175,8 @@ impl GroupLayout {
             .enumerate()
             .map(|(i, (resource, slot))| {
                 assert_eq!(
-                    resource.is_buffer(),
-                    slot.takes_buffer(),
+                    resource.kind(),
+                    slot.takes(),
                     "bind group '{}': binding {i} is a {slot:?} slot",
                     self.label
                 );

@@ -11,6 +11,7 @@ use glam::Mat4;
 
 use crate::frame::View;
 pub use crate::frame::{FrameOutput, FrameTargets};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::scene::{Aabb, CameraView, Scene};
 use scene_gpu::{SceneGpu, SceneTooLarge};
@@ -65,6 +66,26 @@ pub const GBUFFER_MATERIAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rg
 pub const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 pub const RADIANCE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
+/// `shadow.wgsl` and the G-buffer's frame group: a camera (the shadow layer's view or the
+/// frame uniform) and the instance transforms.
+const CAMERA_AND_INSTANCES: &[Slot] = &[Slot::Uniform, Slot::Storage];
+
+/// `direct_light.wgsl`: frame, lights, shadow views, the shadow-map array and its comparison
+/// sampler, the G-buffer (depth, normal, diffuse, specular, emissive) and the direct target.
+const DIRECT_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::DepthTextureArray,
+    Slot::ComparisonSampler,
+    Slot::DepthTexture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+];
+
 /// Shadow maps, G-buffer and direct light for one scene: the view-free part (scene upload,
 /// lights, shadow maps) is updated once per frame; the G-buffer and direct light are recorded
 /// per [`View`].
@@ -78,9 +99,9 @@ pub struct Rasterizer {
     shadow_layer_groups: Vec<wgpu::BindGroup>,
     shadow_pipeline: wgpu::RenderPipeline,
     gbuffer_pipeline: wgpu::RenderPipeline,
-    gbuffer_bgl: wgpu::BindGroupLayout,
+    gbuffer_bgl: GroupLayout,
     direct_pipeline: wgpu::ComputePipeline,
-    direct_bgl: wgpu::BindGroupLayout,
+    direct_bgl: GroupLayout,
     shadow_array_view: wgpu::TextureView,
     comparison_sampler: wgpu::Sampler,
     light_count: u32,
@@ -186,35 +207,19 @@ impl Rasterizer {
 
         // Shadow pipeline: depth only, slope-scaled bias against acne on sloped receivers.
         let shadow_module = ctx.shader("shadow_depth.wgsl");
-        let shadow_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("shadow layer"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::VERTEX),
-                storage_entry(1, wgpu::ShaderStages::VERTEX),
-            ],
-        });
+        let shadow_bgl = GroupLayout::new(
+            device,
+            "shadow layer",
+            wgpu::ShaderStages::VERTEX,
+            CAMERA_AND_INSTANCES,
+        );
         let shadow_layer_groups = shadow_layer_buffers
             .iter()
-            .map(|buffer| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("shadow layer"),
-                    layout: &shadow_bgl,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: buffer.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: scene_gpu.instance_buffer.as_entire_binding(),
-                        },
-                    ],
-                })
-            })
+            .map(|buffer| shadow_bgl.bind(device, &[buffer, &scene_gpu.instance_buffer]))
             .collect();
         let shadow_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("shadow"),
-            bind_group_layouts: &[Some(&shadow_bgl)],
+            bind_group_layouts: &[Some(&shadow_bgl.layout)],
             immediate_size: 0,
         });
         let shadow_pipeline = ctx.scoped("the shadow pipeline", None, PIPELINE_REMEDY, || {
@@ -237,16 +242,15 @@ impl Rasterizer {
 
         // G-buffer pipeline.
         let gbuffer_module = ctx.shader("gbuffer.wgsl");
-        let frame_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("gbuffer frame"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::VERTEX),
-                storage_entry(1, wgpu::ShaderStages::VERTEX),
-            ],
-        });
+        let frame_bgl = GroupLayout::new(
+            device,
+            "gbuffer frame",
+            wgpu::ShaderStages::VERTEX,
+            CAMERA_AND_INSTANCES,
+        );
         let gbuffer_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer"),
-            bind_group_layouts: &[Some(&frame_bgl), Some(&scene_gpu.material_layout)],
+            bind_group_layouts: &[Some(&frame_bgl.layout), Some(&scene_gpu.material_layout)],
             immediate_size: 0,
         });
         let gbuffer_pipeline = ctx.scoped("the gbuffer pipeline", None, PIPELINE_REMEDY, || {
@@ -271,36 +275,7 @@ impl Rasterizer {
         // Direct lighting.
         let direct_module = ctx.shader("direct_light.wgsl");
         let cs = wgpu::ShaderStages::COMPUTE;
-        let direct_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("direct light"),
-            entries: &[
-                uniform_entry(0, cs),
-                storage_entry(1, cs),
-                storage_entry(2, cs),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Depth,
-                        view_dimension: wgpu::TextureViewDimension::D2Array,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 4,
-                    visibility: cs,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Comparison),
-                    count: None,
-                },
-                depth_texture_entry(5, cs),
-                texture_entry(6, cs),
-                texture_entry(7, cs),
-                texture_entry(8, cs),
-                texture_entry(9, cs),
-                storage_texture_entry(10, cs),
-            ],
-        });
+        let direct_bgl = GroupLayout::new(device, "direct light", cs, DIRECT_BINDINGS);
         let comparison_sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("shadow comparison"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -312,7 +287,7 @@ impl Rasterizer {
         });
         let direct_pipeline =
             ctx.scoped("the direct-light pipeline", None, PIPELINE_REMEDY, || {
-                compute_pipeline(device, "direct light", &direct_module, &direct_bgl)
+                compute_pipeline(device, "direct light", &direct_module, &direct_bgl.layout)
             })?;
 
         if scene.lights.is_empty() {
@@ -440,14 +415,10 @@ impl Rasterizer {
         view: &View,
         passes: &mut Passes,
     ) -> Result<(), GpuError> {
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("gbuffer frame"),
-            layout: &self.gbuffer_bgl,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &self.scene_gpu.instance_buffer),
-            ],
-        });
+        let group = self.gbuffer_bgl.bind(
+            &ctx.device,
+            &[&view.frame_buffer, &self.scene_gpu.instance_buffer],
+        );
         let t = &view.targets;
         passes.render(
             "gbuffer",
@@ -481,26 +452,22 @@ impl Rasterizer {
         passes: &mut Passes,
     ) -> Result<(), GpuError> {
         let t = &view.targets;
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("direct light"),
-            layout: &self.direct_bgl,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &self.lights_buffer),
-                buffer_binding(2, &self.shadow_views_buffer),
-                view_binding(3, &self.shadow_array_view),
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::Sampler(&self.comparison_sampler),
-                },
-                view_binding(5, &t.depth),
-                view_binding(6, &t.normal),
-                view_binding(7, &t.diffuse),
-                view_binding(8, &t.specular),
-                view_binding(9, &t.emissive),
-                view_binding(10, &t.radiance_direct),
+        let group = self.direct_bgl.bind(
+            &ctx.device,
+            &[
+                &view.frame_buffer,
+                &self.lights_buffer,
+                &self.shadow_views_buffer,
+                &self.shadow_array_view,
+                &self.comparison_sampler,
+                &t.depth,
+                &t.normal,
+                &t.diffuse,
+                &t.specular,
+                &t.emissive,
+                &t.radiance_direct,
             ],
-        });
+        );
         view.record_per_pixel(passes, "direct", &self.direct_pipeline, &group)
     }
 
@@ -603,7 +570,6 @@ pub fn cleared(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachme
 
 // Layout entries for the groups still written entry by entry; they are the slots of
 // `gpu::bindings`, which new code uses directly.
-use crate::gpu::bindings::Slot;
 
 pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
     Slot::Uniform.entry(binding, visibility)
