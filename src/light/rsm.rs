@@ -9,14 +9,12 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::shadows::setup_lights;
 use crate::raster::types::{GpuLight, Vertex};
-use crate::raster::{
-    buffer_binding, cleared, storage_entry, uniform_entry, view_binding, RenderError,
-    ScenePipeline, DEPTH_FORMAT,
-};
+use crate::raster::{cleared, RenderError, ScenePipeline, DEPTH_FORMAT};
 use crate::scene::{Aabb, Scene};
 
 use super::{ExternalVals, Val};
@@ -180,6 +178,32 @@ struct Append {
 
 /// Rows per workgroup of the append passes (`@workgroup_size(64, 1, 1)`).
 pub const APPEND_GROUP: u32 = 64;
+
+/// `vals_rsm.wgsl`: the layer's view, the instance transforms and the lights.
+const VIEW_BINDINGS: &[Slot] = &[Slot::Uniform, Slot::Storage, Slot::Storage];
+
+/// `vals_from_rsm.wgsl`: the RSM size, its position, normal and flux arrays, and the VALs,
+/// their count, the row offsets and the cluster samples it writes.
+const COMPACT_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::TextureArray,
+    Slot::TextureArray,
+    Slot::TextureArray,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+];
+
+/// `vals_append.wgsl`: its size block, the external candidates, and the VALs, their count and
+/// the per-row counts it writes.
+const APPEND_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::StorageRw,
+    Slot::StorageRw,
+    Slot::StorageRw,
+];
 
 /// RSM rows per workgroup of the compaction's count and write passes (`count_rows`,
 /// `write_rows` in `vals_from_rsm.wgsl`).
@@ -361,35 +385,23 @@ impl Rsm {
         });
 
         let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
-        let view_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("rsm view"),
-            entries: &[
-                uniform_entry(0, vs_fs),
-                storage_entry(1, vs_fs),
-                storage_entry(2, vs_fs),
-            ],
-        });
+        let view_bgl = GroupLayout::new(device, "rsm view", vs_fs, VIEW_BINDINGS);
         let layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
             .map(|_| bytes.uniform::<RsmView>(device, "rsm view"))
             .collect();
         let layer_groups = layer_buffers
             .iter()
             .map(|buffer| {
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("rsm view"),
-                    layout: &view_bgl,
-                    entries: &[
-                        buffer_binding(0, buffer),
-                        buffer_binding(1, &scene_gpu.instance_buffer),
-                        buffer_binding(2, &lights_buffer),
-                    ],
-                })
+                view_bgl.bind(
+                    device,
+                    &[buffer, &scene_gpu.instance_buffer, &lights_buffer],
+                )
             })
             .collect();
         let module = ctx.shader("vals_rsm.wgsl");
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("rsm"),
-            bind_group_layouts: &[Some(&view_bgl), Some(&scene_gpu.material_layout)],
+            bind_group_layouts: &[Some(&view_bgl.layout), Some(&scene_gpu.material_layout)],
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];
@@ -417,29 +429,7 @@ impl Rsm {
         )?;
 
         let cs = wgpu::ShaderStages::COMPUTE;
-        let array_entry = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: cs,
-            ty: wgpu::BindingType::Texture {
-                sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                view_dimension: wgpu::TextureViewDimension::D2Array,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let compact_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("vals from rsm"),
-            entries: &[
-                uniform_entry(0, cs),
-                array_entry(1),
-                array_entry(2),
-                array_entry(3),
-                crate::raster::storage_entry_rw(4, cs),
-                crate::raster::storage_entry_rw(5, cs),
-                crate::raster::storage_entry_rw(6, cs),
-                crate::raster::storage_entry_rw(7, cs),
-            ],
-        });
+        let compact_bgl = GroupLayout::new(device, "vals from rsm", cs, COMPACT_BINDINGS);
         let tiles = cluster_tiles(resolution, layer_count);
         let cluster_samples = bytes.buffer(
             device,
@@ -476,20 +466,19 @@ impl Rsm {
                 mapped_at_creation: false,
             },
         );
-        let compact_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vals from rsm"),
-            layout: &compact_bgl,
-            entries: &[
-                buffer_binding(0, &size_buffer),
-                view_binding(1, &array_views[0]),
-                view_binding(2, &array_views[1]),
-                view_binding(3, &array_views[2]),
-                buffer_binding(4, &vals_buffer),
-                buffer_binding(5, &val_count_buffer),
-                buffer_binding(6, &row_offsets),
-                buffer_binding(7, &cluster_samples),
+        let compact_group = compact_bgl.bind(
+            device,
+            &[
+                &size_buffer,
+                &array_views[0],
+                &array_views[1],
+                &array_views[2],
+                &vals_buffer,
+                &val_count_buffer,
+                &row_offsets,
+                &cluster_samples,
             ],
-        });
+        );
         let module = ctx.shader("vals_from_rsm.wgsl");
         let compact_pipelines = ctx.scoped(
             "the VAL compaction pipelines",
@@ -497,21 +486,18 @@ impl Rsm {
             crate::raster::PIPELINE_REMEDY,
             || {
                 ["count_rows", "scan_rows", "write_rows"].map(|entry| {
-                    crate::raster::compute_pipeline_at(device, entry, &module, &compact_bgl, entry)
+                    crate::raster::compute_pipeline_at(
+                        device,
+                        entry,
+                        &module,
+                        &compact_bgl.layout,
+                        entry,
+                    )
                 })
             },
         )?;
         let append = external.map(|e| {
-            let bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("vals append"),
-                entries: &[
-                    uniform_entry(0, cs),
-                    storage_entry(1, cs),
-                    crate::raster::storage_entry_rw(2, cs),
-                    crate::raster::storage_entry_rw(3, cs),
-                    crate::raster::storage_entry_rw(4, cs),
-                ],
-            });
+            let bgl = GroupLayout::new(device, "vals append", cs, APPEND_BINDINGS);
             let size = bytes.buffer_init(
                 device,
                 "vals append size",
@@ -532,21 +518,20 @@ impl Rsm {
                     mapped_at_creation: false,
                 },
             );
-            let group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("vals append"),
-                layout: &bgl,
-                entries: &[
-                    buffer_binding(0, &size),
-                    buffer_binding(1, &e.candidates),
-                    buffer_binding(2, &vals_buffer),
-                    buffer_binding(3, &val_count_buffer),
-                    buffer_binding(4, &row_counts),
+            let group = bgl.bind(
+                device,
+                &[
+                    &size,
+                    &e.candidates,
+                    &vals_buffer,
+                    &val_count_buffer,
+                    &row_counts,
                 ],
-            });
+            );
             let module = ctx.shader("vals_append.wgsl");
             Append {
                 pipelines: ["count_rows", "append_rows"].map(|entry| {
-                    crate::raster::compute_pipeline_at(device, entry, &module, &bgl, entry)
+                    crate::raster::compute_pipeline_at(device, entry, &module, &bgl.layout, entry)
                 }),
                 group,
                 rows: e.rows,
