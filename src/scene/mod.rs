@@ -646,18 +646,35 @@ pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneE
 /// without extension or folder names a built-in scene (see [`builtin::names`]). A path with any
 /// other extension is an error that lists the supported formats.
 pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
+    Ok(load_choosing_max_edge(spec, params, |_| None)?.0)
+}
+
+/// True when `spec` names a scene file rather than a built-in scene (see [`load_with`]).
+pub fn is_file_spec(spec: &str) -> bool {
+    std::path::Path::new(spec).extension().is_some() || spec.contains('/') || spec.contains('\\')
+}
+
+/// [`load_with`], except that an imported scene's tessellation may be chosen from the scene
+/// as read: `choose` sees it before tessellation and returns the longest edge to refine to,
+/// or `None` for `params.max_edge`. Returns the scene and what `choose` returned (always
+/// `None` for built-in scenes, whose tessellation is `params.max_edge`).
+pub fn load_choosing_max_edge(
+    spec: &str,
+    params: &LoadParams,
+    choose: impl FnOnce(&Scene) -> Option<f32>,
+) -> Result<(Scene, Option<f32>), SceneError> {
     let path = std::path::Path::new(spec);
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    let is_path = extension.is_some() || spec.contains('/') || spec.contains('\\');
-    if !is_path {
-        return builtin::load(
+    if !is_file_spec(spec) {
+        let scene = builtin::load(
             spec,
             &builtin::BuiltinParams {
                 max_edge: params.max_edge,
             },
-        );
+        )?;
+        return Ok((scene, None));
     }
     let policy = params.policy();
     let mut scene = match extension.as_deref() {
@@ -684,9 +701,10 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
             })
         }
     };
-    let warnings = mesh::tessellate_instanced(&mut scene, params.max_edge, spec);
+    let chosen = choose(&scene);
+    let warnings = mesh::tessellate_instanced(&mut scene, chosen.unwrap_or(params.max_edge), spec);
     scene.warnings.extend(warnings);
-    Ok(scene)
+    Ok((scene, chosen))
 }
 
 #[cfg(test)]
