@@ -577,3 +577,20 @@ fn sparse_methods_tessellate_imported_meshes_to_the_point_spacing() {
     let stored = scene::load("cornell", &Default::default()).unwrap();
     assert_eq!(scene.triangle_count(), stored.triangle_count());
 }
+
+/// `sponza` names the shared data's Sponza (tests run in the repository root); other specs
+/// pass through.
+#[test]
+fn the_sponza_alias_resolves_to_the_shared_file() {
+    assert_eq!(scene::resolve_alias("cornell").unwrap(), "cornell");
+    match shared("sponza/Sponza.gltf") {
+        Some(_) => {
+            let path = scene::resolve_alias("sponza").unwrap();
+            assert!(Path::new(&path).is_file(), "{path}");
+        }
+        None => {
+            let err = scene::resolve_alias("sponza").unwrap_err().to_string();
+            assert!(err.contains("Sponza.gltf"), "{err}");
+        }
+    }
+}

@@ -649,6 +649,29 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
     Ok(load_choosing_max_edge(spec, params, |_| None)?.0)
 }
 
+/// Scene names that stand for a file of the shared data folder (benchmark scenes too large
+/// for the repository), relative to the working directory.
+pub const FILE_ALIASES: &[(&str, &str)] = &[("sponza", "../shared/data/sponza/Sponza.gltf")];
+
+/// `spec` with a [`FILE_ALIASES`] name replaced by its file; an alias whose file is missing is
+/// an error that names the path.
+pub fn resolve_alias(spec: &str) -> Result<String, SceneError> {
+    let Some((_, path)) = FILE_ALIASES.iter().find(|(name, _)| *name == spec) else {
+        return Ok(spec.to_string());
+    };
+    if std::path::Path::new(path).is_file() {
+        Ok((*path).to_string())
+    } else {
+        Err(SceneError::Other {
+            path: (*path).to_string(),
+            message: format!(
+                "scene '{spec}' is this file, relative to the working directory, and it is not \
+                 there (run from the repository root beside ../shared, or give the file's path)"
+            ),
+        })
+    }
+}
+
 /// True when `spec` names a scene file rather than a built-in scene (see [`load_with`]).
 pub fn is_file_spec(spec: &str) -> bool {
     std::path::Path::new(spec).extension().is_some() || spec.contains('/') || spec.contains('\\')
@@ -663,6 +686,8 @@ pub fn load_choosing_max_edge(
     params: &LoadParams,
     choose: impl FnOnce(&Scene) -> Option<f32>,
 ) -> Result<(Scene, Option<f32>), SceneError> {
+    let resolved = resolve_alias(spec)?;
+    let spec = resolved.as_str();
     let path = std::path::Path::new(spec);
     let extension = path
         .extension()
