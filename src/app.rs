@@ -52,8 +52,9 @@ pub struct RenderRequest {
     /// instead of `exposure`.
     pub auto_exposure: bool,
     pub indirect_only: bool,
-    /// Built-in scenes' tessellation (maximum edge length, metres).
-    pub max_edge: f32,
+    /// Longest triangle edge (metres); `None`: the built-in scenes' 5 cm, and for an imported
+    /// scene the sparse points' spacing with the sparse methods (see [`load_scene`]).
+    pub max_edge: Option<f32>,
     /// Animation time, seconds (of the first frame with `frames`).
     pub time: f32,
     /// Render this many frames as `frame_NNNN.exr` into the single output folder.
@@ -85,7 +86,7 @@ impl Default for RenderRequest {
             exposure: 0.0,
             auto_exposure: false,
             indirect_only: false,
-            max_edge: BuiltinParams::default().max_edge,
+            max_edge: None,
             time: 0.0,
             frames: None,
             fps: 30.0,
@@ -249,14 +250,15 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         }
     }
     let loading = crate::progress::Step::new(true, 1, &format!("loading {}", request.scene));
-    let mut scene = scene::load_with(
+    let load_started = Instant::now();
+    let (mut scene, tessellation) = load_scene(
         &request.scene,
-        &scene::LoadParams {
-            max_edge: request.max_edge,
-            allow_external_paths: request.allow_external_paths,
-            emitter_lights: request.emitter_lights,
-        },
+        &[(&request.method, &request.options)],
+        request.max_edge,
+        request.allow_external_paths,
+        request.emitter_lights,
     )?;
+    let load_ms = load_started.elapsed().as_secs_f64() * 1000.0;
     loading.inc(1);
     loading.finish();
     let aspect = request.settings.width as f32 / request.settings.height as f32;
@@ -280,6 +282,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     if request.indirect_only && request.method == "direct" {
         log::warn!("--indirect-only with method 'direct': the image is black by definition");
     }
+    let setup_started = Instant::now();
     let ctx = GpuContext::new()?;
     let settings = request.settings;
     let preparing = crate::progress::Step::new(true, 1, &format!("preparing {}", request.method));
@@ -287,6 +290,12 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     preparing.inc(1);
     preparing.finish();
     crate::progress::check()?;
+    // The method's construction: GPU context, uploads, pipelines and its preprocessing.
+    let setup_ms = setup_started.elapsed().as_secs_f64() * 1000.0;
+    log::info!(
+        "scene loaded in {load_ms:.0} ms, method '{}' set up in {setup_ms:.0} ms",
+        request.method
+    );
     let first_world = scene.world_from_node_at(request.time);
     let mut views = Vec::new();
     for rig in rig_views(request, &scene, &first_world)? {
@@ -455,6 +464,9 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         });
     }
     if let Some(obj) = report.as_object_mut() {
+        obj.extend(tessellation.to_json());
+        obj.insert("load_ms".into(), serde_json::json!(round3(load_ms)));
+        obj.insert("setup_ms".into(), serde_json::json!(round3(setup_ms)));
         obj.extend(method.report());
         obj.insert(
             "wall_ms".into(),
@@ -462,6 +474,89 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         );
     }
     Ok(report)
+}
+
+/// The tessellation a scene was loaded with and why.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tessellation {
+    /// Longest triangle edge asked for, metres (the triangle budget may raise it; the
+    /// scene's warnings say so).
+    pub max_edge: f32,
+    /// `"option"` (given), `"sparse spacing"` (an imported scene for a sparse method) or
+    /// `"default"` (the built-in scenes' 5 cm).
+    pub source: &'static str,
+}
+
+impl Tessellation {
+    pub fn to_json(self) -> serde_json::Map<String, serde_json::Value> {
+        let mut map = serde_json::Map::new();
+        map.insert("max_edge".into(), serde_json::json!(self.max_edge));
+        map.insert("max_edge_source".into(), serde_json::json!(self.source));
+        map
+    }
+}
+
+/// Loads `spec` for the given methods. An explicit `max_edge` wins; without one, built-in
+/// scenes keep their 5 cm tessellation (stored reference images depend on it), and an
+/// imported scene rendered by a method that gathers at sparse points is refined to those
+/// points' spacing ([`crate::vals::default_max_edge`]; with several such methods the
+/// finest), instead of 5 cm: Sponza at 5 cm is the 2-million-triangle budget, at its 4096
+/// points' spacing (≈1 m) it keeps its 262k triangles plus the splits of its large floors.
+/// Other methods keep 5 cm.
+pub fn load_scene(
+    spec: &str,
+    methods: &[(&str, &MethodOptions)],
+    max_edge: Option<f32>,
+    allow_external_paths: bool,
+    emitter_lights: u32,
+) -> Result<(scene::Scene, Tessellation), AppError> {
+    let fallback = BuiltinParams::default().max_edge;
+    let params = scene::LoadParams {
+        max_edge: max_edge.unwrap_or(fallback),
+        allow_external_paths,
+        emitter_lights,
+    };
+    if let Some(max_edge) = max_edge {
+        let scene = scene::load_with(spec, &params)?;
+        return Ok((
+            scene,
+            Tessellation {
+                max_edge,
+                source: "option",
+            },
+        ));
+    }
+    let mut failure = None;
+    let (scene, chosen) = scene::load_choosing_max_edge(spec, &params, |raw| {
+        let mut finest: Option<f32> = None;
+        for (method, options) in methods {
+            if !crate::vals::uses_sparse_points(method) {
+                continue;
+            }
+            match crate::vals::default_max_edge(raw, options) {
+                Ok(Some(edge)) => finest = Some(finest.map_or(edge, |f| f.min(edge))),
+                Ok(None) => {}
+                Err(e) => failure = Some(e),
+            }
+        }
+        finest
+    })?;
+    if let Some(e) = failure {
+        return Err(e.into());
+    }
+    Ok((
+        scene,
+        match chosen {
+            Some(max_edge) => Tessellation {
+                max_edge,
+                source: "sparse spacing",
+            },
+            None => Tessellation {
+                max_edge: fallback,
+                source: "default",
+            },
+        },
+    ))
 }
 
 /// GPU bytes the method and its views' targets own.

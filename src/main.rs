@@ -223,10 +223,11 @@ struct RenderArgs {
     /// device's largest 2D texture side (16384 on most).
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
-    /// Tessellation of built-in scenes: maximum triangle edge length in metres (positive;
-    /// refused when the scene would exceed 4 million triangles).
-    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
-    max_edge: f32,
+    /// Tessellation: maximum triangle edge length in metres (positive; refused when a built-in
+    /// scene would exceed 4 million triangles). Default: 0.05, except for an imported scene
+    /// with the sparse methods: the sparse points' spacing √(area / sparse-points).
+    #[arg(long)]
+    max_edge: Option<f32>,
     /// Animation time in seconds (glTF animations); finite.
     #[arg(long, default_value_t = 0.0)]
     time: f32,

@@ -390,12 +390,8 @@ impl<'a> Tracer<'a> {
                 }
             }
         }
-        let base_tex = sample(material.base_color_texture, Vec4::ONE);
-        let mr_tex = sample(material.metallic_roughness_texture, Vec4::ONE);
         let emissive_tex = sample(material.emissive_texture, Vec4::ONE);
-        let base = material.base_color.truncate() * base_tex.truncate();
-        let roughness = (material.roughness * mr_tex.y).clamp(0.0, 1.0);
-        let metallic = (material.metallic * mr_tex.z).clamp(0.0, 1.0);
+        let (base, metallic, roughness) = base_metallic_roughness(self.scene, &material, uv);
         Hit {
             t,
             position,
@@ -407,4 +403,33 @@ impl<'a> Tracer<'a> {
             emission: material.emissive * emissive_tex.truncate(),
         }
     }
+}
+
+/// Base colour, metallic and roughness of `material` at texture coordinate `uv`: the factors
+/// times the base-colour and metallic-roughness textures (roughness in G, metallic in B), as
+/// `shaders/base/gbuffer.wgsl` reads them. A glTF material without `metallicFactor` is
+/// metallic 1 by default and takes its metalness from the texture alone (Sponza's materials
+/// do): the factors by themselves would call it a metal with no diffuse albedo.
+pub fn base_metallic_roughness(scene: &Scene, material: &Material, uv: Vec2) -> (Vec3, f32, f32) {
+    let sample = |texture: Option<usize>| -> Vec4 {
+        texture
+            .and_then(|t| scene.textures.get(t))
+            .map_or(Vec4::ONE, |t| t.sample_bilinear(uv))
+    };
+    let base = material.base_color.truncate() * sample(material.base_color_texture).truncate();
+    let mr = sample(material.metallic_roughness_texture);
+    let roughness = (material.roughness * mr.y).clamp(0.0, 1.0);
+    let metallic = (material.metallic * mr.z).clamp(0.0, 1.0);
+    (base, metallic, roughness)
+}
+
+/// Diffuse albedo ρ_d of material `material` of `scene` at texture coordinate `uv` (textures
+/// included); the ρ_d a ray hit there reports.
+pub fn diffuse_albedo_at(scene: &Scene, material: usize, uv: Vec2) -> Vec3 {
+    let Some(m) = scene.materials.get(material) else {
+        let (base, metallic, _) = base_metallic_roughness(scene, &Material::default(), uv);
+        return Material::diffuse_albedo(base, metallic);
+    };
+    let (base, metallic, _) = base_metallic_roughness(scene, m, uv);
+    Material::diffuse_albedo(base, metallic)
 }

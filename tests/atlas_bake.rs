@@ -578,3 +578,71 @@ fn no_light_leaks_under_the_partition() {
     assert!((0.85..1.15).contains(&lit_side), "{lit_side}");
     assert!((0.7..1.4).contains(&dark_side), "{dark_side}");
 }
+
+/// glTF's metallicFactor defaults to 1: a material that takes its metalness from the
+/// metallic-roughness texture alone (Sponza's all do, with B = 0 there) is a metal by its
+/// factors and a dielectric as rendered. The bake reflects with the textured albedo, as the
+/// path tracer and the G-buffer do: the closed box whose albedo 0.5 lives in textures (base
+/// factor 1, metallic factor 1, metallic texture 0) gives the geometric series of ρ = 128/255.
+/// With the factors' albedo (0) it shot nothing (`shots: 0`) and bounce 1 came from the
+/// near-field gather alone.
+#[test]
+fn textured_albedo_and_metalness_reflect_as_rendered() {
+    use valgi::scene::{ColorSpace, Texture};
+    let mut scene = box_scene();
+    let texture = |name: &str, rgba: [u8; 4]| Texture {
+        name: name.into(),
+        width: 1,
+        height: 1,
+        rgba8: rgba.to_vec(),
+        color_space: ColorSpace::Linear,
+    };
+    scene.textures.push(texture("albedo", [128, 128, 128, 255]));
+    scene.textures.push(texture("dielectric", [0, 255, 0, 255]));
+    let (albedo, dielectric) = (scene.textures.len() - 2, scene.textures.len() - 1);
+    for m in &mut scene.materials {
+        m.base_color = glam::Vec4::ONE;
+        m.base_color_texture = Some(albedo);
+        m.metallic = 1.0;
+        m.metallic_roughness_texture = Some(dielectric);
+    }
+    let settings = BakeSettings {
+        vpls: 400,
+        bounces: 3,
+        atlas_res: 64,
+        ..Default::default()
+    };
+    let result = bake_now(&scene, &settings).unwrap();
+    eprintln!("{}", result.summary());
+    assert!(result.shots > 0, "nothing was shot");
+    let rho = 128.0f64 / 255.0;
+    for p in &result.patches {
+        assert!(
+            (p.rho.y as f64 - rho).abs() < 1e-6,
+            "patch albedo {}",
+            p.rho
+        );
+    }
+    let phi_over_a = 4.0 * std::f64::consts::PI / 24.0;
+    let centre: Vec<u32> = result
+        .layout
+        .texels
+        .iter()
+        .filter(|t| t.centre)
+        .map(|t| t.index)
+        .collect();
+    for b in 1..=3u32 {
+        let mean = centre
+            .iter()
+            .map(|&i| result.irradiance[b as usize - 1][i as usize][1] as f64)
+            .sum::<f64>()
+            / centre.len() as f64;
+        let expected = phi_over_a * rho.powi(b as i32);
+        eprintln!("bounce {b}: mean {mean:.4}, expected {expected:.4}");
+        assert!(
+            (mean / expected - 1.0).abs() < 0.08,
+            "bounce {b}: mean {mean} vs {expected}"
+        );
+    }
+    assert!(result.energy.relative_residual() < 1e-6);
+}

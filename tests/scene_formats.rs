@@ -7,6 +7,8 @@ use serde_json::json;
 use std::path::{Path, PathBuf};
 use valgi::scene::{self, LoadParams, Mesh, Scene, SceneError};
 
+const EMITTERS: u32 = valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS;
+
 fn temp_dir(test: &str) -> PathBuf {
     let dir = std::env::temp_dir()
         .join(format!("valgi-formats-{}", std::process::id()))
@@ -532,4 +534,74 @@ fn an_absurd_max_edge_is_capped_by_the_triangle_budget() {
     assert!((world_area(&scene) - 1e6).abs() < 1.0);
     let warnings = scene.warnings.join("\n");
     assert!(warnings.contains("budget"), "{warnings}");
+}
+
+/// Without `--max-edge`, the sparse methods refine an imported scene to their points' spacing
+/// √(area / points); other methods and built-in scenes keep 5 cm, and a given value wins.
+#[test]
+fn sparse_methods_tessellate_imported_meshes_to_the_point_spacing() {
+    use valgi::app::load_scene;
+    use valgi::method::MethodOptions;
+    let dir = temp_dir("sparse-spacing");
+    // A 4 m × 2 m wall: 8 m², 2 points → spacing 2 m; 1 point → 2.83 m.
+    std::fs::write(
+        dir.join("wall.obj"),
+        "v 0 0 0\nv 4 0 0\nv 4 2 0\nv 0 2 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1//1 3//1 4//1\n",
+    )
+    .unwrap();
+    let spec = dir.join("wall.obj").to_str().unwrap().to_string();
+    let mut options = MethodOptions::default();
+    options.set("sparse-points", "2");
+    let (scene, tess) = load_scene(&spec, &[("sparse", &options)], None, false, EMITTERS).unwrap();
+    assert_eq!(tess.source, "sparse spacing");
+    assert!((tess.max_edge - 2.0).abs() < 1e-4, "{tess:?}");
+    let longest = longest_world_edge(&scene);
+    assert!(longest <= 2.0 * (1.0 + 1e-5) && longest > 1.0, "{longest}");
+    // The finest of several sparse methods; a method without sparse points does not count.
+    let mut coarse = MethodOptions::default();
+    coarse.set("sparse-points", "1");
+    let none = MethodOptions::default();
+    let (_, tess) = load_scene(
+        &spec,
+        &[
+            ("direct", &none),
+            ("sparse+atlas", &coarse),
+            ("sparse", &options),
+        ],
+        None,
+        false,
+        EMITTERS,
+    )
+    .unwrap();
+    assert!((tess.max_edge - 2.0).abs() < 1e-4, "{tess:?}");
+    let (scene, tess) = load_scene(&spec, &[("direct", &none)], None, false, EMITTERS).unwrap();
+    assert_eq!((tess.source, tess.max_edge), ("default", 0.05));
+    assert!(longest_world_edge(&scene) <= 0.05 * (1.0 + 1e-5));
+    let (scene, tess) =
+        load_scene(&spec, &[("sparse", &options)], Some(0.5), false, EMITTERS).unwrap();
+    assert_eq!((tess.source, tess.max_edge), ("option", 0.5));
+    assert!(longest_world_edge(&scene) <= 0.5 * (1.0 + 1e-5));
+    // Built-in scenes keep their tessellation (stored reference images depend on it).
+    let (scene, tess) =
+        load_scene("cornell", &[("sparse", &options)], None, false, EMITTERS).unwrap();
+    assert_eq!(tess.source, "default");
+    let stored = scene::load("cornell", &Default::default()).unwrap();
+    assert_eq!(scene.triangle_count(), stored.triangle_count());
+}
+
+/// `sponza` names the shared data's Sponza (tests run in the repository root); other specs
+/// pass through.
+#[test]
+fn the_sponza_alias_resolves_to_the_shared_file() {
+    assert_eq!(scene::resolve_alias("cornell").unwrap(), "cornell");
+    match shared("sponza/Sponza.gltf") {
+        Some(_) => {
+            let path = scene::resolve_alias("sponza").unwrap();
+            assert!(Path::new(&path).is_file(), "{path}");
+        }
+        None => {
+            let err = scene::resolve_alias("sponza").unwrap_err().to_string();
+            assert!(err.contains("Sponza.gltf"), "{err}");
+        }
+    }
 }

@@ -16,13 +16,13 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::depth::ShadowTest;
 use super::layout::{self, AtlasLayout, Texel};
 use crate::image_io::{Image, ImageError};
-use crate::scene::{LightKind, Material, Scene};
+use crate::scene::{LightKind, Scene};
 use crate::shading::{spot_attenuation, WorldLight};
 use crate::trace::Tracer;
 
@@ -255,6 +255,8 @@ pub struct SurfaceSample {
     pub position: Vec3,
     pub normal: Vec3,
     pub material: u32,
+    /// Diffuse albedo ρ_d at the point, textures included.
+    pub rho: Vec3,
 }
 
 /// A finished bake: the layout, per-bounce irradiance per texel, patches and the account.
@@ -293,10 +295,6 @@ pub(crate) fn check(cancel: &AtomicBool) -> Result<(), BakeError> {
     } else {
         Ok(())
     }
-}
-
-pub(crate) fn material_rho(m: &Material) -> Vec3 {
-    Material::diffuse_albedo(m.base_color.truncate(), m.metallic)
 }
 
 /// Total radiant power of a light (W per channel); `None` for directional lights, whose
@@ -481,15 +479,22 @@ impl<'a> BakeScene<'a> {
 
     /// `count` points on the layout's surfaces, stratified along the area CDF (one per
     /// stratum), each with its triangle's face normal on the side of the shading normal.
-    pub(crate) fn sample_surfaces(&self, count: usize, rng: &mut Rng) -> Vec<SurfaceSample> {
+    pub(crate) fn sample_surfaces(
+        &self,
+        scene: &Scene,
+        count: usize,
+        rng: &mut Rng,
+    ) -> Vec<SurfaceSample> {
         let mut triangles: Vec<[Vec3; 3]> = Vec::new();
         let mut tri_normals: Vec<[Vec3; 3]> = Vec::new();
+        let mut tri_uvs: Vec<Option<[Vec2; 3]>> = Vec::new();
         let mut tri_material: Vec<u32> = Vec::new();
         for m in &self.layout.meshes {
             for t in m.indices.chunks_exact(3) {
                 let idx = [t[0] as usize, t[1] as usize, t[2] as usize];
                 triangles.push(idx.map(|i| m.world_positions[i]));
                 tri_normals.push(idx.map(|i| m.world_normals[i]));
+                tri_uvs.push((!m.material_uvs.is_empty()).then(|| idx.map(|i| m.material_uvs[i])));
                 tri_material.push(m.material as u32);
             }
         }
@@ -514,10 +519,12 @@ impl<'a> BakeScene<'a> {
                 if let Some(f) = (t[1] - t[0]).cross(t[2] - t[0]).try_normalize() {
                     n = if f.dot(n) < 0.0 { -f } else { f };
                 }
+                let uv = tri_uvs[ti].map_or(Vec2::ZERO, |t| t[0] * w.x + t[1] * w.y + t[2] * w.z);
                 SurfaceSample {
                     position: p,
                     normal: n,
                     material: tri_material[ti],
+                    rho: crate::trace::diffuse_albedo_at(scene, tri_material[ti] as usize, uv),
                 }
             })
             .collect()

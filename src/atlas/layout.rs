@@ -25,6 +25,9 @@ pub struct ChartMesh {
     pub world_positions: Vec<Vec3>,
     pub world_normals: Vec<Vec3>,
     pub uvs: Vec<Vec2>,
+    /// The mesh's material texture coordinates (TEXCOORD_0) per vertex, empty when it has
+    /// none: the bake reads the textured albedo at its sample points.
+    pub material_uvs: Vec<Vec2>,
     pub indices: Vec<u32>,
     /// One face of a two-sided sheet ([`sheet_meshes`]): its triangles are wound
     /// counter-clockwise about its normals, and the lookup draws it with back faces culled so
@@ -119,9 +122,9 @@ fn build_layout(
     world_from_node: &[Mat4],
     resolution: u32,
 ) -> Result<AtlasLayout, String> {
-    if !(16..=4096).contains(&resolution) {
+    if !(16..=MAX_RESOLUTION).contains(&resolution) {
         return Err(format!(
-            "atlas resolution {resolution} is out of range (16..4096)"
+            "atlas resolution {resolution} is out of range (16..{MAX_RESOLUTION})"
         ));
     }
     let mut meshes = Vec::new();
@@ -147,6 +150,11 @@ fn build_layout(
                 .map(|&n| (nm * n).try_normalize().unwrap_or(Vec3::Y))
                 .collect(),
             uvs: Vec::new(),
+            material_uvs: if mesh.uv0.len() == mesh.positions.len() {
+                mesh.uv0.clone()
+            } else {
+                Vec::new()
+            },
             indices: mesh.indices.clone(),
             sheet_face: false,
         });
@@ -162,6 +170,13 @@ fn build_layout(
         .instances
         .iter()
         .all(|inst| scene.meshes[inst.mesh].uv1.is_some() && uses[&inst.mesh] == 1);
+    let started = std::time::Instant::now();
+    let lap = |stage: &str| {
+        log::info!(
+            "atlas layout {resolution}²: {stage} done at {:.0} ms",
+            started.elapsed().as_secs_f64() * 1000.0
+        );
+    };
     let source = if all_uv1 {
         for cm in &mut meshes {
             let inst = &scene.instances[cm.instance];
@@ -169,6 +184,18 @@ fn build_layout(
         }
         "texcoord1"
     } else {
+        // Refuse a resolution the charts cannot fit before the sheet test and the unwrap
+        // (minutes on Sponza): every connected piece of a mesh is at least one chart.
+        let pieces: usize = meshes.iter().map(connected_pieces).sum();
+        let needed = min_resolution_for_charts(pieces);
+        if needed > resolution {
+            return Err(format!(
+                "the meshes have at least {pieces} separate pieces, each a light-map chart of at \
+                 least {side}×{side} texels with its padding: they need --atlas-res {needed} or \
+                 more (got {resolution})",
+                side = 1 + 2 * CHART_PADDING,
+            ));
+        }
         // Both faces of a zero-thickness sheet (a partition, a door) are seen, and one texel
         // cannot hold both sides' light: the back face gets charts of its own.
         for i in sheet_meshes(&meshes) {
@@ -183,14 +210,18 @@ fn build_layout(
             meshes[i].sheet_face = true;
             meshes.push(back);
         }
-        unwrap(scene, &mut meshes, resolution)?;
+        lap("sheet test");
+        unwrap(scene, &mut meshes, resolution, pieces)?;
+        lap("unwrap");
         for m in meshes.iter_mut().filter(|m| m.sheet_face) {
             orient_to_normals(m);
         }
         "generated"
     };
     let texels = find_texels(&meshes, resolution);
+    lap("texels");
     let cuts = super::cuts::contact_cuts(&meshes, resolution);
+    lap("contact cuts");
     Ok(AtlasLayout {
         resolution,
         source,
@@ -198,6 +229,69 @@ fn build_layout(
         texels,
         cuts,
     })
+}
+
+/// Largest atlas side.
+pub const MAX_RESOLUTION: u32 = 4096;
+
+/// Empty texels around every chart (charts are twice this apart).
+const CHART_PADDING: u32 = 2;
+
+/// Smallest square atlas side that can hold `charts` charts: each takes at least one texel
+/// plus its padding on every side, (1 + 2p)² texels that no other chart's padded box
+/// overlaps, so the side is at least (1 + 2p)·√charts.
+pub fn min_resolution_for_charts(charts: usize) -> u32 {
+    ((1 + 2 * CHART_PADDING) as f64 * (charts as f64).sqrt()).ceil() as u32
+}
+
+/// Connected pieces of a mesh with area: triangles joined through shared edges (index
+/// pairs; the unwrapper cuts charts at split vertices, so pieces are a lower bound on its
+/// charts).
+fn connected_pieces(m: &ChartMesh) -> usize {
+    let tris: Vec<[u32; 3]> = m
+        .indices
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]])
+        .collect();
+    let mut parent: Vec<usize> = (0..tris.len()).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    let mut by_edge: HashMap<(u32, u32), usize> = HashMap::with_capacity(tris.len() * 3 / 2);
+    for (ti, t) in tris.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let key = (a.min(b), a.max(b));
+            if let Some(&other) = by_edge.get(&key) {
+                let (ra, rb) = (root(&mut parent, ti), root(&mut parent, other));
+                if ra != rb {
+                    parent[ra] = rb;
+                }
+            } else {
+                by_edge.insert(key, ti);
+            }
+        }
+    }
+    let has_area = |t: &[u32; 3]| {
+        let p = t.map(|i| {
+            m.world_positions
+                .get(i as usize)
+                .copied()
+                .unwrap_or(Vec3::ZERO)
+        });
+        (p[1] - p[0]).cross(p[2] - p[0]).length_squared() > 0.0
+    };
+    let mut roots = std::collections::HashSet::new();
+    for (ti, t) in tris.iter().enumerate() {
+        if has_area(t) {
+            roots.insert(root(&mut parent, ti));
+        }
+    }
+    roots.len()
 }
 
 /// Rays per mesh of the sheet test.
@@ -242,32 +336,36 @@ pub fn sheet_meshes(meshes: &[ChartMesh]) -> Vec<usize> {
         |(lo, hi), p| (lo.min(p), hi.max(p)),
     );
     let eps = 1e-4 * (hi - lo).length().max(1e-3);
+    // A BVH over every triangle: the brute-force loop cost 64 rays × meshes × triangles, two
+    // minutes on Sponza's 262k triangles in 25 meshes.
+    let flat: Vec<&Tri> = tris.iter().flatten().collect();
+    let bvh_tris: Vec<obvhs::triangle::Triangle> = flat
+        .iter()
+        .map(|t| obvhs::triangle::Triangle {
+            v0: t.p[0].into(),
+            v1: t.p[1].into(),
+            v2: t.p[2].into(),
+        })
+        .collect();
+    let bvh = (!bvh_tris.is_empty()).then(|| {
+        obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &bvh_tris,
+            obvhs::BvhBuildParams::medium_build(),
+            &mut std::time::Duration::default(),
+        )
+    });
     let closest = |o: Vec3, d: Vec3| -> Option<(f32, Vec3)> {
-        let mut best: Option<(f32, Vec3)> = None;
-        for t in tris.iter().flatten() {
-            // Möller–Trumbore.
-            let (e1, e2) = (t.p[1] - t.p[0], t.p[2] - t.p[0]);
-            let q = d.cross(e2);
-            let det = e1.dot(q);
-            if det.abs() < 1e-12 {
-                continue;
-            }
-            let s = o - t.p[0];
-            let u = s.dot(q) / det;
-            if !(0.0..=1.0).contains(&u) {
-                continue;
-            }
-            let r = s.cross(e1);
-            let v = d.dot(r) / det;
-            if v < 0.0 || u + v > 1.0 {
-                continue;
-            }
-            let dist = e2.dot(r) / det;
-            if dist > eps && best.is_none_or(|(b, _)| dist < b) {
-                best = Some((dist, t.n));
-            }
+        let bvh = bvh.as_ref()?;
+        let ray = obvhs::ray::Ray::new(o.into(), d.into(), eps, f32::INFINITY);
+        let mut hit = obvhs::ray::RayHit::none();
+        let found = bvh.ray_traverse(ray, &mut hit, |ray, id| {
+            bvh_tris[bvh.primitive_indices[id] as usize].intersect(ray)
+        });
+        if !found || !hit.t.is_finite() {
+            return None;
         }
-        best
+        let tri = bvh.primitive_indices[hit.primitive_id as usize] as usize;
+        Some((hit.t, flat[tri].n))
     };
     (0..meshes.len())
         .into_par_iter()
@@ -336,7 +434,18 @@ fn orient_to_normals(m: &mut ChartMesh) {
 
 /// Generated charts for every placed instance, packed into one page with 2 texels padding.
 /// A mesh that has TEXCOORD_1 keeps its islands (repacked); the others are unwrapped.
-fn unwrap(scene: &Scene, meshes: &mut [ChartMesh], resolution: u32) -> Result<(), String> {
+/// Above this many mesh pieces the charts are packed row by row ([`uvunwrap::Packing::Fast`])
+/// instead of by shape: shape packing's density search took 58 of the 71 s of Sponza's
+/// layout (14k charts), and the layout is built again by every render that looks the atlas
+/// up. The built-in scenes have far fewer pieces and keep their shape-packed layouts.
+pub const FAST_PACKING_PIECES: usize = 1000;
+
+fn unwrap(
+    scene: &Scene,
+    meshes: &mut [ChartMesh],
+    resolution: u32,
+    pieces: usize,
+) -> Result<(), String> {
     let positions: Vec<Vec<[f32; 3]>> = meshes
         .iter()
         .map(|m| m.world_positions.iter().map(|p| p.to_array()).collect())
@@ -363,15 +472,54 @@ fn unwrap(scene: &Scene, meshes: &mut [ChartMesh], resolution: u32) -> Result<()
         density: uvunwrap::Density::Auto {
             page_size: resolution,
         },
-        padding: 2,
+        padding: CHART_PADDING,
+        packing: if pieces > FAST_PACKING_PIECES {
+            uvunwrap::Packing::Fast
+        } else {
+            uvunwrap::Packing::Shape
+        },
         ..Default::default()
     };
-    let atlas = uvunwrap::generate(&inputs, &options).map_err(|e| format!("unwrap: {e:?}"))?;
+    let started = std::time::Instant::now();
+    let last_stage = Mutex::new(None);
+    let atlas = uvunwrap::generate_with_progress(&inputs, &options, |p| {
+        let mut last = last_stage.lock().unwrap_or_else(|e| e.into_inner());
+        if *last != Some(p.stage) {
+            log::info!(
+                "unwrap: {:?} from {:.0} ms",
+                p.stage,
+                started.elapsed().as_secs_f64() * 1000.0
+            );
+            *last = Some(p.stage);
+        }
+        true
+    })
+    .map_err(|e| format!("unwrap: {e:?}"))?;
+    log::info!(
+        "unwrap: {} charts, {} page(s) at {:.3} texels/m",
+        atlas.chart_count,
+        atlas.page_count,
+        atlas.texels_per_unit
+    );
     if atlas.page_count > 1 {
-        return Err(format!(
-            "the charts need {} atlas pages at {resolution}²; raise --atlas-res",
-            atlas.page_count
-        ));
+        // P pages of R² hold the charts at the fallback density, so one page of R·√P does;
+        // no page under (1 + 2p)·√charts can. Rounded up to a multiple of 64.
+        let pages = (resolution as f64 * (atlas.page_count as f64).sqrt()).ceil() as u32;
+        let needed = pages.max(min_resolution_for_charts(atlas.chart_count as usize));
+        let needed = needed.div_ceil(64) * 64;
+        return Err(if needed <= MAX_RESOLUTION {
+            format!(
+                "the {} charts need {} atlas pages at {resolution}²; use --atlas-res {needed} \
+                 (one page of {resolution}·√{} texels holds them)",
+                atlas.chart_count, atlas.page_count, atlas.page_count
+            )
+        } else {
+            format!(
+                "the {} charts need {} atlas pages at {resolution}², about {needed}² on one page, \
+                 beyond the largest atlas ({MAX_RESOLUTION}²)",
+                atlas.chart_count, atlas.page_count
+            )
+        });
     }
     // uvunwrap's UVs are relative to the (possibly cropped) page; rescale to the square atlas.
     let sx = atlas.width as f32 / resolution as f32;
@@ -381,6 +529,9 @@ fn unwrap(scene: &Scene, meshes: &mut [ChartMesh], resolution: u32) -> Result<()
         cm.model_positions = xref.iter().map(|&i| cm.model_positions[i]).collect();
         cm.world_positions = xref.iter().map(|&i| cm.world_positions[i]).collect();
         cm.world_normals = xref.iter().map(|&i| cm.world_normals[i]).collect();
+        if !cm.material_uvs.is_empty() {
+            cm.material_uvs = xref.iter().map(|&i| cm.material_uvs[i]).collect();
+        }
         cm.uvs = out
             .vertices
             .iter()

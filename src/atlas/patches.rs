@@ -13,8 +13,8 @@ use kiddo::SquaredEuclidean;
 use rayon::prelude::*;
 
 use super::bake::{
-    check, confirmed_visibility, light_power, material_rho, Bake, BakeError, BakeScene,
-    BakeSettings, Baker, EnergyAccount, Progress, Rng, Stages, SurfaceSample,
+    check, confirmed_visibility, light_power, Bake, BakeError, BakeScene, BakeSettings, Baker,
+    EnergyAccount, Progress, Rng, Stages, SurfaceSample,
 };
 use super::depth::{DepthCube, DepthOrtho};
 use crate::sampling::{cosine_hemisphere, Rng as SampleRng};
@@ -140,6 +140,7 @@ impl SampleLookup {
             position: x,
             normal: n,
             material: 0,
+            rho: Vec3::ZERO,
         };
         let pick = self
             .tree
@@ -295,7 +296,7 @@ fn bake_patches(
     // --- Discretize ---------------------------------------------------------------------
     let sample_count = settings.vpls * settings.samples_per_vpl;
     let mut rng = Rng::from_state(settings.seed);
-    let raw = ctx.sample_surfaces(sample_count, &mut rng);
+    let raw = ctx.sample_surfaces(scene, sample_count, &mut rng);
     // One VPL site per stratum of samples (strata follow the area CDF).
     let spv = settings.samples_per_vpl;
     let sites: Vec<usize> = (0..settings.vpls)
@@ -316,10 +317,13 @@ fn bake_patches(
         let site = raw[sites[j]];
         let start = samples.len();
         samples.extend(m.iter().map(|&s| raw[s]));
+        // The patch reflects with its samples' mean albedo (textures included: a patch on a
+        // textured wall is as bright as the wall's texture on average, not as its factor).
+        let rho = m.iter().map(|&s| raw[s].rho).sum::<Vec3>() / m.len() as f32;
         patches.push(Patch {
             position: site.position,
             normal: site.normal,
-            rho: material_rho(&scene.materials[site.material as usize]),
+            rho,
             area: m.len() as f32 * sample_area,
             samples: start..samples.len(),
         });

@@ -718,6 +718,48 @@ pub fn load(spec: &str, params: &builtin::BuiltinParams) -> Result<Scene, SceneE
 /// without extension or folder names a built-in scene (see [`builtin::names`]). A path with any
 /// other extension is an error that lists the supported formats.
 pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
+    Ok(load_choosing_max_edge(spec, params, |_| None)?.0)
+}
+
+/// Scene names that stand for a file of the shared data folder (benchmark scenes too large
+/// for the repository), relative to the working directory.
+pub const FILE_ALIASES: &[(&str, &str)] = &[("sponza", "../shared/data/sponza/Sponza.gltf")];
+
+/// `spec` with a [`FILE_ALIASES`] name replaced by its file; an alias whose file is missing is
+/// an error that names the path.
+pub fn resolve_alias(spec: &str) -> Result<String, SceneError> {
+    let Some((_, path)) = FILE_ALIASES.iter().find(|(name, _)| *name == spec) else {
+        return Ok(spec.to_string());
+    };
+    if std::path::Path::new(path).is_file() {
+        Ok((*path).to_string())
+    } else {
+        Err(SceneError::Other {
+            path: (*path).to_string(),
+            message: format!(
+                "scene '{spec}' is this file, relative to the working directory, and it is not \
+                 there (run from the repository root beside ../shared, or give the file's path)"
+            ),
+        })
+    }
+}
+
+/// True when `spec` names a scene file rather than a built-in scene (see [`load_with`]).
+pub fn is_file_spec(spec: &str) -> bool {
+    std::path::Path::new(spec).extension().is_some() || spec.contains('/') || spec.contains('\\')
+}
+
+/// [`load_with`], except that an imported scene's tessellation may be chosen from the scene
+/// as read: `choose` sees it before tessellation and returns the longest edge to refine to,
+/// or `None` for `params.max_edge`. Returns the scene and what `choose` returned (always
+/// `None` for built-in scenes, whose tessellation is `params.max_edge`).
+pub fn load_choosing_max_edge(
+    spec: &str,
+    params: &LoadParams,
+    choose: impl FnOnce(&Scene) -> Option<f32>,
+) -> Result<(Scene, Option<f32>), SceneError> {
+    let resolved = resolve_alias(spec)?;
+    let spec = resolved.as_str();
     let path = std::path::Path::new(spec);
     let extension = path
         .extension()
@@ -726,8 +768,7 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
         path: spec.to_string(),
         message,
     })?;
-    let is_path = extension.is_some() || spec.contains('/') || spec.contains('\\');
-    if !is_path {
+    if !is_file_spec(spec) {
         let mut scene = builtin::load(
             spec,
             &builtin::BuiltinParams {
@@ -735,7 +776,7 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
             },
         )?;
         emitters::add_emitter_lights(&mut scene, params.emitter_lights);
-        return Ok(scene);
+        return Ok((scene, None));
     }
     let policy = params.policy();
     let mut scene = match extension.as_deref() {
@@ -762,10 +803,11 @@ pub fn load_with(spec: &str, params: &LoadParams) -> Result<Scene, SceneError> {
             })
         }
     };
-    let warnings = mesh::tessellate_instanced(&mut scene, params.max_edge, spec);
+    let chosen = choose(&scene);
+    let warnings = mesh::tessellate_instanced(&mut scene, chosen.unwrap_or(params.max_edge), spec);
     scene.warnings.extend(warnings);
     emitters::add_emitter_lights(&mut scene, params.emitter_lights);
-    Ok(scene)
+    Ok((scene, chosen))
 }
 
 #[cfg(test)]

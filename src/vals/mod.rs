@@ -102,6 +102,29 @@ impl SparseSettings {
     }
 }
 
+/// Methods that gather at sparse points (they read the `sparse-points` option).
+pub fn uses_sparse_points(method: &str) -> bool {
+    matches!(method, "sparse" | "sparse+atlas")
+}
+
+/// The default tessellation of an imported scene for the sparse methods: the spacing of
+/// their sparse points (`sparse-points` of `options`), so that no triangle spans more than
+/// about one point (a triangle with edges ≤ s has at most √3/4·s² of area, 0.43 of a point's
+/// share s²). Finer meshes only cost preprocessing (every vertex links to 8 points); coarser
+/// ones blur the points' irradiance across a triangle. `None` for a scene without area.
+pub fn default_max_edge(
+    scene: &Scene,
+    options: &MethodOptions,
+) -> Result<Option<f32>, RenderError> {
+    let points: usize = options.get("sparse-points", SparseSettings::default().sparse_points)?;
+    if points == 0 {
+        return Err(RenderError::Settings(
+            "--sparse-points must be at least 1".into(),
+        ));
+    }
+    Ok(points::point_spacing(scene, points))
+}
+
 /// The sparse method's structs shared with WGSL, for the layout test.
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     use crate::raster::types::shared_layout;
