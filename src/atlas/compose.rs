@@ -6,18 +6,16 @@
 
 use super::AtlasLayer;
 use crate::frame::{FrameInput, IndirectLayer, View, ViewCache};
+use crate::gpu::bindings::GroupLayout;
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
-use crate::raster::{
-    buffer_binding, storage_texture_entry, texture_entry, uniform_entry, view_binding, RenderError,
-    RADIANCE_FORMAT,
-};
+use crate::raster::{RenderError, RADIANCE_FORMAT};
 
 /// The atlas on top of another method's bounce: an [`IndirectLayer`].
 pub struct AtlasOnVals {
     pub layer: AtlasLayer,
     name: &'static str,
     add_pipeline: wgpu::ComputePipeline,
-    add_bgl: wgpu::BindGroupLayout,
+    add_bgl: GroupLayout,
     /// Per view: the texture the underlying method draws into, and its bytes.
     under: ViewCache<(wgpu::TextureView, GpuBytes)>,
 }
@@ -27,19 +25,10 @@ impl AtlasOnVals {
     pub fn new(ctx: &GpuContext, layer: AtlasLayer, name: &'static str) -> Self {
         let device = &ctx.device;
         let cs = wgpu::ShaderStages::COMPUTE;
-        let add_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("atlas add"),
-            entries: &[
-                uniform_entry(0, cs),
-                texture_entry(1, cs),
-                texture_entry(2, cs),
-                storage_texture_entry(3, cs),
-                texture_entry(4, cs),
-            ],
-        });
+        let add_bgl = GroupLayout::new(device, "atlas add", cs, super::ADD_BINDINGS);
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("atlas add"),
-            bind_group_layouts: &[Some(&add_bgl)],
+            bind_group_layouts: &[Some(&add_bgl.layout)],
             immediate_size: 0,
         });
         let add_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -90,17 +79,16 @@ impl IndirectLayer for AtlasOnVals {
         })?;
         draw_under(passes, under)?;
         let state = self.layer.record_lookup(ctx, view, passes)?;
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("atlas add"),
-            layout: &self.add_bgl,
-            entries: &[
-                buffer_binding(0, &state.apply_buffer),
-                view_binding(1, &state.irradiance),
-                view_binding(2, &view.targets.diffuse),
-                view_binding(3, &view.targets.radiance_indirect),
-                view_binding(4, under),
+        let group = self.add_bgl.bind(
+            &ctx.device,
+            &[
+                &state.apply_buffer,
+                &state.irradiance,
+                &view.targets.diffuse,
+                &view.targets.radiance_indirect,
+                under,
             ],
-        });
+        );
         view.record_per_pixel(passes, "atlas add", &self.add_pipeline, &group)?;
         Ok(())
     }

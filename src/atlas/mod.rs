@@ -20,13 +20,40 @@ pub use bake::{bake, Bake, BakeError, BakeSettings, Baker, EnergyAccount, Lights
 pub use compose::AtlasOnVals;
 
 use crate::frame::{FrameInput, Method, View, ViewCache, ViewResult};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, Passes};
 use crate::image_io::Image;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
-    buffer_binding, compute_pipeline, storage_texture_entry, texture_entry, uniform_entry,
-    view_binding, Rasterizer, RenderError, RenderSettings, DEPTH_FORMAT, RADIANCE_FORMAT,
+    compute_pipeline, Rasterizer, RenderError, RenderSettings, DEPTH_FORMAT, RADIANCE_FORMAT,
 };
+
+/// `atlas_render.wgsl`: the view's frame (vertex and fragment), the light-map meshes'
+/// transforms, the atlas and its contact cuts.
+const LOOKUP_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Texture,
+    Slot::UintTexture,
+];
+
+/// `atlas_apply.wgsl`'s `cs_main`: parameters, the looked-up irradiance, the G-buffer's
+/// diffuse albedo and the indirect target.
+const APPLY_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+];
+
+/// `cs_add`: [`APPLY_BINDINGS`] plus the underlying method's indirect light it adds to.
+pub(crate) const ADD_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::StorageTexture(RADIANCE_FORMAT),
+    Slot::Texture,
+];
 use crate::scene::Scene;
 
 /// One `valgi bake` invocation.
@@ -222,9 +249,9 @@ pub struct AtlasLayer {
     render_pipeline: wgpu::RenderPipeline,
     /// The same with back faces culled, for the two faces of sheets.
     sheet_pipeline: wgpu::RenderPipeline,
-    render_bgl: wgpu::BindGroupLayout,
+    render_bgl: GroupLayout,
     apply_pipeline: wgpu::ComputePipeline,
-    apply_bgl: wgpu::BindGroupLayout,
+    apply_bgl: GroupLayout,
     atlas_view: wgpu::TextureView,
     cuts_view: wgpu::TextureView,
     atlas_size: u32,
@@ -341,27 +368,15 @@ impl AtlasLayer {
             8,
         );
         let render_module = ctx.shader("atlas_render.wgsl");
-        let render_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("atlas lookup"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::VERTEX | wgpu::ShaderStages::FRAGMENT),
-                crate::raster::storage_entry(1, wgpu::ShaderStages::VERTEX),
-                texture_entry(2, wgpu::ShaderStages::FRAGMENT),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 3,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-            ],
-        });
+        let render_bgl = GroupLayout::new(
+            device,
+            "atlas lookup",
+            wgpu::ShaderStages::VERTEX_FRAGMENT,
+            LOOKUP_BINDINGS,
+        );
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("atlas lookup"),
-            bind_group_layouts: &[Some(&render_bgl)],
+            bind_group_layouts: &[Some(&render_bgl.layout)],
             immediate_size: 0,
         });
         const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
@@ -410,16 +425,14 @@ impl AtlasLayer {
         let sheet_pipeline = make_render_pipeline(Some(wgpu::Face::Back));
 
         let apply_module = ctx.shader("atlas_apply.wgsl");
-        let apply_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("atlas apply"),
-            entries: &[
-                uniform_entry(0, wgpu::ShaderStages::COMPUTE),
-                texture_entry(1, wgpu::ShaderStages::COMPUTE),
-                texture_entry(2, wgpu::ShaderStages::COMPUTE),
-                storage_texture_entry(3, wgpu::ShaderStages::COMPUTE),
-            ],
-        });
-        let apply_pipeline = compute_pipeline(device, "atlas apply", &apply_module, &apply_bgl);
+        let apply_bgl = GroupLayout::new(
+            device,
+            "atlas apply",
+            wgpu::ShaderStages::COMPUTE,
+            APPLY_BINDINGS,
+        );
+        let apply_pipeline =
+            compute_pipeline(device, "atlas apply", &apply_module, &apply_bgl.layout);
         Ok(Self {
             meshes,
             transforms,
@@ -490,16 +503,8 @@ impl AtlasLayer {
                     wgpu::TextureUsages::RENDER_ATTACHMENT,
                 )
                 .create_view(&Default::default());
-            let render_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("atlas lookup"),
-                layout: render_bgl,
-                entries: &[
-                    buffer_binding(0, &frame_buffer),
-                    buffer_binding(1, transforms),
-                    view_binding(2, atlas_view),
-                    view_binding(3, cuts_view),
-                ],
-            });
+            let render_group =
+                render_bgl.bind(device, &[&frame_buffer, transforms, atlas_view, cuts_view]);
             Ok(AtlasView {
                 frame_buffer,
                 apply_buffer,
@@ -553,16 +558,15 @@ impl AtlasLayer {
     ) -> Result<(), RenderError> {
         self.record_lookup(ctx, view, passes)?;
         let state = self.views.get(view).expect("made by the lookup");
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("atlas apply"),
-            layout: &self.apply_bgl,
-            entries: &[
-                buffer_binding(0, &state.apply_buffer),
-                view_binding(1, &state.irradiance),
-                view_binding(2, &view.targets.diffuse),
-                view_binding(3, &view.targets.radiance_indirect),
+        let group = self.apply_bgl.bind(
+            &ctx.device,
+            &[
+                &state.apply_buffer,
+                &state.irradiance,
+                &view.targets.diffuse,
+                &view.targets.radiance_indirect,
             ],
-        });
+        );
         view.record_per_pixel(passes, "atlas apply", &self.apply_pipeline, &group)?;
         Ok(())
     }

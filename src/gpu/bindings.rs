@@ -19,6 +19,8 @@ pub enum Slot {
     Texture,
     /// `texture_2d_array<f32>` read with `textureLoad`.
     TextureArray,
+    /// `texture_2d<u32>`.
+    UintTexture,
     /// `texture_depth_2d` read with `textureLoad`.
     DepthTexture,
     /// `texture_depth_2d_array` (shadow-map layers).
@@ -50,6 +52,7 @@ impl Slot {
             Slot::StorageRw => buffer(wgpu::BufferBindingType::Storage { read_only: false }),
             Slot::Texture => texture(float, d2),
             Slot::TextureArray => texture(float, wgpu::TextureViewDimension::D2Array),
+            Slot::UintTexture => texture(wgpu::TextureSampleType::Uint, d2),
             Slot::DepthTexture => texture(wgpu::TextureSampleType::Depth, d2),
             Slot::DepthTextureArray => texture(
                 wgpu::TextureSampleType::Depth,
