@@ -21,6 +21,10 @@ pub enum Slot {
     TextureArray,
     /// `texture_2d<u32>`.
     UintTexture,
+    /// `texture_2d<f32>` sampled with filtering (material textures).
+    FilterableTexture,
+    /// `sampler` with filtering.
+    FilteringSampler,
     /// `texture_depth_2d` read with `textureLoad`.
     DepthTexture,
     /// `texture_depth_2d_array` (shadow-map layers).
@@ -53,6 +57,12 @@ impl Slot {
             Slot::Texture => texture(float, d2),
             Slot::TextureArray => texture(float, wgpu::TextureViewDimension::D2Array),
             Slot::UintTexture => texture(wgpu::TextureSampleType::Uint, d2),
+            Slot::FilterableTexture => {
+                texture(wgpu::TextureSampleType::Float { filterable: true }, d2)
+            }
+            Slot::FilteringSampler => {
+                wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering)
+            }
             Slot::DepthTexture => texture(wgpu::TextureSampleType::Depth, d2),
             Slot::DepthTextureArray => texture(
                 wgpu::TextureSampleType::Depth,
@@ -78,7 +88,7 @@ impl Slot {
     fn takes(self) -> ResourceKind {
         match self {
             Slot::Uniform | Slot::Storage | Slot::StorageRw => ResourceKind::Buffer,
-            Slot::ComparisonSampler => ResourceKind::Sampler,
+            Slot::ComparisonSampler | Slot::FilteringSampler => ResourceKind::Sampler,
             _ => ResourceKind::TextureView,
         }
     }

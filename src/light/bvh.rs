@@ -12,10 +12,14 @@ use obvhs::bvh2::builder::build_bvh2_from_tris;
 use obvhs::triangle::Triangle;
 use obvhs::BvhBuildParams;
 
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::resources::GpuBytes;
 use crate::gpu::GpuContext;
 use crate::scene::merge::flat_region_indices;
 use crate::scene::{Aabb, Material, Scene};
+
+/// `bvh.wgsl`'s group: the nodes, the triangles and the instances, all read-only.
+const BVH_BINDINGS: &[Slot] = &[Slot::Storage, Slot::Storage, Slot::Storage];
 
 /// One BVH node: a leaf when `prim_count > 0` (triangles `first..first + prim_count` of its
 /// mesh), otherwise an inner node whose children are nodes `first` and `first + 1` of its mesh.
@@ -72,7 +76,7 @@ pub struct SceneBvh {
     pub instance_buffer: wgpu::Buffer,
     pub bytes: GpuBytes,
     /// Bind group 1 of the shaders that include `bvh.wgsl`.
-    pub layout: wgpu::BindGroupLayout,
+    pub layout: GroupLayout,
     pub group: wgpu::BindGroup,
 }
 
@@ -236,21 +240,11 @@ impl SceneBvh {
             bytemuck::cast_slice(&instances),
         );
         let cs = wgpu::ShaderStages::COMPUTE;
-        let layout = ctx
-            .device
-            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some("scene bvh"),
-                entries: &[0, 1, 2].map(|i| crate::raster::storage_entry(i, cs)),
-            });
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("scene bvh"),
-            layout: &layout,
-            entries: &[
-                crate::raster::buffer_binding(0, &node_buffer),
-                crate::raster::buffer_binding(1, &triangle_buffer),
-                crate::raster::buffer_binding(2, &instance_buffer),
-            ],
-        });
+        let layout = GroupLayout::new(&ctx.device, "scene bvh", cs, BVH_BINDINGS);
+        let group = layout.bind(
+            &ctx.device,
+            &[&node_buffer, &triangle_buffer, &instance_buffer],
+        );
         Self {
             nodes,
             triangles,

@@ -401,7 +401,10 @@ impl Rsm {
         let module = ctx.shader("vals_rsm.wgsl");
         let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("rsm"),
-            bind_group_layouts: &[Some(&view_bgl.layout), Some(&scene_gpu.material_layout)],
+            bind_group_layouts: &[
+                Some(&view_bgl.layout),
+                Some(&scene_gpu.material_layout.layout),
+            ],
             immediate_size: 0,
         });
         let attributes = wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x3, 2 => Float32x2];

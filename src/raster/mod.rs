@@ -250,7 +250,10 @@ impl Rasterizer {
         );
         let gbuffer_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("gbuffer"),
-            bind_group_layouts: &[Some(&frame_bgl.layout), Some(&scene_gpu.material_layout)],
+            bind_group_layouts: &[
+                Some(&frame_bgl.layout),
+                Some(&scene_gpu.material_layout.layout),
+            ],
             immediate_size: 0,
         });
         let gbuffer_pipeline = ctx.scoped("the gbuffer pipeline", None, PIPELINE_REMEDY, || {

@@ -5,6 +5,7 @@
 use glam::{Mat3, Mat4, Vec4};
 
 use super::types::{InstanceData, MaterialParams, Vertex};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext};
 use crate::scene::{ColorSpace, Scene, Texture};
 
@@ -25,7 +26,7 @@ pub struct GpuMesh {
 
 pub struct SceneGpu {
     pub meshes: Vec<GpuMesh>,
-    pub material_layout: wgpu::BindGroupLayout,
+    pub material_layout: GroupLayout,
     pub material_bind_groups: Vec<wgpu::BindGroup>,
     /// `InstanceData` per scene instance, indexed by `@builtin(instance_index)`.
     pub instance_buffer: wgpu::Buffer,
@@ -163,36 +164,12 @@ impl SceneGpu {
                     pick(m.normal_texture, &flat_normal),
                     pick(m.emissive_texture, &white),
                 ];
-                device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some(&m.name),
-                    layout: &material_layout,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: uniform.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: wgpu::BindingResource::Sampler(&sampler),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::TextureView(&views[0]),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::TextureView(&views[1]),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 4,
-                            resource: wgpu::BindingResource::TextureView(&views[2]),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 5,
-                            resource: wgpu::BindingResource::TextureView(&views[3]),
-                        },
+                material_layout.bind(
+                    device,
+                    &[
+                        &uniform, &sampler, &views[0], &views[1], &views[2], &views[3],
                     ],
-                })
+                )
             })
             .collect();
 
@@ -266,42 +243,25 @@ pub fn instance_data(world_from_model: Mat4) -> InstanceData {
     }
 }
 
-fn material_bind_group_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
-    let texture = |binding| wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
-        ty: wgpu::BindingType::Texture {
-            sample_type: wgpu::TextureSampleType::Float { filterable: true },
-            view_dimension: wgpu::TextureViewDimension::D2,
-            multisampled: false,
-        },
-        count: None,
-    };
-    device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-        label: Some("material"),
-        entries: &[
-            wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            },
-            wgpu::BindGroupLayoutEntry {
-                binding: 1,
-                visibility: wgpu::ShaderStages::FRAGMENT,
-                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                count: None,
-            },
-            texture(2),
-            texture(3),
-            texture(4),
-            texture(5),
-        ],
-    })
+/// The material group of `gbuffer.wgsl` and `vals_rsm.wgsl` (fragment stage): the material
+/// parameters, the filtering sampler, and the base-colour, metallic-roughness, normal and
+/// emissive textures.
+const MATERIAL_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::FilteringSampler,
+    Slot::FilterableTexture,
+    Slot::FilterableTexture,
+    Slot::FilterableTexture,
+    Slot::FilterableTexture,
+];
+
+fn material_bind_group_layout(device: &wgpu::Device) -> GroupLayout {
+    GroupLayout::new(
+        device,
+        "material",
+        wgpu::ShaderStages::FRAGMENT,
+        MATERIAL_BINDINGS,
+    )
 }
 
 /// Uploads an RGBA8 texture with a full mip chain (box-filtered in linear space, so sRGB

@@ -506,7 +506,7 @@ impl SparseGpu {
         let visibility_pipeline = {
             let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
                 label: Some("visibility"),
-                bind_group_layouts: &[Some(&visibility_bgl), Some(&bvh.layout)],
+                bind_group_layouts: &[Some(&visibility_bgl), Some(&bvh.layout.layout)],
                 immediate_size: 0,
             });
             ctx.scoped(
