@@ -12,7 +12,7 @@ use bytemuck::{Pod, Zeroable};
 use crate::gpu::{GpuContext, Passes};
 use crate::method::Method;
 use crate::raster::{compute_pipeline, RenderError, RenderSettings};
-use crate::scene::{self, builtin::BuiltinParams, Scene};
+use crate::scene::Scene;
 use crate::vals::math::OcclusionMode;
 use crate::vals::{SparseMethod, SparseSettings};
 
@@ -36,6 +36,8 @@ pub struct BenchRequest {
     pub small: u32,
     pub brute: bool,
     pub out: PathBuf,
+    /// Lights and a camera added to the scene (`--light`, `--camera-eye`, …).
+    pub edits: crate::scene::edits::SceneEdits,
 }
 
 /// `FmaParams` in `shaders/bench/bench_fma.wgsl`.
@@ -196,7 +198,33 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     std::fs::create_dir_all(&request.out).map_err(|e| {
         RenderError::Settings(format!("cannot create {}: {e}", request.out.display()))
     })?;
-    let scene = scene::load(&request.scene, &BuiltinParams::default())?;
+    // An imported scene is tessellated for the densest sparse-point count of the grid, as
+    // `render --method sparse` would without --max-edge.
+    let mut densest = crate::method::MethodOptions::default();
+    densest.set(
+        "sparse-points",
+        request.points.iter().copied().max().unwrap_or(4096),
+    );
+    let (mut scene, tessellation) = crate::app::load_scene(
+        &request.scene,
+        &[("sparse", &densest)],
+        None,
+        false,
+        crate::scene::emitters::DEFAULT_EMITTER_LIGHTS,
+    )?;
+    let camera_selector = request.edits.apply(
+        &mut scene,
+        None,
+        request.width as f32 / request.height as f32,
+    )?;
+    println!(
+        "scene: {} ({} triangles, max edge {:.3} m from {}, {} lights)",
+        scene.name,
+        scene.triangle_count(),
+        tessellation.max_edge,
+        tessellation.source,
+        scene.lights.len()
+    );
     let ctx = GpuContext::new()?;
     let peak = fma_peak(&ctx)?;
     println!(
@@ -223,7 +251,11 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         };
         let mut method = SparseMethod::new(&ctx, &scene, render_settings, settings)?;
         let camera = scene
-            .camera_view(None, width as f32 / height as f32, &world)
+            .camera_view(
+                camera_selector.as_deref(),
+                width as f32 / height as f32,
+                &world,
+            )
             .map_err(|e| RenderError::Settings(e.to_string()))?;
         // One warm-up frame (pipelines, caches), then the measured one.
         method.render(&ctx, &scene, &world, &camera)?;
@@ -292,7 +324,11 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         let mut brute =
             crate::peers::brute::BruteMethod::new(&ctx, &scene, render_settings, &options)?;
         let camera = scene
-            .camera_view(None, request.width as f32 / request.height as f32, &world)
+            .camera_view(
+                camera_selector.as_deref(),
+                request.width as f32 / request.height as f32,
+                &world,
+            )
             .map_err(|e| RenderError::Settings(e.to_string()))?;
         let frame = brute.render(&ctx, &scene, &world, &camera)?;
         let total = frame.timings.total_ms();

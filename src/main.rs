@@ -364,6 +364,8 @@ struct EvalArgs {
 struct BenchArgs {
     #[arg(long, default_value = "cornell")]
     scene: String,
+    #[command(flatten)]
+    scene_edits: SceneEditArgs,
     #[arg(long, default_value_t = 1920)]
     width: u32,
     #[arg(long, default_value_t = 1080)]
@@ -815,6 +817,7 @@ fn main() -> ExitCode {
                 small: args.small,
                 brute: !args.no_brute,
                 out: args.out,
+                edits: args.scene_edits.edits(),
             };
             match valgi::bench::run(&request) {
                 Ok(path) => {
