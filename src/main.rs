@@ -347,9 +347,10 @@ struct EvalArgs {
     /// Frames per method (≥ 3 measures flicker); frame f is at time f/30 s.
     #[arg(long, default_value_t = 1)]
     frames: u32,
-    /// Tessellation of built-in scenes (metres).
-    #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
-    max_edge: f32,
+    /// Longest triangle edge, metres (default: 0.05 for built-in scenes; an imported scene
+    /// with a sparse method is refined to its sparse-point spacing, as in `render`).
+    #[arg(long)]
+    max_edge: Option<f32>,
     /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
     /// triangles, each a Lambertian point emitter of the cluster's power (the reference samples
     /// the triangles themselves).
@@ -990,7 +991,10 @@ fn run_eval(args: EvalArgs) -> ExitCode {
         ref_spp: args.ref_spp,
         ref_bounces,
         frames: args.frames,
-        max_edge: args.max_edge,
+        max_edge: args
+            .max_edge
+            .unwrap_or(builtin::BuiltinParams::default().max_edge),
+        sparse_spacing: args.max_edge.is_none(),
         emitter_lights: args.emitter_lights,
         exposure: args.exposure,
         ..valgi::eval::EvalRequest::default()

@@ -33,6 +33,8 @@ pub enum EvalError {
     Settings(String),
     #[error(transparent)]
     Cancelled(#[from] crate::progress::Cancelled),
+    #[error(transparent)]
+    App(#[from] crate::app::AppError),
 }
 
 /// One `valgi eval` invocation.
@@ -58,6 +60,9 @@ pub struct EvalRequest {
     pub frames: u32,
     pub frame_dt: f32,
     pub max_edge: f32,
+    /// Tessellate an imported scene for the listed sparse methods' point spacing, as `render`
+    /// does without `--max-edge` (`max_edge` then applies to built-in scenes only).
+    pub sparse_spacing: bool,
     /// Most proxy lights the emissive surfaces become (0 = none); the reference ignores it.
     pub emitter_lights: u32,
     /// Tone-map exposure (stops) for FLIP and sheets of full images; `None` = automatic.
@@ -81,6 +86,7 @@ impl Default for EvalRequest {
             frames: 1,
             frame_dt: 1.0 / 30.0,
             max_edge: BuiltinParams::default().max_edge,
+            sparse_spacing: false,
             emitter_lights: scene::emitters::DEFAULT_EMITTER_LIGHTS,
             exposure: None,
             progress: true,
@@ -363,13 +369,21 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
     };
     let aspect = request.width as f32 / request.height as f32;
     // Each scene with the command line's edits, and the camera they leave it with.
-    let mut scenes: Vec<(Scene, Option<String>)> = Vec::with_capacity(request.scenes.len());
+    let mut scenes: Vec<(Scene, Option<String>, f32)> = Vec::with_capacity(request.scenes.len());
+    let method_pairs: Vec<(&str, &MethodOptions)> =
+        specs.iter().map(|(n, o)| (n.as_str(), o)).collect();
     for spec in &request.scenes {
-        let mut scene = scene::load_with(spec, &params)?;
+        let (mut scene, max_edge) = if request.sparse_spacing {
+            let (scene, tessellation) =
+                crate::app::load_scene(spec, &method_pairs, None, false, request.emitter_lights)?;
+            (scene, tessellation.max_edge)
+        } else {
+            (scene::load_with(spec, &params)?, request.max_edge)
+        };
         let camera = request
             .edits
             .apply(&mut scene, request.camera.as_deref(), aspect)?;
-        scenes.push((scene, camera));
+        scenes.push((scene, camera, max_edge));
     }
     let ctx = GpuContext::new()?;
     let settings = RenderSettings {
@@ -385,7 +399,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         references_rendered: 0,
         references_cached: 0,
     };
-    for (scene_spec, (scene, camera)) in request.scenes.iter().zip(&scenes) {
+    for (scene_spec, (scene, camera, max_edge)) in request.scenes.iter().zip(&scenes) {
         // A reference cached for the bare scene must not serve the edited one.
         let scene_key = if request.edits.is_empty() {
             scene_spec.clone()
@@ -411,7 +425,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             request.ref_bounces,
             request.ref_spp,
             request.ref_seed,
-            request.max_edge,
+            *max_edge,
             0.0,
         );
         let reference = cached_reference(&cache_dir, &key, || {
