@@ -17,13 +17,14 @@ use half::f16;
 use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
-    buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, texture_entry,
-    uniform_entry, view_binding, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
+    buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, RenderError,
+    ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
@@ -143,7 +144,7 @@ pub struct SparseGpu {
     occlusion: Kernel,
     interpolate: Kernel,
     apply_pipeline: wgpu::RenderPipeline,
-    apply_bgl: wgpu::BindGroupLayout,
+    apply_bgl: GroupLayout,
     bvh: SceneBvh,
     visibility_buffer: wgpu::Buffer,
     /// Last frame's visibility, blended into this frame's (`visibility-history`).
@@ -158,6 +159,19 @@ pub struct SparseGpu {
 
 /// Bytes of cluster visibility per sparse point: one per cluster.
 pub const VISIBILITY_BYTES_PER_POINT: u64 = MAX_CLUSTERS as u64;
+
+/// `vals_apply.wgsl` (vertex and fragment): the view's frame, the instances, their vertex
+/// ranges, the vertex lights, the G-buffer's normal, diffuse and specular, and the parameters.
+const APPLY_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::Storage,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Uniform,
+];
 
 /// One compute pass of the solution: pipeline, layout, and the buffers after the parameter
 /// block in binding order.
@@ -537,23 +551,11 @@ impl SparseGpu {
 
         // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
         let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
-        let apply_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("apply"),
-            entries: &[
-                uniform_entry(0, vs_fs),
-                storage_entry(1, vs_fs),
-                storage_entry(2, vs_fs),
-                storage_entry(3, vs_fs),
-                texture_entry(4, wgpu::ShaderStages::FRAGMENT),
-                texture_entry(5, wgpu::ShaderStages::FRAGMENT),
-                texture_entry(6, wgpu::ShaderStages::FRAGMENT),
-                uniform_entry(7, vs_fs),
-            ],
-        });
+        let apply_bgl = GroupLayout::new(device, "apply", vs_fs, APPLY_BINDINGS);
         let apply_module = ctx.shader("vals_apply.wgsl");
         let apply_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("apply"),
-            bind_group_layouts: &[Some(&apply_bgl)],
+            bind_group_layouts: &[Some(&apply_bgl.layout)],
             immediate_size: 0,
         });
         let apply_pipeline = ScenePipeline {
@@ -776,20 +778,19 @@ impl SparseGpu {
         indirect: &wgpu::TextureView,
     ) -> Result<(), GpuError> {
         let targets = &view.targets;
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("apply"),
-            layout: &self.apply_bgl,
-            entries: &[
-                buffer_binding(0, &view.frame_buffer),
-                buffer_binding(1, &scene_gpu.instance_buffer),
-                buffer_binding(2, &self.ranges_buffer),
-                buffer_binding(3, &self.vertex_lights),
-                view_binding(4, &targets.normal),
-                view_binding(5, &targets.diffuse),
-                view_binding(6, &targets.specular),
-                buffer_binding(7, &self.params_buffer),
+        let group = self.apply_bgl.bind(
+            &ctx.device,
+            &[
+                &view.frame_buffer,
+                &scene_gpu.instance_buffer,
+                &self.ranges_buffer,
+                &self.vertex_lights,
+                &targets.normal,
+                &targets.diffuse,
+                &targets.specular,
+                &self.params_buffer,
             ],
-        });
+        );
         passes.render(
             "apply",
             &[cleared(indirect)],
