@@ -571,33 +571,6 @@ pub fn cleared(view: &wgpu::TextureView) -> Option<wgpu::RenderPassColorAttachme
     })
 }
 
-// Layout entries for the groups still written entry by entry; they are the slots of
-// `gpu::bindings`, which new code uses directly.
-
-pub fn uniform_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    Slot::Uniform.entry(binding, visibility)
-}
-
-pub fn storage_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    Slot::Storage.entry(binding, visibility)
-}
-
-/// A storage buffer the shader writes (`var<storage, read_write>`).
-pub fn storage_entry_rw(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-) -> wgpu::BindGroupLayoutEntry {
-    Slot::StorageRw.entry(binding, visibility)
-}
-
-/// A 2D depth texture read with `textureLoad` (the G-buffer's depth).
-pub fn depth_texture_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-) -> wgpu::BindGroupLayoutEntry {
-    Slot::DepthTexture.entry(binding, visibility)
-}
-
 /// Vertex buffers of [`Vertex`] read for their position only (shadow maps, depth-equal
 /// passes).
 pub const POSITION_ONLY: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferLayout {
@@ -610,29 +583,10 @@ pub const POSITION_ONLY: wgpu::VertexBufferLayout<'static> = wgpu::VertexBufferL
     }],
 };
 
-/// A float texture read with `textureLoad` (no filtering needed).
-pub fn texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
-    Slot::Texture.entry(binding, visibility)
-}
-
-pub fn storage_texture_entry(
-    binding: u32,
-    visibility: wgpu::ShaderStages,
-) -> wgpu::BindGroupLayoutEntry {
-    Slot::StorageTexture(RADIANCE_FORMAT).entry(binding, visibility)
-}
-
 pub fn buffer_binding(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {
         binding,
         resource: buffer.as_entire_binding(),
-    }
-}
-
-pub fn view_binding(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
-    wgpu::BindGroupEntry {
-        binding,
-        resource: wgpu::BindingResource::TextureView(view),
     }
 }
 

@@ -23,8 +23,8 @@ use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
-    buffer_binding, cleared, compute_pipeline, storage_entry, storage_entry_rw, RenderError,
-    ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
+    buffer_binding, cleared, compute_pipeline, RenderError, ScenePipeline, POSITION_ONLY,
+    RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
@@ -392,11 +392,7 @@ impl SparseGpu {
                 .iter()
                 .enumerate()
                 .map(|(i, (_, rw))| {
-                    if *rw {
-                        storage_entry_rw(i as u32, cs)
-                    } else {
-                        storage_entry(i as u32, cs)
-                    }
+                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, cs)
                 })
                 .collect();
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -509,11 +505,7 @@ impl SparseGpu {
                 .iter()
                 .enumerate()
                 .map(|(i, (_, rw))| {
-                    if *rw {
-                        storage_entry_rw(i as u32, cs)
-                    } else {
-                        storage_entry(i as u32, cs)
-                    }
+                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, cs)
                 })
                 .collect::<Vec<_>>(),
         });

@@ -20,12 +20,17 @@ use winit::window::{Window, WindowId};
 
 use crate::app::AppError;
 use crate::frame::{record_frame, Method, View, ViewResult, ViewRig};
+use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::timing::round3;
 use crate::gpu::{FrameTimings, GpuContext};
 use crate::method::{self, MethodOptions, OptionKind};
 use crate::raster::types::{shared_layout, SharedLayout};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, CameraView, Scene};
+
+/// `present.wgsl` (fragment): the tone map's parameters and the view's direct and indirect
+/// radiance.
+const PRESENT_BINDINGS: &[Slot] = &[Slot::Uniform, Slot::Texture, Slot::Texture];
 
 /// Width of the control panel, logical pixels.
 const PANEL_WIDTH: f32 = 280.0;
@@ -344,7 +349,7 @@ struct Running {
     method: Box<dyn Method>,
     views: Vec<View>,
     results: Vec<ViewResult>,
-    present_layout: wgpu::BindGroupLayout,
+    present_layout: GroupLayout,
     present_pipeline: wgpu::RenderPipeline,
     present_targets: Vec<PresentTarget>,
     egui_ctx: egui::Context,
@@ -426,17 +431,8 @@ impl Running {
         surface.configure(&ctx.device, &config);
 
         let fs = wgpu::ShaderStages::FRAGMENT;
-        let present_layout =
-            ctx.device
-                .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                    label: Some("present"),
-                    entries: &[
-                        crate::raster::uniform_entry(0, fs),
-                        crate::raster::texture_entry(1, fs),
-                        crate::raster::texture_entry(2, fs),
-                    ],
-                });
-        let present_pipeline = present_pipeline(&ctx, &present_layout, format);
+        let present_layout = GroupLayout::new(&ctx.device, "present", fs, PRESENT_BINDINGS);
+        let present_pipeline = present_pipeline(&ctx, &present_layout.layout, format);
 
         let method_entry = method::entry(&request.method)?;
         let mut edits = BTreeMap::new();
@@ -530,17 +526,8 @@ impl Running {
                 .output_indirect
                 .create_view(&Default::default());
             let group = self
-                .ctx
-                .device
-                .create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("present"),
-                    layout: &self.present_layout,
-                    entries: &[
-                        crate::raster::buffer_binding(0, &params),
-                        crate::raster::view_binding(1, &direct),
-                        crate::raster::view_binding(2, &indirect),
-                    ],
-                });
+                .present_layout
+                .bind(&self.ctx.device, &[&params, &direct, &indirect]);
             self.present_targets.push(PresentTarget {
                 params,
                 group,
