@@ -44,21 +44,10 @@ fn closed_box_matches_the_geometric_series() {
     };
     let result = bake_now(&scene, &settings).unwrap();
     let rho = 0.5f64;
-    let phi_over_a = 4.0 * std::f64::consts::PI / 24.0;
-    let centre: Vec<u32> = result
-        .layout
-        .texels
-        .iter()
-        .filter(|t| t.centre)
-        .map(|t| t.index)
-        .collect();
+    let phi_over_a = common::BOX_PHI_OVER_A;
     let mut total = 0.0;
     for b in 1..=4u32 {
-        let mean = centre
-            .iter()
-            .map(|&i| result.irradiance[b as usize - 1][i as usize][1] as f64)
-            .sum::<f64>()
-            / centre.len() as f64;
+        let mean = common::centre_bounce_mean(&result, b);
         let expected = phi_over_a * rho.powi(b as i32);
         eprintln!("bounce {b}: mean {mean:.4}, expected {expected:.4}");
         assert!(
@@ -623,21 +612,9 @@ fn textured_albedo_and_metalness_reflect_as_rendered() {
             p.rho
         );
     }
-    let phi_over_a = 4.0 * std::f64::consts::PI / 24.0;
-    let centre: Vec<u32> = result
-        .layout
-        .texels
-        .iter()
-        .filter(|t| t.centre)
-        .map(|t| t.index)
-        .collect();
     for b in 1..=3u32 {
-        let mean = centre
-            .iter()
-            .map(|&i| result.irradiance[b as usize - 1][i as usize][1] as f64)
-            .sum::<f64>()
-            / centre.len() as f64;
-        let expected = phi_over_a * rho.powi(b as i32);
+        let mean = common::centre_bounce_mean(&result, b);
+        let expected = common::BOX_PHI_OVER_A * rho.powi(b as i32);
         eprintln!("bounce {b}: mean {mean:.4}, expected {expected:.4}");
         assert!(
             (mean / expected - 1.0).abs() < 0.08,

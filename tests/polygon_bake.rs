@@ -2,6 +2,8 @@
 //! series, power conservation from the lights to the VPLs to the virtual lights, the texel
 //! coverage invariant, and per-bounce against joint clustering.
 
+mod common;
+
 use std::sync::atomic::AtomicBool;
 
 use valgi::atlas::bake::PolygonSettings;
@@ -42,21 +44,9 @@ fn closed_box_matches_the_geometric_series() {
         settings.polygon.shadows = shadows;
         let result = bake_now(&scene, &settings);
         eprintln!("{}", result.summary());
-        let phi_over_a = 4.0 * std::f64::consts::PI / 24.0;
-        let centre: Vec<u32> = result
-            .layout
-            .texels
-            .iter()
-            .filter(|t| t.centre)
-            .map(|t| t.index)
-            .collect();
         for b in 1..=3u32 {
-            let mean = centre
-                .iter()
-                .map(|&i| result.irradiance[b as usize - 1][i as usize][1] as f64)
-                .sum::<f64>()
-                / centre.len() as f64;
-            let expected = phi_over_a * 0.5f64.powi(b as i32);
+            let mean = common::centre_bounce_mean(&result, b);
+            let expected = common::BOX_PHI_OVER_A * 0.5f64.powi(b as i32);
             eprintln!("shadows {shadows}, bounce {b}: mean {mean:.4}, expected {expected:.4}");
             assert!(
                 (mean / expected - 1.0).abs() < 0.05,

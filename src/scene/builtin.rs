@@ -551,6 +551,53 @@ fn lpv_diagonal(name: &str, max_edge: f32) -> Scene {
     b.scene
 }
 
+/// The six faces of the cube [−1, 1]³, wound to face inwards, in the order +x, −x, +y, −y,
+/// +z, −z.
+fn inward_cube_faces() -> [[Vec3; 4]; 6] {
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    [
+        [
+            c(1., -1., -1.),
+            c(1., 1., -1.),
+            c(1., 1., 1.),
+            c(1., -1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., -1., 1.),
+            c(-1., 1., 1.),
+            c(-1., 1., -1.),
+        ],
+        [
+            c(-1., 1., -1.),
+            c(-1., 1., 1.),
+            c(1., 1., 1.),
+            c(1., 1., -1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(1., -1., -1.),
+            c(1., -1., 1.),
+            c(-1., -1., 1.),
+        ],
+        [
+            c(-1., -1., 1.),
+            c(1., -1., 1.),
+            c(1., 1., 1.),
+            c(-1., 1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., 1., -1.),
+            c(1., 1., -1.),
+            c(1., -1., -1.),
+        ],
+    ]
+}
+
+/// Index of the +z face in [`inward_cube_faces`].
+const POS_Z_FACE: usize = 4;
+
 /// A closed cube [−1, 1]³ m, every face Lambertian with albedo 0.5 and facing inwards, lit by
 /// a 1 W/sr point light at its centre. Direct light reaches every wall through a different
 /// face of the light's cube shadow map; with no occluders, radiance is ρ/π · I·cosθ/d²
@@ -560,46 +607,7 @@ fn closed_box(name: &str, max_edge: f32) -> Scene {
     let mut b = SceneBuilder::new(name);
     let grey = b.material(Material::lambert("grey", Vec3::splat(0.5)));
     let mut mb = MeshBuilder::new("box", grey);
-    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
-    let faces = [
-        [
-            c(1., -1., -1.),
-            c(1., 1., -1.),
-            c(1., 1., 1.),
-            c(1., -1., 1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(-1., -1., 1.),
-            c(-1., 1., 1.),
-            c(-1., 1., -1.),
-        ],
-        [
-            c(-1., 1., -1.),
-            c(-1., 1., 1.),
-            c(1., 1., 1.),
-            c(1., 1., -1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(1., -1., -1.),
-            c(1., -1., 1.),
-            c(-1., -1., 1.),
-        ],
-        [
-            c(-1., -1., 1.),
-            c(1., -1., 1.),
-            c(1., 1., 1.),
-            c(-1., 1., 1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(-1., 1., -1.),
-            c(1., 1., -1.),
-            c(1., -1., -1.),
-        ],
-    ];
-    for [p0, p1, p2, p3] in faces {
+    for [p0, p1, p2, p3] in inward_cube_faces() {
         mb.add_quad(p0, p1, p2, p3, Vec3::ZERO, max_edge);
     }
     b.object("box", mb.build(), Trs::default());
@@ -641,40 +649,11 @@ fn emissive_quad(name: &str, max_edge: f32) -> Scene {
     });
     let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
     let mut walls = MeshBuilder::new("walls", grey);
-    let faces = [
-        [
-            c(1., -1., -1.),
-            c(1., 1., -1.),
-            c(1., 1., 1.),
-            c(1., -1., 1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(-1., -1., 1.),
-            c(-1., 1., 1.),
-            c(-1., 1., -1.),
-        ],
-        [
-            c(-1., 1., -1.),
-            c(-1., 1., 1.),
-            c(1., 1., 1.),
-            c(1., 1., -1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(1., -1., -1.),
-            c(1., -1., 1.),
-            c(-1., -1., 1.),
-        ],
-        [
-            c(-1., -1., -1.),
-            c(-1., 1., -1.),
-            c(1., 1., -1.),
-            c(1., -1., -1.),
-        ],
-    ];
-    for [p0, p1, p2, p3] in faces {
-        walls.add_quad(p0, p1, p2, p3, Vec3::ZERO, max_edge);
+    // Every wall of the closed box but +z, the open side the camera looks through.
+    for (i, [p0, p1, p2, p3]) in inward_cube_faces().into_iter().enumerate() {
+        if i != POS_Z_FACE {
+            walls.add_quad(p0, p1, p2, p3, Vec3::ZERO, max_edge);
+        }
     }
     b.object("walls", walls.build(), Trs::default());
     let mut quad = MeshBuilder::new("lamp", lamp);

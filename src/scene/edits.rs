@@ -201,13 +201,10 @@ impl SceneEdits {
         if !self.camera.is_empty() || needs_camera_node {
             selector = Some(self.apply_camera(scene, selector.as_deref(), aspect)?);
         }
-        let camera_node = selector.as_deref().and_then(|sel| {
-            match sel.parse::<usize>() {
-                Ok(i) => scene.cameras.get(i),
-                Err(_) => scene.cameras.iter().find(|c| c.name == sel),
-            }
-            .map(|c| c.node)
-        });
+        let camera_node = selector
+            .as_deref()
+            .and_then(|sel| scene.camera_index(Some(sel)))
+            .map(|i| scene.cameras[i].node);
         for (i, spec) in self.lights.iter().enumerate() {
             let name = format!("--light {}", i + 1);
             let (parent, local, kind, intensity) = match *spec {
@@ -282,14 +279,7 @@ impl SceneEdits {
         }
         let world = scene.world_from_node();
         let base = scene.camera_view(selector, aspect, &world)?;
-        let scene_camera = match selector {
-            None => (!scene.cameras.is_empty()).then_some(0),
-            Some(sel) => sel
-                .parse::<usize>()
-                .ok()
-                .filter(|&i| i < scene.cameras.len())
-                .or_else(|| scene.cameras.iter().position(|c| c.name == sel)),
-        };
+        let scene_camera = scene.camera_index(selector);
         // Only the field of view changes on a scene camera: edit it in place so that an
         // animated camera keeps its animation.
         if let (Some(index), None, None) = (scene_camera, edit.eye, edit.target) {

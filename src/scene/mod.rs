@@ -535,6 +535,18 @@ impl Scene {
             .fold(0.0, f32::max)
     }
 
+    /// The index of the camera `selector` names: a number is an index, anything else a name;
+    /// `None` is the first camera. `None` when there is no such camera.
+    pub fn camera_index(&self, selector: Option<&str>) -> Option<usize> {
+        match selector {
+            None => (!self.cameras.is_empty()).then_some(0),
+            Some(sel) => match sel.parse::<usize>() {
+                Ok(i) => (i < self.cameras.len()).then_some(i),
+                Err(_) => self.cameras.iter().position(|c| c.name == sel),
+            },
+        }
+    }
+
     /// Resolves a camera by name or index. `None` picks the scene's first camera, or a default
     /// camera framing the scene when it has none.
     pub fn camera_view(
@@ -544,13 +556,10 @@ impl Scene {
         world_from_node: &[Mat4],
     ) -> Result<CameraView, SceneError> {
         let bounds = self.world_bounds(world_from_node);
+        let found = self.camera_index(selector).map(|i| &self.cameras[i]);
         let camera = match selector {
-            None => self.cameras.first(),
+            None => found,
             Some(sel) => {
-                let found = match sel.parse::<usize>() {
-                    Ok(i) => self.cameras.get(i),
-                    Err(_) => self.cameras.iter().find(|c| c.name == sel),
-                };
                 if found.is_none() {
                     let names: Vec<String> = self
                         .cameras

@@ -138,3 +138,22 @@ pub fn assert_success(output: &std::process::Output) {
         String::from_utf8_lossy(&output.stderr)
     );
 }
+
+/// Φ/A of `box-point`: its 1 W/sr point light (4π W) over the closed box's 24 m², the mean
+/// direct irradiance; bounce b of the closed box adds ρ^b·Φ/A.
+pub const BOX_PHI_OVER_A: f64 = 4.0 * std::f64::consts::PI / 24.0;
+
+/// Mean irradiance (green) of bounce `bounce` (1-based) of a bake over the texels at chart
+/// centres (away from seams and padding).
+pub fn centre_bounce_mean(result: &valgi::atlas::Bake, bounce: u32) -> f64 {
+    let irradiance = &result.irradiance[bounce as usize - 1];
+    let (sum, count) = result
+        .layout
+        .texels
+        .iter()
+        .filter(|t| t.centre)
+        .fold((0.0f64, 0usize), |(sum, count), t| {
+            (sum + irradiance[t.index as usize][1] as f64, count + 1)
+        });
+    sum / count.max(1) as f64
+}
