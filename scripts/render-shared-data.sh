@@ -26,7 +26,7 @@ JOBS=(
   "metal-rough-spheres|render --scene $D/gltf-samples/MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb --method direct --light headlight:30"
   "specular-test|render --scene $D/gltf-samples/SpecularTest/SpecularTest.glb --method sparse --light headlight:30"
   "emissive-strength|render --scene $D/gltf-samples/EmissiveStrengthTest/EmissiveStrengthTest.glb --method sparse"
-  "environment-test|render --scene $D/gltf-samples/EnvironmentTest/glTF/EnvironmentTest.gltf --method sparse --light headlight:30"
+  "environment-test|render --scene $D/gltf-samples/EnvironmentTest/glTF/EnvironmentTest.gltf --method sparse --light sun:-0.3,-0.6,-1,3"
   "clear-coat|render --scene $D/gltf-samples/ClearCoatTest/ClearCoatTest.glb --method sparse --light headlight:30"
   "sponza|render --scene $D/sponza/Sponza.gltf --method sparse --light sun:-0.3,-1,-0.2,5 --camera-eye -11,1.8,-0.4 --camera-target 10,3.5,-0.4 --fov 60"
   "veach-ajar|render --scene $D/veach-ajar/scene.xml --method sparse"
