@@ -411,18 +411,15 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "indirect_only": request.indirect_only,
         "non_finite_pixels": non_finite,
         "exposure": exposure.map(|e| (e * 1000.0).round() / 1000.0),
-        // Of the last frame's images, per view: a black or blown-out render shows here
-        // without opening the file.
+        // Of the last frame's images (sanitized, so finite), per view: a black or blown-out
+        // render shows here without opening the file.
         "mean_luminance": last_images
             .iter()
-            .map(|image| crate::image_io::mean_luminance(image) as f32)
+            .map(|image| crate::eval::metrics::mean_luminance(image) as f32)
             .collect::<Vec<_>>(),
         "dark_fraction": last_images
             .iter()
-            .map(|image| {
-                let dark = crate::image_io::dark_fraction(image, exposure.unwrap_or(0.0));
-                (dark * 1000.0).round() / 1000.0
-            })
+            .map(|image| round3(crate::image_io::dark_fraction(image, exposure.unwrap_or(0.0))))
             .collect::<Vec<_>>(),
         "warnings": scene.warnings.len(),
         "outputs": written,

@@ -535,4 +535,15 @@ fn auto_exposure_is_reported_and_a_black_png_is_named() {
         dark_err.contains("are black at --exposure -20") && dark_err.contains("--auto-exposure"),
         "{dark_err}"
     );
+    // The mean is of the linear image, before exposure: the same scene gives the same lit
+    // mean at both; the dark fraction is at the run's exposure.
+    let mean = |r: &serde_json::Value| r["mean_luminance"][0].as_f64().expect("mean_luminance");
+    let dark_fraction = |r: &serde_json::Value| r["dark_fraction"][0].as_f64().expect("dark");
+    assert!(mean(&auto) > 0.0, "{auto}");
+    assert!(
+        (mean(&auto) - mean(&dark)).abs() <= 1e-6 * mean(&auto),
+        "{auto}\n{dark}"
+    );
+    assert_eq!(dark_fraction(&dark), 1.0, "{dark}");
+    assert!(dark_fraction(&auto) < 0.9, "{auto}");
 }

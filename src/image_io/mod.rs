@@ -252,23 +252,6 @@ pub fn key_exposure(image: &Image) -> Option<f32> {
     })
 }
 
-/// Mean linear luminance (Rec. 709 weights) of the finite pixels; 0 for an empty image.
-pub fn mean_luminance(image: &Image) -> f64 {
-    let (mut sum, mut count) = (0.0f64, 0u64);
-    for p in &image.pixels {
-        let luminance = 0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64;
-        if luminance.is_finite() {
-            sum += luminance;
-            count += 1;
-        }
-    }
-    if count == 0 {
-        0.0
-    } else {
-        sum / count as f64
-    }
-}
-
 /// Fraction of pixels whose every channel tone-maps to less than 2/255 at `exposure`.
 pub fn dark_fraction(image: &Image, exposure: f32) -> f64 {
     let scale = 2f32.powf(exposure);
@@ -364,22 +347,6 @@ mod tests {
         half.pixels[..8].fill([0.0; 4]);
         assert!((key_exposure(&half).unwrap() - 2.0).abs() < 1e-4);
         assert_eq!(key_exposure(&Image::new(2, 2)), None);
-    }
-
-    #[test]
-    fn mean_luminance_weights_channels_and_skips_non_finite_pixels() {
-        let img = Image::from_rgba(
-            3,
-            1,
-            vec![
-                [1.0, 0.0, 0.0, 1.0],
-                [0.0, 1.0, 0.0, 1.0],
-                [f32::NAN, 0.0, 0.0, 1.0],
-            ],
-        );
-        // (0.2126 + 0.7152) / 2: the NaN pixel is neither counted nor averaged.
-        assert!((mean_luminance(&img) - 0.4639).abs() < 1e-6);
-        assert_eq!(mean_luminance(&Image::new(0, 0)), 0.0);
     }
 
     #[test]
