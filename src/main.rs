@@ -219,10 +219,21 @@ struct RenderArgs {
     /// N×N supersampling per pixel for anti-aliased edges.
     #[arg(long, default_value_t = 1)]
     ssaa: u32,
-    /// Shadow-map resolution per layer (a point light uses six layers): 16 up to the
-    /// device's largest 2D texture side (16384 on most).
+    /// Shadow-map side of a light at full resolution (a point light has six views): 16 up to
+    /// the device's largest 2D texture side (16384 on most); lights beyond --shadow-memory get
+    /// less.
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
+    /// Shadow-map budget in MiB (1..=65536): lights beyond it get smaller tiles by power
+    /// (down to 16²), then the dimmest go unshadowed with a warning.
+    #[arg(long, default_value_t = valgi::raster::DEFAULT_SHADOW_MEMORY_MIB,
+          value_parser = clap::value_parser!(u32).range(1..=65536))]
+    shadow_memory: u32,
+    /// Most VALs all lights' RSMs may make together (VAL methods; 1..=2³¹): beyond it every
+    /// RSM view gets a smaller side, its VALs carrying the same total flux.
+    #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
+          value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
+    max_vals: u32,
     /// Tessellation: maximum triangle edge length in metres (positive; refused when a built-in
     /// scene would exceed 4 million triangles). Default: 0.05, except for an imported scene
     /// with the sparse methods: the sparse points' spacing √(area / sparse-points).
@@ -291,6 +302,14 @@ struct ViewArgs {
     ssaa: u32,
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
+    /// Shadow-map budget in MiB, as for `render`.
+    #[arg(long, default_value_t = valgi::raster::DEFAULT_SHADOW_MEMORY_MIB,
+          value_parser = clap::value_parser!(u32).range(1..=65536))]
+    shadow_memory: u32,
+    /// Most VALs all lights' RSMs may make together, as for `render`.
+    #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
+          value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
+    max_vals: u32,
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
     /// Animation time of the first frame, seconds.
@@ -704,6 +723,8 @@ fn main() -> ExitCode {
                     height: args.height,
                     ssaa: args.ssaa,
                     shadow_resolution: args.shadow_res,
+                    shadow_memory_mib: args.shadow_memory,
+                    max_vals: args.max_vals,
                     ..RenderSettings::default()
                 },
                 camera: args.camera,
@@ -749,6 +770,8 @@ fn main() -> ExitCode {
                         height: args.height,
                         ssaa: args.ssaa,
                         shadow_resolution: args.shadow_res,
+                        shadow_memory_mib: args.shadow_memory,
+                        max_vals: args.max_vals,
                         ..RenderSettings::default()
                     },
                     camera: args.camera,

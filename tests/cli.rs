@@ -336,7 +336,7 @@ fn mr_refuses_a_sparse_point_count_out_of_range() {
 }
 
 #[test]
-fn shadow_resolutions_spp_and_sparse_points_out_of_range_are_refused() {
+fn shadow_budgets_val_budgets_spp_and_sparse_points_out_of_range_are_refused() {
     if common::gpu().is_none() {
         return;
     }
@@ -348,6 +348,26 @@ fn shadow_resolutions_spp_and_sparse_points_out_of_range_are_refused() {
             &["--shadow-res", res],
         );
     }
+    for budget in ["0", "100000"] {
+        assert_refused(
+            &tiny_render(out, &["--shadow-memory", budget]),
+            &["--shadow-memory", budget],
+        );
+    }
+    // One 4096² layer is 64 MiB: a 16 MiB budget cannot hold even one.
+    assert_refused(
+        &tiny_render(out, &["--shadow-res", "4096", "--shadow-memory", "16"]),
+        &["--shadow-res 4096", "64 MiB", "--shadow-memory 16"],
+    );
+    assert_refused(
+        &tiny_render(out, &["--max-vals", "0"]),
+        &["--max-vals", "0"],
+    );
+    // plane-point's point light has six RSM views: five VALs cannot give each one.
+    assert_refused(
+        &tiny_render(out, &["--method", "sparse", "--max-vals", "5"]),
+        &["--max-vals 5", "6 light views"],
+    );
     assert_refused(
         &tiny_render(out, &["--method", "reference", "--spp", "1000000000"]),
         &["spp", "1000000000"],

@@ -94,6 +94,92 @@ fn point_light_over_plane_matches_inverse_square_cosine_law() {
     assert!(worst < 0.01, "worst relative error {worst} ≥ 1%");
 }
 
+/// A thousand point lights over the plane within the default shadow budget (6000 cube faces:
+/// 24 GB at full resolution): every light's shadow map is a small tile, none may shadow the
+/// open plane, and the sum is the inverse-square cosine law over all of them. With a budget
+/// too small for all of them, the dimmest go unshadowed and the plane is lit the same.
+#[test]
+fn a_thousand_point_lights_render_within_the_shadow_budget() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut scene = load("plane-point");
+    let template = scene.lights[0].clone();
+    scene.lights.clear();
+    // A 10×10×10 lattice 0.5–1.5 m above the 4 m plane, powers spread over 10×.
+    for i in 0..1000 {
+        let (a, b, c) = (i % 10, (i / 10) % 10, i / 100);
+        scene.nodes.push(valgi::scene::Node {
+            name: format!("light {i}"),
+            parent: None,
+            local: valgi::scene::Trs {
+                translation: Vec3::new(
+                    -1.35 + 0.3 * a as f32,
+                    0.5 + 0.1 * c as f32,
+                    -1.35 + 0.3 * b as f32,
+                ),
+                ..Default::default()
+            },
+        });
+        let mut light = template.clone();
+        light.node = scene.nodes.len() - 1;
+        light.intensity = template.intensity * (0.1 + 0.9 * ((i * 7) % 10) as f32 / 9.0) / 100.0;
+        scene.lights.push(light);
+    }
+    let lights: Vec<(Vec3, f32)> = {
+        let world = scene.world_from_node();
+        scene
+            .lights
+            .iter()
+            .map(|l| {
+                (
+                    world[l.node].transform_point3(Vec3::ZERO),
+                    l.radiometric().x,
+                )
+            })
+            .collect()
+    };
+    let settings = RenderSettings {
+        shadow_resolution: 1024,
+        ..small(48, 48)
+    };
+    // 1 MiB holds 1024 views of 16²: 170 lights keep shadows, the other 830 go without.
+    let partly_shadowed = RenderSettings {
+        shadow_resolution: 16,
+        shadow_memory_mib: 1,
+        ..settings
+    };
+    for settings in [settings, partly_shadowed] {
+        let (frame, camera) = render(&ctx, &scene, settings);
+        let (mut checked, mut worst) = (0, 0.0f32);
+        for y in (2..48).step_by(5) {
+            for x in (2..48).step_by(5) {
+                let Some(p) = pixel_on_ground(&camera, &frame.direct, x, y) else {
+                    continue;
+                };
+                if p.x.abs() > 1.9 || p.z.abs() > 1.9 {
+                    continue;
+                }
+                let expected: f32 = lights
+                    .iter()
+                    .map(|&(light, intensity)| {
+                        let to_light = light - p;
+                        let d2 = to_light.length_squared();
+                        ALBEDO / std::f32::consts::PI * intensity * to_light.y / (d2 * d2.sqrt())
+                    })
+                    .sum();
+                let got = frame.direct.get(x, y)[0];
+                worst = worst.max((got - expected).abs() / expected);
+                checked += 1;
+            }
+        }
+        assert!(checked > 30, "only {checked} pixels on the plane");
+        assert!(
+            worst < 0.01,
+            "shadow memory {} MiB: worst relative error {worst}",
+            settings.shadow_memory_mib
+        );
+    }
+}
+
 #[test]
 fn spot_cone_follows_khr_falloff() {
     let Some(ctx) = common::gpu() else { return };
@@ -442,6 +528,25 @@ fn exit_cube(origin: Vec3, dir: Vec3) -> Vec3 {
 #[test]
 fn point_light_cube_shadow_faces_each_shadow_their_own_wall() {
     let Some(ctx) = common::gpu() else { return };
+    cube_faces_shadow_their_own_walls(&ctx, small(96, 96));
+}
+
+/// The same six shadows with the cube's faces packed as 128² tiles into one 512² layer (a
+/// 1 MiB budget): a tile read at a wrong offset, or a filter tap reaching into a neighbour's
+/// tile, puts a shadow on the wrong wall or a false one on a lit wall.
+#[test]
+fn point_light_cube_shadows_survive_packing_into_tiles_of_one_layer() {
+    let Some(ctx) = common::gpu() else { return };
+    cube_faces_shadow_their_own_walls(
+        &ctx,
+        RenderSettings {
+            shadow_memory_mib: 1,
+            ..small(96, 96)
+        },
+    );
+}
+
+fn cube_faces_shadow_their_own_walls(ctx: &GpuContext, settings: RenderSettings) {
     let mut scene = load("box-point");
     // 0.1 m squares 0.5 m from the light: their umbra on the walls (1 m away) is 0.2 m wide.
     let (blocker_half, blocker_distance) = (0.05, 0.5);
@@ -465,8 +570,7 @@ fn point_light_cube_shadow_faces_each_shadow_their_own_wall() {
         node: scene.instances[0].node,
     });
     let world = scene.world_from_node();
-    let settings = small(96, 96);
-    let raster = Rasterizer::new(&ctx, &scene, settings).expect("rasterizer");
+    let raster = Rasterizer::new(ctx, &scene, settings).expect("rasterizer");
     let umbra_half = blocker_half / blocker_distance;
     let mut worst: f32 = 0.0;
     let (mut lit, mut shadowed_walls) = (0, std::collections::HashSet::new());
@@ -484,7 +588,7 @@ fn point_light_cube_shadow_faces_each_shadow_their_own_wall() {
             zfar: 4.0,
             off_axis: None,
         };
-        let frame = raster.render_direct(&ctx, &scene, &world, &camera).unwrap();
+        let frame = raster.render_direct(ctx, &scene, &world, &camera).unwrap();
         let world_from_clip = camera.clip_from_world().inverse();
         for y in 0..96 {
             for x in 0..96 {

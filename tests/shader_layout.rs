@@ -163,3 +163,75 @@ fn workgroup_sizes_match_the_dispatches() {
         }
     }
 }
+
+/// Constants the Rust side and the WGSL side each hold (CPU twins and dispatch code rely on
+/// them) have the same values.
+#[test]
+fn shared_constants_match() {
+    let expected: &[(&str, &str, u32)] = &[
+        (
+            "vals_from_rsm.wgsl",
+            "MAX_CLUSTERS",
+            valgi::light::rsm::MAX_CLUSTERS,
+        ),
+        (
+            "vals_from_rsm.wgsl",
+            "CLUSTER_SAMPLE_SIDE",
+            valgi::light::rsm::CLUSTER_SAMPLE_SIDE,
+        ),
+        (
+            "vals_visibility.wgsl",
+            "MAX_CLUSTERS",
+            valgi::light::rsm::MAX_CLUSTERS,
+        ),
+        (
+            "vals_visibility.wgsl",
+            "CLUSTER_SAMPLE_SIDE",
+            valgi::light::rsm::CLUSTER_SAMPLE_SIDE,
+        ),
+        (
+            "vals_visibility.wgsl",
+            "MAX_RAY_TILES",
+            valgi::vals::visibility::MAX_RAY_TILES,
+        ),
+        (
+            "direct_light.wgsl",
+            "NO_SHADOW",
+            valgi::raster::types::NO_SHADOW,
+        ),
+        (
+            "direct_light.wgsl",
+            "LIGHT_POINT",
+            valgi::raster::types::LIGHT_POINT,
+        ),
+        (
+            "direct_light.wgsl",
+            "LIGHT_SPOT",
+            valgi::raster::types::LIGHT_SPOT,
+        ),
+        (
+            "direct_light.wgsl",
+            "LIGHT_DIRECTIONAL",
+            valgi::raster::types::LIGHT_DIRECTIONAL,
+        ),
+        (
+            "direct_light.wgsl",
+            "LIGHT_EMITTER",
+            valgi::raster::types::LIGHT_EMITTER,
+        ),
+    ];
+    for (file, name, value) in expected {
+        let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let constant = module
+            .constants
+            .iter()
+            .find(|(_, c)| c.name.as_deref() == Some(name))
+            .unwrap_or_else(|| panic!("{file} declares no {name}"))
+            .1;
+        let found = match module.global_expressions[constant.init] {
+            naga::Expression::Literal(naga::Literal::U32(v)) => v,
+            ref other => panic!("{file}: {name} is {other:?}, not a u32 literal"),
+        };
+        assert_eq!(found, *value, "{file}: {name}");
+    }
+}

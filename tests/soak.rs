@@ -1,5 +1,6 @@
 //! Long runs stay flat: every method renders 300 animated frames at 16² and neither the
-//! process's resident set nor the GPU bytes the method owns may grow after warm-up. The
+//! process's resident set (in both halves of the run after warm-up) nor the GPU bytes the
+//! method owns may grow after warm-up. The
 //! sparse method once grew ~1.8 MB a frame here (a software driver specialised its kernels
 //! on per-frame uniform values and kept every variant).
 
@@ -16,10 +17,11 @@ use valgi::scene::{self, builtin::BuiltinParams};
 const FRAMES: u32 = 300;
 const WARMUP: u32 = 100;
 const SAMPLE_EVERY: u32 = 20;
-/// Resident growth allowed after warm-up, as a fraction of the resident set: the
-/// allocator's arenas and the driver's pools move by well under this, while a leak of
-/// 20 kB a frame already exceeds it over 200 frames.
-const RESIDENT_SLACK: f64 = 0.02;
+/// Resident growth allowed in *each* half of the run after warm-up, as a fraction of the
+/// resident set (a leak grows in both halves; an allocator arena or a driver pool that steps
+/// up once, as seen here at +2.6% in one run of ten, grows in one): a leak of 20 kB a frame
+/// grows the ~130 MB set 1.5% per 100-frame half.
+const RESIDENT_SLACK_PER_HALF: f64 = 0.01;
 
 fn atlas_for(scene_name: &str, from_bounce: u32) -> std::path::PathBuf {
     let scene = scene::load(scene_name, &BuiltinParams::default()).unwrap();
@@ -122,16 +124,21 @@ fn no_method_grows_over_a_long_run() {
         let growth = valgi::frame::memory::growth_after(&samples, WARMUP).expect("samples");
         assert_eq!(growth.frames, FRAMES - WARMUP, "{label}");
         let fraction = growth.resident_fraction.expect("Linux reports VmRSS");
+        let sustained = valgi::frame::memory::sustained_resident_growth(&samples, WARMUP)
+            .expect("resident samples in both halves");
         eprintln!(
-            "{label}: resident {:+} bytes ({:+.2}%), gpu {:+} bytes over frames {WARMUP}..{FRAMES}",
+            "{label}: resident {:+} bytes ({:+.2}%, {:+.2}% in each half), gpu {:+} bytes over \
+             frames {WARMUP}..{FRAMES}",
             growth.resident_bytes.unwrap_or(0),
             fraction * 100.0,
+            sustained * 100.0,
             growth.gpu_bytes
         );
-        if fraction > RESIDENT_SLACK || growth.gpu_bytes != 0 {
+        if sustained > RESIDENT_SLACK_PER_HALF || growth.gpu_bytes != 0 {
             failures.push(format!(
-                "{label}: resident {:+.2}%, gpu {:+} bytes after warm-up",
+                "{label}: resident {:+.2}% ({:+.2}% in each half), gpu {:+} bytes after warm-up",
                 fraction * 100.0,
+                sustained * 100.0,
                 growth.gpu_bytes
             ));
         }

@@ -116,6 +116,65 @@ fn rsm_of_a_point_light_in_a_closed_box_reflects_rho_times_its_power() {
     assert_eq!(frame.direct.non_finite_count(), 0);
 }
 
+/// The VALs of `scene`'s RSMs at `rsm` per view under `max_vals`, and the RSM's packing.
+fn rsm_vals(
+    ctx: &GpuContext,
+    scene: &Scene,
+    rsm: u32,
+    max_vals: u32,
+) -> (Vec<valgi::light::Val>, u32, u32) {
+    let scene_gpu = valgi::raster::scene_gpu::SceneGpu::upload(ctx, scene).unwrap();
+    let rsm = valgi::light::rsm::Rsm::new(ctx, scene, &scene_gpu, rsm, max_vals).unwrap();
+    let mut passes = valgi::gpu::Passes::new(ctx);
+    rsm.prepare(ctx, scene, &scene.world_from_node());
+    rsm.record(&mut passes, &scene_gpu).unwrap();
+    passes.finish().unwrap();
+    (rsm.read_vals(ctx).unwrap(), rsm.resolution, rsm.pack)
+}
+
+/// More point lights than the device has array layers for their cube faces: the views share
+/// physical layers as tiles. All lights sit where the box's one light sits, so every view
+/// must produce exactly the VALs of the same face of the lone light (a tile read or
+/// rendered at a wrong offset changes texel directions, solid angles and flux), and with
+/// `--max-vals` below the views' texels the side shrinks but the reflected flux stays
+/// ρ·4π·I per light.
+#[test]
+fn rsm_views_beyond_the_array_layers_pack_into_tiles_with_the_same_vals() {
+    let Some(ctx) = common::gpu() else { return };
+    let single = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let (lone, _, lone_pack) = rsm_vals(&ctx, &single, 8, u32::MAX);
+    assert_eq!((lone.len(), lone_pack), (6 * 64, 1));
+    let lights = ctx.device.limits().max_texture_array_layers / 6 + 40;
+    let mut many = single.clone();
+    many.lights = vec![single.lights[0].clone(); lights as usize];
+    let (vals, side, pack) = rsm_vals(&ctx, &many, 8, u32::MAX);
+    assert_eq!(side, 8);
+    assert!(pack >= 2, "{} views were not packed", 6 * lights);
+    assert_eq!(vals.len(), lone.len() * lights as usize);
+    // Rasterized at another viewport offset, interpolants may differ in the last bit.
+    for (i, val) in vals.iter().enumerate() {
+        let twin = &lone[i % lone.len()];
+        assert!(
+            close(val.position, twin.position, 1e-5, 1e-6)
+                && close(val.flux, twin.flux, 1e-5, 0.0)
+                && (val.area - twin.area).abs() <= 1e-5 * twin.area,
+            "VAL {i} (view {}): {val:?} vs {twin:?}",
+            i / 64
+        );
+    }
+    // A budget of 20 VALs per view: 4² each, and the same power reflected.
+    let (budgeted, side, _) = rsm_vals(&ctx, &many, 8, 6 * lights * 20);
+    assert_eq!((side, budgeted.len()), (4, 6 * 16 * lights as usize));
+    let flux = |v: &[valgi::light::Val]| v.iter().map(|v| v.flux.x as f64).sum::<f64>();
+    let expected = 0.5 * 4.0 * std::f64::consts::PI * lights as f64;
+    for (label, total) in [("8²", flux(&vals)), ("4²", flux(&budgeted))] {
+        assert!(
+            (total - expected).abs() < 0.02 * expected,
+            "{label}: reflected flux {total} vs {expected}"
+        );
+    }
+}
+
 #[test]
 fn gpu_kernels_agree_with_their_cpu_twins() {
     let Some(ctx) = common::gpu() else { return };

@@ -48,27 +48,20 @@ fn gathered_at_rest(
     method
 }
 
-#[test]
-fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
-    let Some(ctx) = common::gpu() else { return };
-    // The corridor: walls, a door and a partition between the VALs and many points.
-    let scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
-    let world = scene.world_from_node();
-    let method = gathered_at_rest(&ctx, &scene, 600);
-    let gpu_vals = method.rsm.read_gpu_vals(&ctx).unwrap();
-    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
-    let gpu_visibility = method.sparse.read_visibility(&ctx).unwrap();
-    let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+/// Every (point, cluster) visibility byte of the GPU against the same rays on the CPU; returns
+/// how many pairs are partly visible. A ray that grazes an edge may land on either side in
+/// f32, so a few pairs may differ; the bytes must agree almost everywhere.
+fn assert_visibility_matches_the_cpu_twin(
+    ctx: &valgi::gpu::GpuContext,
+    scene: &valgi::scene::Scene,
+    method: &SparseMethod,
+    gathered: &valgi::vals::sparse::PointsReadback,
+    samples: &[u32],
+) -> usize {
+    let gpu_vals = method.rsm.read_gpu_vals(ctx).unwrap();
+    let gpu_visibility = method.sparse.read_visibility(ctx).unwrap();
     let tiles = method.rsm.tile_count();
     let clusters = tiles.min(MAX_CLUSTERS) as usize;
-    assert!(
-        gpu_vals.len() > 300 && clusters > 4,
-        "{} VALs, {clusters} clusters",
-        gpu_vals.len()
-    );
-
-    // Visibility: the same rays on the CPU. A ray that grazes an edge may land on either side
-    // in f32, so a few pairs may differ; the bytes must agree almost everywhere.
     let bvh = method.sparse.bvh();
     let per_point = MAX_CLUSTERS as usize;
     let (mut pairs, mut exact, mut far_off, mut partial) = (0usize, 0usize, 0usize, 0usize);
@@ -81,7 +74,7 @@ fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
                 p.normal,
                 c as u32,
                 tiles,
-                &samples,
+                samples,
                 &gpu_vals,
             );
             let gpu = gpu_visibility[i * per_point + c];
@@ -101,6 +94,66 @@ fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
         far_off as f64 <= 0.002 * pairs as f64,
         "{far_off} of {pairs} differ by > 1/8"
     );
+    partial
+}
+
+/// With hundreds of lights a cluster holds more RSM tiles than it shoots at: the GPU's
+/// strided subset must be the CPU twin's, and the pass must stay bounded (at most
+/// `MAX_RAY_TILES` tiles of rays per point and cluster).
+#[test]
+fn visibility_twins_agree_when_clusters_hold_more_tiles_than_they_shoot_at() {
+    let Some(ctx) = common::gpu() else { return };
+    let mut scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    // 200 copies of the corridor's light, each a fifth of a percent of it.
+    let mut light = scene.lights[0].clone();
+    light.intensity /= 200.0;
+    scene.lights = vec![light; 200];
+    let world = scene.world_from_node();
+    let method = gathered_at_rest(&ctx, &scene, 200);
+    let tiles = method.rsm.tile_count();
+    assert!(
+        tiles > MAX_CLUSTERS * visibility::MAX_RAY_TILES,
+        "{tiles} tiles do not overfill the clusters"
+    );
+    assert_eq!(
+        visibility::ray_tile_stride(0, tiles),
+        tiles
+            .div_ceil(MAX_CLUSTERS)
+            .div_ceil(visibility::MAX_RAY_TILES)
+            * MAX_CLUSTERS
+    );
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+    let partial =
+        assert_visibility_matches_the_cpu_twin(&ctx, &scene, &method, &gathered, &samples);
+    assert!(
+        partial > 100,
+        "only {partial} partly visible pairs: the rays were not exercised"
+    );
+}
+
+#[test]
+fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
+    let Some(ctx) = common::gpu() else { return };
+    // The corridor: walls, a door and a partition between the VALs and many points.
+    let scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    let world = scene.world_from_node();
+    let method = gathered_at_rest(&ctx, &scene, 600);
+    let gpu_vals = method.rsm.read_gpu_vals(&ctx).unwrap();
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let gpu_visibility = method.sparse.read_visibility(&ctx).unwrap();
+    let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+    let tiles = method.rsm.tile_count();
+    let clusters = tiles.min(MAX_CLUSTERS) as usize;
+    assert!(
+        gpu_vals.len() > 300 && clusters > 4,
+        "{} VALs, {clusters} clusters",
+        gpu_vals.len()
+    );
+
+    let partial =
+        assert_visibility_matches_the_cpu_twin(&ctx, &scene, &method, &gathered, &samples);
+    let per_point = MAX_CLUSTERS as usize;
     // The scene must exercise the rays: some pairs partly hidden, some fully.
     let hidden = gpu_visibility
         .chunks(per_point)

@@ -30,8 +30,8 @@ struct Light {
     // rgb: W/sr (point, spot; I0 of an emitter) or W/m² (directional).
     intensity: vec4<f32>,
     kind: u32,
-    // First layer in the shadow-map array; point lights and emitters use six consecutive layers.
-    shadow_layer: u32,
+    // First shadow view; point lights and emitters use six consecutive views. NO_SHADOW: none.
+    first_shadow_view: u32,
     // KHR_lights_punctual cone: attenuation = saturate(cos·scale + offset)².
     cone_scale: f32,
     cone_offset: f32,
@@ -42,9 +42,14 @@ struct ShadowView {
     // xyz: the light's position (perspective) or zero (orthographic); w: 1 perspective, 0 ortho.
     origin: vec4<f32>,
     // x: world size of one texel at unit distance (perspective) or absolute (ortho);
-    // y: shadow-map resolution; z: near plane; w: far plane.
+    // y: the view's resolution (its tile's side); z: near plane; w: far plane.
     texel: vec4<f32>,
+    // xyz: (u0, v0, size) of the view's tile in its layer's texture coordinates.
+    atlas_rect: vec4<f32>,
+    atlas_layer: u32,
 }
+
+const NO_SHADOW: u32 = 0xffffffffu;
 
 struct InstanceData {
     world_from_model: mat4x4<f32>,

@@ -34,11 +34,11 @@ fn cube_face(d: vec3<f32>) -> u32 {
     return select(5u, 4u, d.z > 0.0);
 }
 
-// Fraction of the shadow-map footprint around p that the light sees: bilinear comparison
-// taps over a (2r+1)² texel grid. The receiver is pushed along its normal by a texel's world
-// size so that flat surfaces do not shadow themselves.
-fn visibility(layer: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
-    let view = shadow_views[layer];
+// Fraction of the shadow-map footprint around p that shadow view `view_index` sees: bilinear
+// comparison taps over a (2r+1)² texel grid of the view's tile. The receiver is pushed along
+// its normal by a texel's world size so that flat surfaces do not shadow themselves.
+fn visibility(view_index: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
+    let view = shadow_views[view_index];
     var texel_world = view.texel.x;
     if (view.origin.w > 0.5) {
         texel_world = view.texel.x * length(p - view.origin.xyz);
@@ -53,14 +53,21 @@ fn visibility(layer: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
     if (ndc.z > 1.0) {
         return 1.0;
     }
-    let texel_uv = 1.0 / view.texel.y;
+    // The view's [0, 1]² maps onto its tile; taps stay half a texel inside the tile so that
+    // bilinear filtering never reads a neighbour's depths.
+    let tile_origin = view.atlas_rect.xy;
+    let tile_size = view.atlas_rect.z;
+    let texel_uv = tile_size / view.texel.y;
+    let tile_uv = tile_origin + clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * tile_size;
+    let lo = tile_origin + vec2<f32>(0.5 * texel_uv);
+    let hi = tile_origin + vec2<f32>(tile_size - 0.5 * texel_uv);
     let r = i32(frame.shadow_pcf_radius);
     var lit = 0.0;
     var taps = 0.0;
     for (var dy = -r; dy <= r; dy++) {
         for (var dx = -r; dx <= r; dx++) {
-            let tap_uv = clamp(uv + vec2<f32>(f32(dx), f32(dy)) * texel_uv, vec2<f32>(0.0), vec2<f32>(1.0));
-            lit += textureSampleCompareLevel(shadow_maps, shadow_sampler, tap_uv, layer, ndc.z);
+            let tap_uv = clamp(tile_uv + vec2<f32>(f32(dx), f32(dy)) * texel_uv, lo, hi);
+            lit += textureSampleCompareLevel(shadow_maps, shadow_sampler, tap_uv, view.atlas_layer, ndc.z);
             taps += 1.0;
         }
     }
@@ -93,7 +100,7 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
         let light = lights[i];
         var wi: vec3<f32>;
         var irradiance_normal: vec3<f32>;
-        var layer = light.shadow_layer;
+        var view_index = light.first_shadow_view;
         if (light.kind == LIGHT_DIRECTIONAL) {
             wi = -light.direction.xyz;
             irradiance_normal = light.intensity.rgb;
@@ -106,7 +113,7 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
             if (light.kind == LIGHT_SPOT) {
                 falloff *= spot_attenuation(light, -wi);
             } else {
-                layer += cube_face(-wi);
+                view_index += cube_face(-wi);
                 if (light.kind == LIGHT_EMITTER) {
                     falloff *= emitter_lobe(light, -wi);
                 }
@@ -117,7 +124,10 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
         if (cos_i <= 0.0 || all(irradiance_normal <= vec3<f32>(0.0))) {
             continue;
         }
-        let v = visibility(layer, p, n);
+        var v = 1.0;
+        if (light.first_shadow_view != NO_SHADOW) {
+            v = visibility(view_index, p, n);
+        }
         radiance += brdf(rho_d, rho_s, k, n, wi, wo) * irradiance_normal * (cos_i * v);
     }
     textureStore(radiance_direct, pixel, vec4<f32>(radiance, 1.0));

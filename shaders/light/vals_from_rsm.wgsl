@@ -11,6 +11,11 @@ struct RsmSize {
     capacity: u32,
     // Cluster tiles per layer side.
     tiles: u32,
+    // Views per physical layer side: pack² views share one array layer as tiles.
+    pack: u32,
+    pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 @group(0) @binding(0) var<uniform> size: RsmSize;
@@ -47,14 +52,25 @@ fn sample_stratum(x: u32) -> u32 {
     return select(CLUSTER_SAMPLE_SIDE, stratum, centre == x);
 }
 
+// Texel (x, y) of view `layer` in the packed arrays: xy and the physical layer (the CPU twin
+// is `Rsm::physical_texel`).
+fn rsm_texel(layer: u32, x: u32, y: u32) -> vec3<i32> {
+    let per_layer = size.pack * size.pack;
+    let slot = layer % per_layer;
+    return vec3<i32>(
+        i32((slot % size.pack) * size.resolution + x),
+        i32((slot / size.pack) * size.resolution + y),
+        i32(layer / per_layer),
+    );
+}
+
 const SCAN_GROUP: u32 = 256u;
 
 var<workgroup> block_sums: array<u32, SCAN_GROUP>;
 
 fn lit(x: u32, row: u32) -> bool {
-    let layer = i32(row / size.resolution);
-    let texel = vec2<i32>(i32(x), i32(row % size.resolution));
-    return textureLoad(rsm_flux, texel, layer, 0).a > 0.5;
+    let t = rsm_texel(row / size.resolution, x, row % size.resolution);
+    return textureLoad(rsm_flux, t.xy, t.z, 0).a > 0.5;
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -113,14 +129,14 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     var slot = row_offsets[row];
     let stratum_y = sample_stratum(u32(y));
     for (var x = 0u; x < size.resolution; x++) {
-        let texel = vec2<i32>(i32(x), y);
-        let flux = textureLoad(rsm_flux, texel, layer, 0);
+        let t = rsm_texel(u32(layer), x, u32(y));
+        let flux = textureLoad(rsm_flux, t.xy, t.z, 0);
         if (flux.a < 0.5 || slot >= size.capacity) {
             continue;
         }
         var val: Val;
-        val.position_area = textureLoad(rsm_position_area, texel, layer, 0);
-        val.normal = vec4<f32>(normalize(textureLoad(rsm_normal, texel, layer, 0).xyz), 0.0);
+        val.position_area = textureLoad(rsm_position_area, t.xy, t.z, 0);
+        val.normal = vec4<f32>(normalize(textureLoad(rsm_normal, t.xy, t.z, 0).xyz), 0.0);
         // w: the VAL's cluster (a small integer, exact in f32).
         let tile = layer_tile(u32(layer), x, u32(y));
         val.flux = vec4<f32>(flux.rgb, f32(tile % MAX_CLUSTERS));

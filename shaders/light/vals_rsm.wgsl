@@ -12,6 +12,8 @@ struct RsmView {
     tan_half_fov: f32,
     // World area of one texel of an orthographic view.
     texel_area: f32,
+    // Top-left texel of this view's tile in its physical layer (views may share one).
+    tile_origin: vec2<u32>,
 }
 
 @group(0) @binding(0) var<uniform> view: RsmView;
@@ -84,7 +86,8 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front_facing: bool) -> RsmOut {
         let dist = length(d);
         to_light = -d / max(dist, 1e-30);
         // Image-plane coordinates of this texel's centre at unit distance.
-        let ndc = vec2<f32>(in.clip.x / f32(view.resolution) * 2.0 - 1.0, 1.0 - in.clip.y / f32(view.resolution) * 2.0);
+        let local = in.clip.xy - vec2<f32>(view.tile_origin);
+        let ndc = vec2<f32>(local.x / f32(view.resolution) * 2.0 - 1.0, 1.0 - local.y / f32(view.resolution) * 2.0);
         let uv = ndc * view.tan_half_fov;
         let delta = 2.0 * view.tan_half_fov / f32(view.resolution);
         let q = 1.0 + dot(uv, uv);

@@ -11,6 +11,9 @@ const MAX_CLUSTERS: u32 = 32u;
 const CLUSTER_SAMPLE_SIDE: u32 = 4u;
 // Ray ends are pulled off both surfaces by this fraction of the segment's length.
 const RAY_OFFSET: f32 = 2e-3;
+// Most RSM tiles a cluster shoots at (each CLUSTER_SAMPLE_SIDE² rays): with more tiles than
+// MAX_CLUSTERS · this (hundreds of lights), an evenly strided subset stands for the rest.
+const MAX_RAY_TILES: u32 = 4u;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
@@ -28,7 +31,12 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     var seen = 0.0;
     var total = 0.0;
-    for (var tile = cluster; tile < params.rsm_tiles; tile += MAX_CLUSTERS) {
+    var tiles_in_cluster = 0u;
+    if (cluster < params.rsm_tiles) {
+        tiles_in_cluster = (params.rsm_tiles - cluster + MAX_CLUSTERS - 1u) / MAX_CLUSTERS;
+    }
+    let stride = max(1u, (tiles_in_cluster + MAX_RAY_TILES - 1u) / MAX_RAY_TILES) * MAX_CLUSTERS;
+    for (var tile = cluster; tile < params.rsm_tiles; tile += stride) {
         for (var s = 0u; s < per_tile; s++) {
             let slot = cluster_samples[tile * per_tile + s];
             if (slot == 0u) {

@@ -118,7 +118,8 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 light_index,
                 resolution,
                 tan_half_fov,
-                texel_area
+                texel_area,
+                tile_origin
             ]
         ),
         shared_layout!(
@@ -131,7 +132,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             "RsmSize",
             "vals_from_rsm.wgsl",
             rsm::RsmSize,
-            [resolution, layers, capacity, tiles]
+            [resolution, layers, capacity, tiles, pack, pad0, pad1, pad2]
         ),
     ]);
     layouts

@@ -65,6 +65,9 @@ pub struct RsmView {
     pub tan_half_fov: f32,
     /// World area of one texel of an orthographic view.
     pub texel_area: f32,
+    /// Top-left texel of the view's tile in its physical layer ([`Rsm::physical_texel`]).
+    pub tile_origin: [u32; 2],
+    pub _pad: [u32; 2],
 }
 
 /// `RsmSize` in `shaders/light/vals_from_rsm.wgsl`.
@@ -76,6 +79,11 @@ pub struct RsmSize {
     pub capacity: u32,
     /// Cluster tiles per layer side ([`cluster_tiles`]).
     pub tiles: u32,
+    /// Views per physical layer side ([`Rsm::pack`]).
+    pub pack: u32,
+    pub pad0: u32,
+    pub pad1: u32,
+    pub pad2: u32,
 }
 
 /// The most VAL clusters a frame has: visibility is kept per (sparse point, cluster), one
@@ -116,6 +124,38 @@ pub fn layer_tile(resolution: u32, tiles: u32, layer: u32, x: u32, y: u32) -> u3
     layer * tiles * tiles + ty * tiles + tx
 }
 
+/// The RSM side every view gets under `max_vals`: the requested one, or the largest whose
+/// `views · side²` texels fit (`None` when not even one texel per view does).
+pub fn budget_resolution(requested: u32, views: u32, max_vals: u32) -> Option<u32> {
+    if views == 0 {
+        return Some(requested);
+    }
+    let fit = ((max_vals as f64 / views as f64).sqrt().floor() as u32).min(requested);
+    // The float root can land one off near perfect squares; settle it in integers.
+    let fits = |side: u32| views as u64 * side as u64 * side as u64 <= max_vals as u64;
+    let side = (fit.saturating_sub(1)..=(fit + 1).min(requested))
+        .rev()
+        .find(|&side| fits(side))?;
+    (side > 0).then_some(side)
+}
+
+/// [`Rsm::physical_texel`] for a given packing.
+pub fn physical_texel(pack: u32, resolution: u32, layer: u32, x: u32, y: u32) -> (u32, u32, u32) {
+    let per_layer = pack * pack;
+    let slot = layer % per_layer;
+    (
+        layer / per_layer,
+        (slot % pack) * resolution + x,
+        (slot / pack) * resolution + y,
+    )
+}
+
+/// Views per physical layer side: 1 while the views fit the array layers, else the smallest
+/// `k` whose `k²` views per layer do, with `k·resolution` within the texture side.
+pub fn pack_factor(views: u32, resolution: u32, max_layers: u32, max_side: u32) -> Option<u32> {
+    (1..=max_side / resolution.max(1)).find(|&k| views.div_ceil(k * k) <= max_layers)
+}
+
 /// The stratum of a texel in its tile (one axis), if the texel is that stratum's sample:
 /// strata split the tile's span `[t·R/T, (t+1)·R/T)` into `CLUSTER_SAMPLE_SIDE` parts, and a
 /// stratum's sample is its centre texel.
@@ -133,10 +173,21 @@ const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
+/// Default `--max-vals`: a million VALs (about 90 MB of RSM and VAL storage); every scene
+/// built in fits at the methods' default `rsm`.
+pub const DEFAULT_MAX_VALS: u32 = 1 << 20;
+
 /// The RSMs of every light and the VAL buffer made from them.
+///
+/// A *layer* here is one light view of `resolution`² texels (six per point light). When the
+/// views outnumber the device's array layers, `pack`² of them share one physical layer of
+/// `pack·resolution` texels a side, as tiles in row-major order; every texture read goes
+/// through [`Rsm::physical_texel`] (and its WGSL twin), so consumers still think in views.
 pub struct Rsm {
     pub resolution: u32,
     pub layer_count: u32,
+    /// Views per physical layer side (1: one view per array layer).
+    pub pack: u32,
     /// Capacity in RSM VALs (every texel of every layer).
     pub capacity: u32,
     /// Further slots after the RSM's for [`ExternalVals`] (0 without).
@@ -228,8 +279,9 @@ impl Rsm {
         scene: &Scene,
         scene_gpu: &SceneGpu,
         resolution: u32,
+        max_vals: u32,
     ) -> Result<Self, RenderError> {
-        Self::with_external(ctx, scene, scene_gpu, resolution, None)
+        Self::with_external(ctx, scene, scene_gpu, resolution, max_vals, None)
     }
 
     /// The RSMs, with room after their VALs for `external`'s valid candidates, which
@@ -238,24 +290,52 @@ impl Rsm {
         ctx: &GpuContext,
         scene: &Scene,
         scene_gpu: &SceneGpu,
-        resolution: u32,
+        requested_resolution: u32,
+        max_vals: u32,
         external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
         let device = &ctx.device;
         let limits = device.limits();
-        if resolution == 0 || resolution > limits.max_texture_dimension_2d {
+        if requested_resolution == 0 || requested_resolution > limits.max_texture_dimension_2d {
             return Err(RenderError::Settings(format!(
-                "--rsm {resolution}: the RSM resolution must be 1..={}",
+                "--rsm {requested_resolution}: the RSM resolution must be 1..={}",
                 limits.max_texture_dimension_2d
             )));
         }
         let layer_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
-        if layer_count > limits.max_texture_array_layers {
-            return Err(RenderError::Settings(format!(
-                "scene '{}' needs {layer_count} RSM layers; the device allows {}",
-                scene.name, limits.max_texture_array_layers
-            )));
+        let resolution = budget_resolution(requested_resolution, layer_count, max_vals)
+            .ok_or_else(|| {
+                RenderError::Settings(format!(
+                    "--max-vals {max_vals}: scene '{}' has {layer_count} light views ({}), \
+                     so not even one VAL per view fits; raise --max-vals to at least {layer_count}",
+                    scene.name,
+                    crate::gpu::count_of(scene.lights.len(), "light"),
+                ))
+            })?;
+        if resolution < requested_resolution {
+            log::warn!(
+                "scene '{}': {layer_count} RSM views at --rsm {requested_resolution} would make \
+                 {} VALs, over --max-vals {max_vals}; every view uses {resolution}² instead \
+                 (each VAL carries its share of the flux, so the light's power is unchanged)",
+                scene.name,
+                layer_count as u64 * requested_resolution as u64 * requested_resolution as u64,
+            );
         }
+        let pack = pack_factor(
+            layer_count,
+            resolution,
+            limits.max_texture_array_layers,
+            limits.max_texture_dimension_2d,
+        )
+        .ok_or_else(|| {
+            RenderError::Settings(format!(
+                "scene '{}' needs {layer_count} RSM views of {resolution}²; the device's {} \
+                 array layers of at most {}² cannot hold them: lower --rsm or --max-vals",
+                scene.name, limits.max_texture_array_layers, limits.max_texture_dimension_2d
+            ))
+        })?;
+        let physical_side = pack * resolution;
+        let physical_layers = layer_count.div_ceil(pack * pack);
         let texels = layer_count as u64 * resolution as u64 * resolution as u64;
         let external_slots = external.map_or(0, |e| e.rows as u64 * e.row_length as u64);
         let slots = texels + external_slots;
@@ -310,9 +390,10 @@ impl Rsm {
             },
         );
         let layers = layer_count.max(1);
-        let side = resolution as u64 * resolution as u64;
+        let physical = physical_layers.max(1);
+        let side = physical_side as u64 * physical_side as u64;
         let rsm_bytes = side
-            * (layers as u64
+            * (physical as u64
                 * [POSITION_FORMAT, NORMAL_FORMAT, FLUX_FORMAT]
                     .map(crate::gpu::resources::block_bytes)
                     .iter()
@@ -325,7 +406,7 @@ impl Rsm {
                 crate::gpu::count_of(scene.lights.len(), "light")
             ),
             Some(rsm_bytes),
-            "Lower --rsm (a point light takes six layers) or use fewer lights",
+            "Lower --rsm or --max-vals (a point light takes six views) or use fewer lights",
             || {
                 let mut array = |label: &str, format| {
                     bytes.texture(
@@ -333,9 +414,9 @@ impl Rsm {
                         &wgpu::TextureDescriptor {
                             label: Some(label),
                             size: wgpu::Extent3d {
-                                width: resolution,
-                                height: resolution,
-                                depth_or_array_layers: layers,
+                                width: physical_side,
+                                height: physical_side,
+                                depth_or_array_layers: physical,
                             },
                             mip_level_count: 1,
                             sample_count: 1,
@@ -355,7 +436,7 @@ impl Rsm {
                 let depth = bytes.texture_2d(
                     device,
                     "rsm depth",
-                    (resolution, resolution),
+                    (physical_side, physical_side),
                     DEPTH_FORMAT,
                     wgpu::TextureUsages::RENDER_ATTACHMENT,
                 );
@@ -363,7 +444,7 @@ impl Rsm {
             },
         )?;
         let depth_view = depth.create_view(&Default::default());
-        let layer_views: Vec<[wgpu::TextureView; 3]> = (0..layer_count)
+        let layer_views: Vec<[wgpu::TextureView; 3]> = (0..physical_layers)
             .map(|layer| {
                 textures.each_ref().map(|t| {
                     t.create_view(&wgpu::TextureViewDescriptor {
@@ -457,6 +538,10 @@ impl Rsm {
                 layers: layer_count,
                 capacity,
                 tiles,
+                pack,
+                pad0: 0,
+                pad1: 0,
+                pad2: 0,
             }),
             wgpu::BufferUsages::UNIFORM,
         );
@@ -543,6 +628,7 @@ impl Rsm {
         Ok(Self {
             resolution,
             layer_count,
+            pack,
             capacity,
             external_capacity: external_slots as u32,
             vals_buffer,
@@ -598,6 +684,11 @@ impl Rsm {
                     } else {
                         view.texel[0] * view.texel[0]
                     },
+                    tile_origin: {
+                        let (_, x, y) = self.physical_texel(layer as u32, 0, 0);
+                        [x, y]
+                    },
+                    _pad: [0; 2],
                 };
                 ctx.queue.write_buffer(
                     &self.layer_buffers[layer],
@@ -618,14 +709,23 @@ impl Rsm {
     ) -> crate::raster::shadows::LightSetup {
         let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
         // No margin: cube faces must meet exactly so that no direction is counted twice.
-        setup_lights(scene, world_from_node, &bounds, self.resolution, 0.0)
+        setup_lights(
+            scene,
+            world_from_node,
+            &bounds,
+            &vec![self.resolution; scene.lights.len()],
+            0.0,
+        )
     }
 
     /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm"), then
     /// appends the external VALs' valid candidates (pass "vals append"); their producer must
     /// have recorded its passes before this.
     pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
-        for (views, group) in self.layer_views.iter().zip(&self.layer_groups) {
+        let per_physical = (self.pack * self.pack) as usize;
+        for (physical, views) in self.layer_views.iter().enumerate() {
+            let first = physical * per_physical;
+            let last = (first + per_physical).min(self.layer_groups.len());
             passes.render(
                 "rsm",
                 &[cleared(&views[0]), cleared(&views[1]), cleared(&views[2])],
@@ -639,8 +739,14 @@ impl Rsm {
                 }),
                 |pass| {
                     pass.set_pipeline(&self.pipeline);
-                    pass.set_bind_group(0, group, &[]);
-                    scene_gpu.draw(pass, Some(1));
+                    for (layer, group) in (first..last).zip(&self.layer_groups[first..last]) {
+                        let (_, x, y) = self.physical_texel(layer as u32, 0, 0);
+                        let r = self.resolution;
+                        pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
+                        pass.set_scissor_rect(x, y, r, r);
+                        pass.set_bind_group(0, group, &[]);
+                        scene_gpu.draw(pass, Some(1));
+                    }
                 },
             )?;
         }
@@ -705,6 +811,12 @@ impl Rsm {
         crate::gpu::read_buffer(ctx, &self.cluster_samples)
     }
 
+    /// Where texel (x, y) of view `layer` lives: (physical layer, x, y). Views fill their
+    /// physical layer `pack` to a row (`rsm_texel` in `vals_from_rsm.wgsl` is the WGSL twin).
+    pub fn physical_texel(&self, layer: u32, x: u32, y: u32) -> (u32, u32, u32) {
+        physical_texel(self.pack, self.resolution, layer, x, y)
+    }
+
     /// Tiles over all layers (each with `CLUSTER_SAMPLE_SIDE²` sample slots).
     pub fn tile_count(&self) -> u32 {
         self.layer_count * self.tiles * self.tiles
@@ -713,5 +825,49 @@ impl Rsm {
     pub fn read_count(&self, ctx: &GpuContext) -> Result<u32, GpuError> {
         let count: Vec<u32> = crate::gpu::read_buffer(ctx, &self.val_count_buffer)?;
         Ok(count.first().copied().unwrap_or(0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_val_budget_shrinks_every_view_to_the_largest_side_that_fits() {
+        assert_eq!(budget_resolution(64, 6, u32::MAX), Some(64));
+        assert_eq!(budget_resolution(64, 6000, 1 << 20), Some(13)); // 6000·13² ≤ 2²⁰ < 6000·14²
+        assert_eq!(budget_resolution(64, 6, 6 * 49), Some(7));
+        assert_eq!(budget_resolution(64, 6, 6 * 49 - 1), Some(6));
+        assert_eq!(budget_resolution(64, 6, 5), None);
+        assert_eq!(budget_resolution(64, 0, 1), Some(64));
+    }
+
+    #[test]
+    fn views_pack_only_when_the_array_layers_run_out() {
+        assert_eq!(pack_factor(2048, 64, 2048, 16384), Some(1));
+        assert_eq!(pack_factor(2049, 64, 2048, 16384), Some(2));
+        assert_eq!(pack_factor(6000, 64, 2048, 16384), Some(2));
+        assert_eq!(pack_factor(10_000, 64, 2048, 16384), Some(3));
+        // 4·4096 > 16384 would be needed.
+        assert_eq!(pack_factor(100_000, 4096, 2048, 16384), None);
+    }
+
+    #[test]
+    fn packed_views_tile_their_layers_without_overlap() {
+        let (pack, side) = (3, 5);
+        let mut seen = std::collections::HashSet::new();
+        for layer in 0..20 {
+            for y in 0..side {
+                for x in 0..side {
+                    let (l, px, py) = physical_texel(pack, side, layer, x, y);
+                    assert!(px < pack * side && py < pack * side);
+                    assert!(
+                        seen.insert((l, px, py)),
+                        "view {layer} texel {x},{y} reused"
+                    );
+                }
+            }
+        }
+        assert_eq!(physical_texel(1, 8, 7, 3, 4), (7, 3, 4));
     }
 }

@@ -425,7 +425,13 @@ impl NegativeMethod {
     ) -> Result<Self, RenderError> {
         let settings = NegativeSettings::from_options(options)?;
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(ctx, scene, &raster.scene_gpu, settings.rsm)?;
+        let rsm = Rsm::new(
+            ctx,
+            scene,
+            &raster.scene_gpu,
+            settings.rsm,
+            raster.settings.max_vals,
+        )?;
         let device = &ctx.device;
         let mesh_bounds: Vec<Aabb> = scene.meshes.iter().map(|m| m.model_bounds()).collect();
         let bounds = scene.instance_bounds(&mesh_bounds, &scene.world_from_node());
@@ -724,8 +730,23 @@ impl Method for NegativeMethod {
             cpu::positive_samples(&setup, &lights, self.rsm.resolution, self.settings.positive);
         if samples != self.samples {
             if !samples.is_empty() {
+                // The shader reads the RSM arrays directly: texels where the packed views
+                // keep them.
+                let packed: Vec<cpu::PositiveSample> = samples
+                    .iter()
+                    .map(|s| {
+                        let (layer, texel_x, texel_y) =
+                            self.rsm.physical_texel(s.layer, s.texel_x, s.texel_y);
+                        cpu::PositiveSample {
+                            layer,
+                            texel_x,
+                            texel_y,
+                            ..*s
+                        }
+                    })
+                    .collect();
                 ctx.queue
-                    .write_buffer(&self.samples_buffer, 0, bytemuck::cast_slice(&samples));
+                    .write_buffer(&self.samples_buffer, 0, bytemuck::cast_slice(&packed));
             }
             let count = SampleCount {
                 count: samples.len() as u32,

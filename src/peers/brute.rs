@@ -89,7 +89,13 @@ impl BruteMethod {
             )));
         }
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(ctx, scene, &raster.scene_gpu, rsm_resolution)?;
+        let rsm = Rsm::new(
+            ctx,
+            scene,
+            &raster.scene_gpu,
+            rsm_resolution,
+            raster.settings.max_vals,
+        )?;
         let device = &ctx.device;
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brute params"),

@@ -4,6 +4,7 @@
 //! to the end.
 
 pub mod scene_gpu;
+pub mod shadow_atlas;
 pub mod shadows;
 pub mod types;
 
@@ -28,6 +29,11 @@ pub struct RenderSettings {
     pub shadow_resolution: u32,
     /// PCF kernel radius in texels ((2r+1)² bilinear comparison taps).
     pub pcf_radius: u32,
+    /// Budget of the shadow maps in MiB: lights share it by power ([`shadow_atlas`]).
+    pub shadow_memory_mib: u32,
+    /// Most VALs the RSMs of all lights may make together: beyond it every view's RSM side
+    /// shrinks ([`crate::light::rsm::budget_resolution`]).
+    pub max_vals: u32,
 }
 
 impl Default for RenderSettings {
@@ -38,6 +44,8 @@ impl Default for RenderSettings {
             ssaa: 1,
             shadow_resolution: 1024,
             pcf_radius: 1,
+            shadow_memory_mib: DEFAULT_SHADOW_MEMORY_MIB,
+            max_vals: crate::light::rsm::DEFAULT_MAX_VALS,
         }
     }
 }
@@ -47,7 +55,11 @@ pub const PIPELINE_REMEDY: &str =
     "The adapter's limits are below what the pipeline needs; try another adapter (WGPU_ADAPTER_NAME)";
 
 /// Smallest `--shadow-res`: below it PCF kernels span the whole map.
-pub const MIN_SHADOW_RESOLUTION: u32 = 16;
+pub const MIN_SHADOW_RESOLUTION: u32 = shadow_atlas::MIN_TILE_SIDE;
+
+/// Default `--shadow-memory`: 64 full layers at the default 1024² (ten point lights and four
+/// spots at full resolution; a thousand point lights at 64² to 128²).
+pub const DEFAULT_SHADOW_MEMORY_MIB: u32 = 256;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
@@ -94,9 +106,13 @@ pub struct Rasterizer {
     pub scene_gpu: SceneGpu,
     lights_buffer: wgpu::Buffer,
     shadow_views_buffer: wgpu::Buffer,
-    shadow_layer_buffers: Vec<wgpu::Buffer>,
-    shadow_layer_views: Vec<wgpu::TextureView>,
-    shadow_layer_groups: Vec<wgpu::BindGroup>,
+    /// Where each light's views live in the shadow-map array.
+    atlas: shadow_atlas::ShadowAtlas,
+    /// One uniform buffer and bind group per shadowed view, in view order (`None`: the
+    /// light is unshadowed).
+    shadow_view_groups: Vec<Option<(wgpu::Buffer, wgpu::BindGroup)>>,
+    /// Per array layer: its render target and the views drawn into it with their tiles.
+    shadow_layers: Vec<(wgpu::TextureView, Vec<(usize, shadow_atlas::Tile)>)>,
     shadow_pipeline: wgpu::RenderPipeline,
     gbuffer_pipeline: wgpu::RenderPipeline,
     gbuffer_bgl: GroupLayout,
@@ -128,15 +144,7 @@ impl Rasterizer {
                  (the device's largest 2D texture side)"
             )));
         }
-        let layer_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
-        if layer_count > limits.max_texture_array_layers {
-            return Err(RenderError::Settings(format!(
-                "scene '{}' has {} lights needing {layer_count} shadow-map layers; the device allows {}",
-                scene.name,
-                scene.lights.len(),
-                limits.max_texture_array_layers
-            )));
-        }
+        let atlas = plan_shadow_atlas(scene, &settings, limits.max_texture_array_layers)?;
         let scene_gpu = SceneGpu::upload(ctx, scene)?;
         let mut shadow_bytes = GpuBytes::default();
 
@@ -150,12 +158,22 @@ impl Rasterizer {
                 mapped_at_creation: false,
             },
         );
-        let layers = layer_count.max(1);
+        let first_view: Vec<u32> = scene
+            .lights
+            .iter()
+            .scan(0, |next, light| {
+                let first = *next;
+                *next += light.kind.shadow_layers();
+                Some(first)
+            })
+            .collect();
+        let view_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
+        let layers = atlas.layers.max(1);
         let shadow_views_buffer = shadow_bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
                 label: Some("shadow views"),
-                size: layers as u64 * std::mem::size_of::<ShadowView>() as u64,
+                size: view_count.max(1) as u64 * std::mem::size_of::<ShadowView>() as u64,
                 usage: storage,
                 mapped_at_creation: false,
             },
@@ -190,20 +208,27 @@ impl Rasterizer {
             dimension: Some(wgpu::TextureViewDimension::D2Array),
             ..Default::default()
         });
-        let shadow_layer_views: Vec<wgpu::TextureView> = (0..layer_count)
+        let mut shadow_layers: Vec<(wgpu::TextureView, Vec<(usize, shadow_atlas::Tile)>)> = (0
+            ..atlas.layers)
             .map(|layer| {
-                shadow_texture.create_view(&wgpu::TextureViewDescriptor {
+                let view = shadow_texture.create_view(&wgpu::TextureViewDescriptor {
                     label: Some("shadow layer"),
                     dimension: Some(wgpu::TextureViewDimension::D2),
                     base_array_layer: layer,
                     array_layer_count: Some(1),
                     ..Default::default()
-                })
+                });
+                (view, Vec::new())
             })
             .collect();
-        let shadow_layer_buffers: Vec<wgpu::Buffer> = (0..layer_count)
-            .map(|_| shadow_bytes.uniform::<ShadowView>(device, "shadow layer view"))
-            .collect();
+        for (light, tiles) in atlas.tiles.iter().enumerate() {
+            for (face, tile) in tiles.iter().flatten().enumerate() {
+                let view_index = first_view[light] as usize + face;
+                shadow_layers[tile.layer as usize]
+                    .1
+                    .push((view_index, *tile));
+            }
+        }
 
         // Shadow pipeline: depth only, slope-scaled bias against acne on sloped receivers.
         let shadow_module = ctx.shader("shadow_depth.wgsl");
@@ -213,10 +238,15 @@ impl Rasterizer {
             wgpu::ShaderStages::VERTEX,
             CAMERA_AND_INSTANCES,
         );
-        let shadow_layer_groups = shadow_layer_buffers
-            .iter()
-            .map(|buffer| shadow_bgl.bind(device, &[buffer, &scene_gpu.instance_buffer]))
-            .collect();
+        let mut shadow_view_groups: Vec<Option<(wgpu::Buffer, wgpu::BindGroup)>> =
+            (0..view_count).map(|_| None).collect();
+        for (_, tiles) in &shadow_layers {
+            for &(view_index, _) in tiles {
+                let buffer = shadow_bytes.uniform::<ShadowView>(device, "shadow view");
+                let group = shadow_bgl.bind(device, &[&buffer, &scene_gpu.instance_buffer]);
+                shadow_view_groups[view_index] = Some((buffer, group));
+            }
+        }
         let shadow_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("shadow"),
             bind_group_layouts: &[Some(&shadow_bgl.layout)],
@@ -293,6 +323,7 @@ impl Rasterizer {
                 compute_pipeline(device, "direct light", &direct_module, &direct_bgl.layout)
             })?;
 
+        report_shadow_atlas(scene, &atlas);
         if scene.lights.is_empty() {
             log::warn!(
                 "scene '{}' has no lights: direct light is black (emission only); add one with \
@@ -310,9 +341,9 @@ impl Rasterizer {
             scene_gpu,
             lights_buffer,
             shadow_views_buffer,
-            shadow_layer_buffers,
-            shadow_layer_views,
-            shadow_layer_groups,
+            atlas,
+            shadow_view_groups,
+            shadow_layers,
             shadow_pipeline,
             gbuffer_pipeline,
             gbuffer_bgl: frame_bgl,
@@ -338,13 +369,31 @@ impl Rasterizer {
         self.scene_gpu
             .update_transforms(ctx, scene, world_from_node);
         let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
-        let setup = shadows::setup_lights(
+        let sides: Vec<u32> = self
+            .atlas
+            .tiles
+            .iter()
+            .map(|tiles| tiles.as_ref().map_or(self.atlas.layer_side, |t| t[0].side))
+            .collect();
+        let mut setup = shadows::setup_lights(
             scene,
             world_from_node,
             &bounds,
-            self.settings.shadow_resolution,
+            &sides,
             self.settings.pcf_radius as f32 + 1.0,
         );
+        for (light, tiles) in setup.lights.iter_mut().zip(&self.atlas.tiles) {
+            let Some(tiles) = tiles else {
+                light.first_shadow_view = types::NO_SHADOW;
+                continue;
+            };
+            for (face, tile) in tiles.iter().enumerate() {
+                let view = &mut setup.views[light.first_shadow_view as usize + face];
+                let [u0, v0, size] = tile.uv_rect(self.atlas.layer_side);
+                view.atlas_rect = [u0, v0, size, 0.0];
+                view.atlas_layer = tile.layer;
+            }
+        }
         if !setup.lights.is_empty() {
             queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
             queue.write_buffer(
@@ -353,8 +402,10 @@ impl Rasterizer {
                 bytemuck::cast_slice(&setup.views),
             );
         }
-        for (buffer, view) in self.shadow_layer_buffers.iter().zip(&setup.views) {
-            queue.write_buffer(buffer, 0, bytemuck::bytes_of(view));
+        for (group, view) in self.shadow_view_groups.iter().zip(&setup.views) {
+            if let Some((buffer, _)) = group {
+                queue.write_buffer(buffer, 0, bytemuck::bytes_of(view));
+            }
         }
     }
 
@@ -370,13 +421,10 @@ impl Rasterizer {
         self.record_shadows(passes)
     }
 
-    /// Shadow maps of every light (pass "shadow").
+    /// Shadow maps of every shadowed light (pass "shadow"): one pass per array layer, one
+    /// viewport per tile in it.
     pub fn record_shadows(&self, passes: &mut Passes) -> Result<(), GpuError> {
-        for (view, group) in self
-            .shadow_layer_views
-            .iter()
-            .zip(&self.shadow_layer_groups)
-        {
+        for (view, tiles) in &self.shadow_layers {
             passes.render(
                 "shadow",
                 &[],
@@ -390,8 +438,16 @@ impl Rasterizer {
                 }),
                 |pass| {
                     pass.set_pipeline(&self.shadow_pipeline);
-                    pass.set_bind_group(0, group, &[]);
-                    self.scene_gpu.draw(pass, None);
+                    for &(view_index, tile) in tiles {
+                        let (_, group) = self.shadow_view_groups[view_index]
+                            .as_ref()
+                            .expect("every tiled view has its uniforms");
+                        let (x, y, side) = (tile.x as f32, tile.y as f32, tile.side as f32);
+                        pass.set_viewport(x, y, side, side, 0.0, 1.0);
+                        pass.set_scissor_rect(tile.x, tile.y, tile.side, tile.side);
+                        pass.set_bind_group(0, group, &[]);
+                        self.scene_gpu.draw(pass, None);
+                    }
                 },
             )?;
         }
@@ -498,6 +554,87 @@ impl Rasterizer {
             timings,
             gpu_bytes: self.gpu_bytes() + view.gpu_bytes(),
         })
+    }
+}
+
+/// Power of a light in watts (luminance-weighted), what its shadow-map share follows; a
+/// directional light's is infinite (it covers the whole scene).
+fn light_power(light: &crate::scene::Light) -> f32 {
+    use crate::scene::LightKind;
+    let luminance = glam::Vec3::new(0.2126, 0.7152, 0.0722)
+        .dot(light.radiometric())
+        .max(0.0);
+    let solid_angle = match light.kind {
+        LightKind::Point => 4.0 * std::f32::consts::PI,
+        LightKind::Emitter => std::f32::consts::PI,
+        LightKind::Spot {
+            outer_cone_angle, ..
+        } => 2.0 * std::f32::consts::PI * (1.0 - outer_cone_angle.clamp(0.0, 1.6).cos()),
+        LightKind::Directional => return f32::INFINITY,
+    };
+    luminance * solid_angle
+}
+
+/// The shadow-map layout of a scene's lights under `--shadow-memory`.
+fn plan_shadow_atlas(
+    scene: &Scene,
+    settings: &RenderSettings,
+    max_layers: u32,
+) -> Result<shadow_atlas::ShadowAtlas, RenderError> {
+    let requests: Vec<shadow_atlas::TileRequest> = scene
+        .lights
+        .iter()
+        .map(|light| shadow_atlas::TileRequest {
+            views: light.kind.shadow_layers(),
+            importance: light_power(light),
+        })
+        .collect();
+    let bytes_per_texel = crate::gpu::resources::block_bytes(DEPTH_FORMAT);
+    let budget_bytes = settings.shadow_memory_mib as u64 * (1 << 20);
+    shadow_atlas::allocate(
+        &requests,
+        settings.shadow_resolution,
+        bytes_per_texel,
+        budget_bytes,
+        max_layers,
+    )
+    .map_err(
+        |shadow_atlas::AtlasError::LayerOverBudget { layer_bytes, .. }| {
+            RenderError::Settings(format!(
+                "--shadow-res {res}: one {res}×{res} shadow layer takes {} MiB, more than \
+             --shadow-memory {} MiB; lower --shadow-res or raise --shadow-memory to at least {}",
+                layer_bytes.div_ceil(1 << 20),
+                settings.shadow_memory_mib,
+                layer_bytes.div_ceil(1 << 20),
+                res = settings.shadow_resolution,
+            ))
+        },
+    )
+}
+
+/// Says which lights lost shadow resolution or their shadows to the budget.
+fn report_shadow_atlas(scene: &Scene, atlas: &shadow_atlas::ShadowAtlas) {
+    let unshadowed = atlas.unshadowed();
+    if unshadowed > 0 {
+        log::warn!(
+            "scene '{}': {unshadowed} of {} are unshadowed (they still light the scene): \
+             their shadow maps do not fit --shadow-memory even at {}²; raise --shadow-memory \
+             or lower --shadow-res",
+            scene.name,
+            crate::gpu::count_of(scene.lights.len(), "light"),
+            shadow_atlas::MIN_TILE_SIDE,
+        );
+    }
+    let reduced = atlas.reduced();
+    if reduced > 0 {
+        log::info!(
+            "scene '{}': {reduced} of {} have shadow maps below --shadow-res {} (down to {}²) \
+             to fit --shadow-memory, the dimmest smallest",
+            scene.name,
+            crate::gpu::count_of(scene.lights.len(), "light"),
+            atlas.layer_side,
+            atlas.smallest_side(),
+        );
     }
 }
 

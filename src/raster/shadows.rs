@@ -16,7 +16,9 @@ pub struct LightSetup {
     pub views: Vec<ShadowView>,
 }
 
-/// Builds the light records and views. `margin_texels` widens perspective views by that many
+/// Builds the light records and views, light `i`'s at `sides[i]` texels a side (each view a
+/// whole layer, `atlas_layer` = the view's index, until a caller places it in a tile).
+/// `margin_texels` widens perspective views by that many
 /// texels per side: shadow maps need it so filter kernels near a cube face's edge stay inside
 /// that face; reflective shadow maps use 0 so that cube faces tile the sphere exactly and every
 /// direction is counted once.
@@ -24,7 +26,7 @@ pub fn setup_lights(
     scene: &Scene,
     world_from_node: &[Mat4],
     bounds: &Aabb,
-    resolution: u32,
+    sides: &[u32],
     margin_texels: f32,
 ) -> LightSetup {
     let (center, radius) = if bounds.is_empty() {
@@ -32,12 +34,15 @@ pub fn setup_lights(
     } else {
         (bounds.center(), (bounds.extent().length() * 0.5).max(1e-4))
     };
-    let res = resolution as f32;
     let mut lights = Vec::new();
     let mut views = Vec::new();
-    for light in WorldLight::from_scene(scene, world_from_node) {
+    for (light_index, light) in WorldLight::from_scene(scene, world_from_node)
+        .into_iter()
+        .enumerate()
+    {
+        let res = sides[light_index] as f32;
         let (position, direction) = (light.position, light.direction);
-        let shadow_layer = views.len() as u32;
+        let first_shadow_view = views.len() as u32;
         // Far enough to see everything, near as far out as possible for depth precision.
         let far = ((position - center).length() + radius) * 1.01;
         let near = (far * 1e-4).max(1e-5);
@@ -93,6 +98,7 @@ pub fn setup_lights(
                     clip_from_world: (clip_from_view * view_from_world).to_cols_array_2d(),
                     origin: [0.0; 4],
                     texel: [2.0 * radius / res, res, radius * 0.5, radius * 3.5],
+                    ..whole_layer()
                 });
                 (LIGHT_DIRECTIONAL, 0.0, 1.0)
             }
@@ -103,10 +109,13 @@ pub fn setup_lights(
             direction: direction.extend(light.range.unwrap_or(0.0)).to_array(),
             intensity: intensity.extend(0.0).to_array(),
             kind,
-            shadow_layer,
+            first_shadow_view,
             cone_scale,
             cone_offset,
         });
+    }
+    for (index, view) in views.iter_mut().enumerate() {
+        view.atlas_layer = index as u32;
     }
     LightSetup { lights, views }
 }
@@ -136,6 +145,19 @@ pub(crate) fn perspective_view(
         clip_from_world: (clip_from_view * view_from_world).to_cols_array_2d(),
         origin: position.extend(1.0).to_array(),
         texel: [2.0 * (fov * 0.5).tan() / res, res, near, far],
+        ..whole_layer()
+    }
+}
+
+/// A view that fills its layer; [`setup_lights`] numbers the layers.
+fn whole_layer() -> ShadowView {
+    ShadowView {
+        clip_from_world: [[0.0; 4]; 4],
+        origin: [0.0; 4],
+        texel: [0.0; 4],
+        atlas_rect: [0.0, 0.0, 1.0, 0.0],
+        atlas_layer: 0,
+        _pad: [0; 3],
     }
 }
 

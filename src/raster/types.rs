@@ -28,7 +28,7 @@ pub struct GpuLight {
     pub direction: [f32; 4],
     pub intensity: [f32; 4],
     pub kind: u32,
-    pub shadow_layer: u32,
+    pub first_shadow_view: u32,
     pub cone_scale: f32,
     pub cone_offset: f32,
 }
@@ -39,7 +39,14 @@ pub struct ShadowView {
     pub clip_from_world: [[f32; 4]; 4],
     pub origin: [f32; 4],
     pub texel: [f32; 4],
+    /// `(u0, v0, size)` of the view's tile in its layer's texture coordinates (`w` unused).
+    pub atlas_rect: [f32; 4],
+    pub atlas_layer: u32,
+    pub _pad: [u32; 3],
 }
+
+/// `GpuLight::first_shadow_view` of a light without a shadow map (over the shadow budget).
+pub const NO_SHADOW: u32 = u32::MAX;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
@@ -141,7 +148,7 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
                 direction,
                 intensity,
                 kind,
-                shadow_layer,
+                first_shadow_view,
                 cone_scale,
                 cone_offset
             ]
@@ -150,7 +157,7 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             "ShadowView",
             "common.wgsl",
             ShadowView,
-            [clip_from_world, origin, texel]
+            [clip_from_world, origin, texel, atlas_rect, atlas_layer]
         ),
         layout!(
             "InstanceData",

@@ -295,6 +295,7 @@ impl SparseMethod {
             scene,
             &raster.scene_gpu,
             settings.rsm,
+            render.max_vals,
             val_source.as_ref().map(|s| s.external()),
         )?;
         let started = Instant::now();

@@ -23,7 +23,24 @@ use crate::vals::math::disc_geometry;
 /// Ray ends are pulled off both surfaces by this fraction of the segment's length.
 pub const RAY_OFFSET: f32 = 2e-3;
 
-/// `V_c(x)` for cluster `cluster` at the point (x, n): `rsm_tiles` RSM tiles over all layers,
+/// Most RSM tiles one cluster's rays go to (`MAX_RAY_TILES` in `vals_visibility.wgsl`): a
+/// cluster holds every `MAX_CLUSTERS`-th tile, which with hundreds of lights is thousands of
+/// rays per point; an evenly strided subset of this many tiles stands for them.
+pub const MAX_RAY_TILES: u32 = 4;
+
+/// Step between the tiles cluster `cluster` shoots at: every one of its tiles while it has
+/// at most [`MAX_RAY_TILES`], else an even stride that visits that many.
+pub fn ray_tile_stride(cluster: u32, rsm_tiles: u32) -> u32 {
+    let tiles_in_cluster = if cluster < rsm_tiles {
+        (rsm_tiles - cluster).div_ceil(MAX_CLUSTERS)
+    } else {
+        0
+    };
+    tiles_in_cluster.div_ceil(MAX_RAY_TILES).max(1) * MAX_CLUSTERS
+}
+
+/// `V_c(x)` for cluster `cluster` at the point (x, n), from the rays to the sampled VALs of
+/// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles over all layers,
 /// `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals` as the GPU
 /// holds them.
 #[allow(clippy::too_many_arguments)]
@@ -41,6 +58,7 @@ pub fn cluster_visibility(
     let mut seen = 0.0f32;
     let mut total = 0.0f32;
     let mut tile = cluster;
+    let stride = ray_tile_stride(cluster, rsm_tiles);
     while tile < rsm_tiles {
         for s in 0..per_tile {
             let slot = samples
@@ -64,7 +82,7 @@ pub fn cluster_visibility(
                 seen += weight;
             }
         }
-        tile += MAX_CLUSTERS;
+        tile += stride;
     }
     if total <= 0.0 {
         1.0

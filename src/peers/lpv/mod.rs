@@ -261,7 +261,13 @@ impl LpvMethod {
             )));
         }
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(ctx, scene, &raster.scene_gpu, settings.rsm)?;
+        let rsm = Rsm::new(
+            ctx,
+            scene,
+            &raster.scene_gpu,
+            settings.rsm,
+            raster.settings.max_vals,
+        )?;
         // Fitted once to the rest pose, so that animation does not move the grid (no flicker).
         let bounds = scene.world_bounds(&scene.world_from_node());
         let (lo, hi) = if bounds.is_empty() {
