@@ -53,7 +53,6 @@ fn gathered_at_rest(
 /// f32, so a few pairs may differ; the bytes must agree almost everywhere.
 fn assert_visibility_matches_the_cpu_twin(
     ctx: &valgi::gpu::GpuContext,
-    scene: &valgi::scene::Scene,
     method: &SparseMethod,
     gathered: &valgi::vals::sparse::PointsReadback,
     samples: &[u32],
@@ -68,14 +67,7 @@ fn assert_visibility_matches_the_cpu_twin(
     for (i, p) in gathered.points.iter().enumerate() {
         for c in 0..clusters {
             let cpu = visibility::cluster_visibility(
-                bvh,
-                scene.instances.len(),
-                p.position,
-                p.normal,
-                c as u32,
-                tiles,
-                samples,
-                &gpu_vals,
+                bvh, p.position, p.normal, c as u32, tiles, samples, &gpu_vals,
             );
             let gpu = gpu_visibility[i * per_point + c];
             let cpu = visibility::quantize(cpu);
@@ -124,8 +116,7 @@ fn visibility_twins_agree_when_clusters_hold_more_tiles_than_they_shoot_at() {
     );
     let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
     let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
-    let partial =
-        assert_visibility_matches_the_cpu_twin(&ctx, &scene, &method, &gathered, &samples);
+    let partial = assert_visibility_matches_the_cpu_twin(&ctx, &method, &gathered, &samples);
     assert!(
         partial > 100,
         "only {partial} partly visible pairs: the rays were not exercised"
@@ -151,8 +142,7 @@ fn visibility_and_the_visible_gather_agree_with_their_cpu_twins() {
         gpu_vals.len()
     );
 
-    let partial =
-        assert_visibility_matches_the_cpu_twin(&ctx, &scene, &method, &gathered, &samples);
+    let partial = assert_visibility_matches_the_cpu_twin(&ctx, &method, &gathered, &samples);
     let per_point = MAX_CLUSTERS as usize;
     // The scene must exercise the rays: some pairs partly hidden, some fully.
     let hidden = gpu_visibility
@@ -262,7 +252,7 @@ fn the_bvh_follows_rigid_motion_without_a_rebuild() {
     for _ in 0..n {
         let (a, b) = (point(), point());
         let d = b - a;
-        let ours = bvh.occluded(a, b, scene.instances.len());
+        let ours = bvh.occluded(a, b);
         let theirs = !tracer.unoccluded(a, d.normalize(), d.length());
         agree += usize::from(ours == theirs);
         blocked += usize::from(ours);
@@ -281,9 +271,105 @@ fn the_bvh_follows_rigid_motion_without_a_rebuild() {
     bvh.update(&ctx, &scene, &lifted);
     let centre = bounds.center();
     let across = (centre - Vec3::X * 10.0, centre + Vec3::X * 10.0);
-    assert!(!bvh.occluded(across.0, across.1, scene.instances.len()));
+    assert!(!bvh.occluded(across.0, across.1));
     let up = Vec3::new(0.0, 10.0, 0.0);
-    assert!(bvh.occluded(across.0 + up, across.1 + up, scene.instances.len()));
+    assert!(bvh.occluded(across.0 + up, across.1 + up));
+}
+
+/// The Cornell box and `side³ − 1` copies of it 0.8 m apart (the box is 0.56 m wide).
+fn cornell_copies(side: usize) -> valgi::scene::Scene {
+    let mut scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let originals = scene.instances.clone();
+    for k in 1..side.pow(3) {
+        let offset = Vec3::new(
+            (k % side) as f32,
+            ((k / side) % side) as f32,
+            (k / side / side) as f32,
+        ) * 0.8;
+        for inst in &originals {
+            scene.nodes.push(valgi::scene::Node {
+                name: format!("copy {k}"),
+                parent: Some(inst.node),
+                local: valgi::scene::Trs {
+                    translation: offset,
+                    ..Default::default()
+                },
+            });
+            scene.instances.push(valgi::scene::Instance {
+                mesh: inst.mesh,
+                node: scene.nodes.len() - 1,
+            });
+        }
+    }
+    scene
+}
+
+/// The GPU's walk of the top level against the CPU twin's, on hundreds of instances.
+#[test]
+fn visibility_twins_agree_over_hundreds_of_instances() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_copies(4);
+    let world = scene.world_from_node();
+    let method = gathered_at_rest(&ctx, &scene, 600);
+    assert!(method.sparse.bvh().top_nodes.len() > 100);
+    let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+    let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+    let partial = assert_visibility_matches_the_cpu_twin(&ctx, &method, &gathered, &samples);
+    assert!(
+        partial > 50,
+        "only {partial} partly visible pairs: the rays were not exercised"
+    );
+}
+
+/// Over a thousand instances: the top level must find exactly what a loop over every
+/// instance finds (the path tracer's BVH is the judge).
+#[test]
+fn the_top_level_over_many_instances_finds_what_the_tracer_finds() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_copies(6);
+    let world = scene.world_from_node();
+    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
+    bvh.update(&ctx, &scene, &world);
+    assert!(
+        bvh.top_nodes.len() > 100,
+        "{} top-level nodes",
+        bvh.top_nodes.len()
+    );
+    let tracer = valgi::trace::Tracer::new(&scene, &world);
+    let mut rng = valgi::sampling::Rng::new(11, 0, 0);
+    let bounds = scene.world_bounds(&world);
+    let (lo, hi) = (bounds.min, bounds.max);
+    let mut point = || {
+        Vec3::new(
+            lo.x + (hi.x - lo.x) * rng.next_f32(),
+            lo.y + (hi.y - lo.y) * rng.next_f32(),
+            lo.z + (hi.z - lo.z) * rng.next_f32(),
+        )
+    };
+    let (mut agree, mut blocked) = (0, 0);
+    let n = 3000;
+    for i in 0..n {
+        let a = point();
+        // Short segments as well as long ones: most miss most instances' boxes.
+        let b = if i % 2 == 0 {
+            point()
+        } else {
+            a + (point() - a) * 0.1
+        };
+        let d = b - a;
+        let ours = bvh.occluded(a, b);
+        let theirs = !tracer.unoccluded(a, d.normalize(), d.length());
+        agree += usize::from(ours == theirs);
+        blocked += usize::from(ours);
+    }
+    assert!(
+        agree >= n * 995 / 1000,
+        "{agree} of {n} agree with the tracer"
+    );
+    assert!(
+        blocked > n / 10 && blocked < n * 9 / 10,
+        "{blocked} of {n} blocked"
+    );
 }
 
 #[test]
@@ -315,7 +401,6 @@ fn visibility_history_blends_last_frames_bytes_like_the_cpu_twin() {
         for c in 0..clusters {
             let v = visibility::cluster_visibility(
                 method.sparse.bvh(),
-                scene.instances.len(),
                 p.position,
                 p.normal,
                 c as u32,

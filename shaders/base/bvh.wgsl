@@ -1,6 +1,7 @@
 // Shadow rays against the scene's two-level BVH (`src/light/bvh.rs`, whose `SceneBvh::occluded`
-// is the CPU twin): a loop over instances, each tested against its world box, then the ray in
-// the instance's model space through its mesh's binary BVH. The BVH is bind group 1 of every
+// is the CPU twin): the top level over the instances' world boxes, each instance at its leaves
+// tested against its box, then the ray in the instance's model space through its mesh's
+// binary BVH. The BVH is bind group 1 of every
 // includer (`SceneBvh::bind_group_layout`).
 
 struct BvhNode {
@@ -28,6 +29,8 @@ struct BvhInstance {
 @group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
 @group(1) @binding(1) var<storage, read> bvh_triangles: array<BvhTriangle>;
 @group(1) @binding(2) var<storage, read> bvh_instances: array<BvhInstance>;
+// The top level: leaves hold `prim_count` instances from `first` (in `bvh_instances`).
+@group(1) @binding(3) var<storage, read> bvh_top: array<BvhNode>;
 
 const BVH_STACK_DEPTH: u32 = 64u;
 
@@ -98,18 +101,36 @@ fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triang
 }
 
 // True when a triangle lies on the segment from `start` to `end` (t in (0, 1)).
-fn segment_occluded(start: vec3<f32>, end: vec3<f32>, instance_count: u32) -> bool {
+fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     let d = end - start;
     let inv = bvh_safe_inverse(d);
-    for (var i = 0u; i < instance_count; i++) {
-        let inst = bvh_instances[i];
-        if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
+    var stack: array<u32, BVH_STACK_DEPTH>;
+    var top = 1u;
+    stack[0] = 0u;
+    while (top > 0u) {
+        top -= 1u;
+        let node = bvh_top[stack[top]];
+        if (!bvh_ray_box(start, inv, 1.0, node.min, node.max)) {
             continue;
         }
-        let origin = (inst.model_from_world * vec4<f32>(start, 1.0)).xyz;
-        let dir = (inst.model_from_world * vec4<f32>(d, 0.0)).xyz;
-        if (bvh_mesh_hit(origin, dir, bitcast<u32>(inst.world_min.w), bitcast<u32>(inst.world_max.w))) {
-            return true;
+        if (node.prim_count == 0u) {
+            if (top + 2u <= BVH_STACK_DEPTH) {
+                stack[top] = node.first;
+                stack[top + 1u] = node.first + 1u;
+                top += 2u;
+            }
+            continue;
+        }
+        for (var i = node.first; i < node.first + node.prim_count; i++) {
+            let inst = bvh_instances[i];
+            if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
+                continue;
+            }
+            let origin = (inst.model_from_world * vec4<f32>(start, 1.0)).xyz;
+            let dir = (inst.model_from_world * vec4<f32>(d, 0.0)).xyz;
+            if (bvh_mesh_hit(origin, dir, bitcast<u32>(inst.world_min.w), bitcast<u32>(inst.world_max.w))) {
+                return true;
+            }
         }
     }
     return false;

@@ -53,7 +53,7 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
             let start = point.position + point.normal * offset;
             let end = l + val.normal.xyz * offset;
             total += weight;
-            if (!segment_occluded(start, end, params.instance_count)) {
+            if (!segment_occluded(start, end)) {
                 seen += weight;
             }
         }

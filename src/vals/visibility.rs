@@ -43,10 +43,8 @@ pub fn ray_tile_stride(cluster: u32, rsm_tiles: u32) -> u32 {
 /// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles over all layers,
 /// `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals` as the GPU
 /// holds them.
-#[allow(clippy::too_many_arguments)]
 pub fn cluster_visibility(
     bvh: &SceneBvh,
-    instance_count: usize,
     x: Vec3,
     n: Vec3,
     cluster: u32,
@@ -78,7 +76,7 @@ pub fn cluster_visibility(
             let from = x + n * offset;
             let to = val.position + val.normal * offset;
             total += weight;
-            if !bvh.occluded(from, to, instance_count) {
+            if !bvh.occluded(from, to) {
                 seen += weight;
             }
         }
