@@ -76,6 +76,10 @@ fn hostile_corpus_files_say_why() {
     expect("ply/err-vertex-count-4e9.ply", "exceed the limit");
     expect("ply/err-face-list-2pow64m1.ply", "out of range for U32");
     expect("ply/err-binary-list-past-end.ply", "declares 255 items");
+    expect(
+        "ply/err-vertex-list-then-garbage.ply",
+        "vertex 1: list 've4' length",
+    );
     expect("obj/err-huge-negative-index.obj", "line 4");
     expect("xml/err-mesh-escape.xml", "outside the scene's folder");
     expect("xml/err-entity-expansion.xml", "malformed XML");

@@ -252,6 +252,9 @@ pub fn parse(bytes: &[u8], display: &str) -> Result<Mesh, SceneError> {
                         values.push(v);
                     }
                     Property::List(name, count_type, item_type) => {
+                        // A slot per property keeps `values` indexed like the properties
+                        // (`position_at` and the rest count lists too); a list is never one.
+                        values.push(f64::NAN);
                         let n = reader
                             .value(*count_type)
                             .map_err(|m| fail(read_error(m, &format!("list '{name}' length"))))?;
@@ -582,6 +585,22 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A list property before the position (found by cargo-fuzz: it shifted every scalar's
+    /// index and read past the row).
+    #[test]
+    fn a_vertex_list_before_the_position_does_not_shift_it() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty list uchar int tags\n\
+            property float x\nproperty float y\nproperty float z\nelement face 1\n\
+            property list uchar int vertex_indices\nend_header\n\
+            2 7 8 0 0 0\n0 1 0 0\n1 5 0 1 0\n3 0 1 2\n";
+        let mesh = parse(text.as_bytes(), "tags.ply").unwrap();
+        assert_eq!(
+            mesh.positions,
+            vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            "positions read from the wrong columns"
+        );
+    }
 
     const QUAD_HEADER: &str = "element vertex 4\nproperty float x\nproperty float y\n\
         property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
