@@ -213,11 +213,13 @@ pub fn parse(bytes: &[u8], display: &str) -> Result<Mesh, SceneError> {
     let mut polygon: Vec<u32> = Vec::new();
     let mut face_seen = false;
 
-    for element in &elements {
+    for (element_index, element) in elements.iter().enumerate() {
         if element.properties.is_empty() {
             continue;
         }
-        let is_vertex = element.name == "vertex";
+        // Only the first 'vertex' element holds the vertices (its columns are the ones found
+        // above); a later one is read past like any other element, as a later 'face' is.
+        let is_vertex = element_index == vertex;
         let is_face = element.name == "face" && !face_seen;
         let face_list = if is_face {
             face_seen = true;
@@ -585,6 +587,19 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A second 'vertex' element with other columns (found by cargo-fuzz: its rows were read
+    /// with the first one's column indices).
+    #[test]
+    fn a_second_vertex_element_is_skipped_not_read_with_the_first_ones_columns() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n\
+            property float y\nproperty float z\nelement vertex 1\nproperty float x\n\
+            element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+            0 0 0\n1 0 0\n0 1 0\n7\n3 0 1 2\n";
+        let mesh = parse(text.as_bytes(), "twice.ply").unwrap();
+        assert_eq!(mesh.positions, vec![Vec3::ZERO, Vec3::X, Vec3::Y]);
+        assert_eq!(mesh.indices, vec![0, 1, 2]);
+    }
 
     /// A list property before the position (found by cargo-fuzz: it shifted every scalar's
     /// index and read past the row).
