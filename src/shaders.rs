@@ -57,6 +57,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/vals/vals_occlusion.wgsl"),
     ),
     (
+        "vals_occluder_bounds.wgsl",
+        include_str!("../shaders/vals/vals_occluder_bounds.wgsl"),
+    ),
+    (
         "vals_interpolate.wgsl",
         include_str!("../shaders/vals/vals_interpolate.wgsl"),
     ),

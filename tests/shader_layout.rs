@@ -106,6 +106,7 @@ fn workgroup_sizes_match_the_dispatches() {
         ("vals_gather.wgsl", "cs_main", [group, 1, 1]),
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_occluder_bounds.wgsl", "cs_main", [group, 1, 1]),
         ("vals_interpolate.wgsl", "cs_main", [group, 1, 1]),
         ("depth_vals.wgsl", "bilateral", [tile, tile, 1]),
         ("depth_vals.wgsl", "surfel", [tile, tile, 1]),

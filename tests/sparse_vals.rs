@@ -275,7 +275,20 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
         for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
             let mut so = s;
             so.options.occlusion = mode;
-            let (_, _, occluded) = run_sparse(&ctx, &scene, 32, so, Stage::Occlusion);
+            let (occluding, _, occluded) = run_sparse(&ctx, &scene, 32, so, Stage::Occlusion);
+            // The tile bounds the pass culls with, against their CPU twin.
+            let tile = so.options.tile;
+            let bounds = occluding.sparse.read_occluder_bounds(&ctx, tile).unwrap();
+            assert_eq!(bounds.len(), discs.len().div_ceil(tile as usize));
+            for (k, (gpu, chunk)) in bounds.iter().zip(discs.chunks(tile as usize)).enumerate() {
+                let cpu = math::occluder_bounds(chunk);
+                assert!(
+                    (gpu.center - cpu.center).length() < 1e-5
+                        && (gpu.radius - cpu.radius).abs() < 1e-5
+                        && (gpu.max_disc_radius - cpu.max_disc_radius).abs() < 1e-6,
+                    "tile {k}: {gpu:?} vs {cpu:?}"
+                );
+            }
             let mut darkened = 0;
             for (i, r) in receivers.iter().enumerate() {
                 let before = &renormalized.lights[i];

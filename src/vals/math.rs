@@ -315,6 +315,74 @@ pub fn occluder_share(x: Vec3, n: Vec3, light: Vec3, sphere: f32, disc: &Occlude
     (overlap / sphere_area).min(1.0) * ramp
 }
 
+/// A tile of occluder discs as the occlusion pass culls it: a sphere around every disc
+/// centre and the largest disc radius (`tile_bounds` in `vals_occluder_bounds.wgsl`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OccluderBounds {
+    pub center: Vec3,
+    pub radius: f32,
+    pub max_disc_radius: f32,
+}
+
+/// The bounds of `discs`: the centre of their centres' box, the farthest centre from it.
+pub fn occluder_bounds(discs: &[OccluderDisc]) -> OccluderBounds {
+    let (lo, hi) = discs.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), d| (lo.min(d.center), hi.max(d.center)),
+    );
+    let center = 0.5 * (lo + hi);
+    OccluderBounds {
+        center,
+        radius: discs
+            .iter()
+            .map(|d| (d.center - center).length())
+            .fold(0.0, f32::max),
+        max_disc_radius: discs.iter().map(|d| d.radius).fold(0.0, f32::max),
+    }
+}
+
+/// False only when no disc inside `bounds` can take a share of the light sphere seen from
+/// (x, n), so the pass may skip the whole tile without changing a bit of the result. Every
+/// reason [`occluder_share`] returns 0 is checked for the whole sphere of centres: all below
+/// the horizon, all at least as far as the light, or too far sideways — a centre within the
+/// sphere is within `asin(R/d)` of the sphere's direction, so its projected square centre
+/// within that of the sphere's (projection onto the tangent plane shortens chords), and
+/// squares overlap only when their centres are closer than the half sides' sum on both axes.
+pub fn tile_may_occlude(
+    x: Vec3,
+    n: Vec3,
+    light: Vec3,
+    sphere: f32,
+    bounds: &OccluderBounds,
+) -> bool {
+    let to_light = light - x;
+    let light_distance = to_light.length();
+    if sphere <= 0.0 || light_distance <= 0.0 || bounds.max_disc_radius <= 0.0 {
+        return false;
+    }
+    let v = bounds.center - x;
+    let distance = v.length();
+    let r = bounds.radius;
+    // x inside (or at the rim of) the sphere: every direction is possible.
+    if distance <= r * 1.001 + 1e-6 {
+        return true;
+    }
+    if n.dot(v) + r < 0.0 || distance - r >= light_distance {
+        return false;
+    }
+    let (t, b) = tangent_frame(n);
+    let wl = to_light / light_distance;
+    let wc = v / distance;
+    let alpha = (r / distance).min(1.0).asin();
+    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
+    let nearest = distance - r;
+    let rd = bounds.max_disc_radius;
+    let disc_area = PI * rd * rd / (rd * rd + nearest * nearest);
+    // The margin absorbs rounding in the shares' own evaluation.
+    let reach = 0.5 * sphere_area.sqrt() + 0.5 * disc_area.sqrt() + alpha + 1e-4;
+    (wl - wc).dot(t).abs() < reach && (wl - wc).dot(b).abs() < reach
+}
+
 /// Occlusion at receiver `index` from every other disc.
 pub fn occlusion(
     index: usize,
@@ -430,6 +498,72 @@ pub fn brute_force(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+        /// Culling a tile never drops a disc that takes a share: when `tile_may_occlude` says
+        /// no, every disc in the tile gives exactly 0.
+        #[test]
+        fn a_culled_tile_holds_no_disc_with_a_share(
+            x in proptest::array::uniform3(-1.0f32..1.0),
+            n in proptest::array::uniform3(-1.0f32..1.0),
+            light in proptest::array::uniform3(-3.0f32..3.0),
+            sphere in 0.01f32..1.0,
+            centre in proptest::array::uniform3(-3.0f32..3.0),
+            spread in 0.01f32..1.0,
+            discs in proptest::collection::vec(
+                (proptest::array::uniform3(-1.0f32..1.0), proptest::array::uniform3(-1.0f32..1.0), 0.005f32..0.3),
+                1..40,
+            ),
+        ) {
+            let n = Vec3::from(n);
+            proptest::prop_assume!(n.length() > 0.1);
+            let n = n.normalize();
+            let discs: Vec<OccluderDisc> = discs
+                .iter()
+                .filter(|(_, normal, _)| Vec3::from(*normal).length() > 0.1)
+                .map(|&(offset, normal, radius)| OccluderDisc {
+                    center: Vec3::from(centre) + Vec3::from(offset) * spread,
+                    normal: Vec3::from(normal).normalize(),
+                    radius,
+                })
+                .collect();
+            proptest::prop_assume!(!discs.is_empty());
+            let bounds = occluder_bounds(&discs);
+            if !tile_may_occlude(Vec3::from(x), n, Vec3::from(light), sphere, &bounds) {
+                for d in &discs {
+                    let share = occluder_share(Vec3::from(x), n, Vec3::from(light), sphere, d);
+                    proptest::prop_assert_eq!(share, 0.0, "{:?}", d);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn culling_skips_tiles_far_from_the_light_path() {
+        let discs = [OccluderDisc {
+            center: Vec3::new(5.0, 1.0, 0.0),
+            normal: Vec3::Y,
+            radius: 0.1,
+        }];
+        let bounds = occluder_bounds(&discs);
+        // Receiver at the origin facing up, light straight above: the tile is far to the side.
+        assert!(!tile_may_occlude(
+            Vec3::ZERO,
+            Vec3::Y,
+            Vec3::new(0.0, 3.0, 0.0),
+            0.2,
+            &bounds
+        ));
+        // The same tile between the receiver and a light behind it is kept.
+        assert!(tile_may_occlude(
+            Vec3::ZERO,
+            Vec3::Y,
+            Vec3::new(10.0, 2.0, 0.0),
+            0.2,
+            &bounds
+        ));
+    }
 
     #[test]
     fn disc_irradiance_on_axis_matches_the_exact_disc() {

@@ -32,6 +32,10 @@ pub use crate::light::{
     ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY, FLAG_VISIBILITY,
 };
 
+/// Most discs a workgroup of the occlusion pass holds at once (`TILE_MAX` in
+/// `vals_occlusion.wgsl` and `vals_occluder_bounds.wgsl`).
+pub const OCCLUSION_TILE_MAX: u32 = 256;
+
 /// Invocations per workgroup of the solution kernels (gather, renormalize, occlusion,
 /// interpolation: `@workgroup_size(64, 1, 1)`, checked against naga by
 /// `tests/shader_layout.rs`).
@@ -142,6 +146,8 @@ pub struct SparseGpu {
     gather: Kernel,
     renormalize: Kernel,
     occlusion: Kernel,
+    /// The bounds of the occlusion pass's disc tiles (view-free, its own parameter block).
+    occluder_bounds: Kernel,
     interpolate: Kernel,
     apply_pipeline: wgpu::RenderPipeline,
     apply_bgl: GroupLayout,
@@ -448,6 +454,23 @@ impl SparseGpu {
                 (&clamp_buffer, true),
             ],
         )?;
+        // Two vec4 per tile of occluder discs; at most one tile per point.
+        let occluder_bounds = empty(
+            &mut bytes,
+            "occluder bounds",
+            32 * point_count.max(1) as u64,
+        );
+        let occluder_bounds_kernel = make(
+            "occluder bounds",
+            "vals_occluder_bounds.wgsl",
+            &[
+                (&params_buffer, false),
+                (instances, false),
+                (&points_model_buffer, false),
+                (&points_meta_buffer, false),
+                (&occluder_bounds, true),
+            ],
+        )?;
         let occlusion = make(
             "occlusion",
             "vals_occlusion.wgsl",
@@ -459,6 +482,7 @@ impl SparseGpu {
                 (&point_diffuse, true),
                 (&point_glossy, true),
                 (&point_extra, false),
+                (&occluder_bounds, false),
             ],
         )?;
         let interpolate = make(
@@ -585,6 +609,7 @@ impl SparseGpu {
             gather,
             renormalize,
             occlusion,
+            occluder_bounds: occluder_bounds_kernel,
             interpolate,
             apply_pipeline,
             apply_bgl,
@@ -609,6 +634,27 @@ impl SparseGpu {
     }
 
     /// The per-(point, cluster) visibility of the last recorded frame, V·255 per byte.
+    /// The occlusion pass's tile bounds of the last frame that ran it, per tile (`tile`
+    /// points each) as [`math::OccluderBounds`].
+    pub fn read_occluder_bounds(
+        &self,
+        ctx: &GpuContext,
+        tile: u32,
+    ) -> Result<Vec<super::math::OccluderBounds>, GpuError> {
+        let buffer = &self.occluder_bounds.buffers[3];
+        let raw: Vec<[f32; 4]> = crate::gpu::read_buffer(ctx, buffer)?;
+        let tiles = self.point_count.div_ceil(tile.clamp(1, OCCLUSION_TILE_MAX)) as usize;
+        Ok(raw
+            .chunks_exact(2)
+            .take(tiles)
+            .map(|pair| super::math::OccluderBounds {
+                center: Vec3::new(pair[0][0], pair[0][1], pair[0][2]),
+                radius: pair[0][3],
+                max_disc_radius: pair[1][0],
+            })
+            .collect())
+    }
+
     pub fn read_visibility(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
         let words: Vec<u32> = crate::gpu::read_buffer(ctx, &self.visibility_buffer)?;
         Ok(bytemuck::cast_slice(&words).to_vec())
@@ -746,6 +792,15 @@ impl SparseGpu {
         }
         let disc_occlusion = matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union);
         if last >= Stage::Occlusion && disc_occlusion {
+            let tiles = self
+                .point_count
+                .div_ceil(options.tile.clamp(1, OCCLUSION_TILE_MAX));
+            let own = self
+                .occluder_bounds
+                .group
+                .as_ref()
+                .expect("bound at creation");
+            compute(&self.occluder_bounds, own, tiles.div_ceil(POINT_GROUP))?;
             compute(&self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {

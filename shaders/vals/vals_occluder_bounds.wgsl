@@ -1,0 +1,46 @@
+// Bounds of every tile of occluder discs, for the occlusion pass to skip tiles that cannot
+// hide any of a point's light (CPU twin: `vals::math::occluder_bounds`): per tile of
+// `params.tile` points, the centre and radius of a sphere around its disc centres, then its
+// largest disc radius — two vec4 per tile.
+#include "vals_common.wgsl"
+
+const TILE_MAX: u32 = 256u;
+
+@group(0) @binding(0) var<storage, read> params: SparseParams;
+@group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
+@group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
+@group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
+@group(0) @binding(4) var<storage, read_write> occluder_bounds: array<vec4<f32>>;
+
+fn point_at(i: u32) -> WorldPoint {
+    let point_meta = points_meta[i];
+    return world_point(points_model[i], point_meta, instances[point_meta.y]);
+}
+
+// One invocation per tile.
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let index = gid.x;
+    let first = index * tile;
+    if (first >= params.point_count) {
+        return;
+    }
+    let end = min(first + tile, params.point_count);
+    var lo = vec3<f32>(3.4e38);
+    var hi = vec3<f32>(-3.4e38);
+    var max_disc_radius = 0.0;
+    for (var i = first; i < end; i++) {
+        let p = point_at(i);
+        lo = min(lo, p.position);
+        hi = max(hi, p.position);
+        max_disc_radius = max(max_disc_radius, p.disc_radius);
+    }
+    let centre = 0.5 * (lo + hi);
+    var radius = 0.0;
+    for (var i = first; i < end; i++) {
+        radius = max(radius, length(point_at(i).position - centre));
+    }
+    occluder_bounds[2u * index] = vec4<f32>(centre, radius);
+    occluder_bounds[2u * index + 1u] = vec4<f32>(max_disc_radius, 0.0, 0.0, 0.0);
+}
