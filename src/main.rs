@@ -157,6 +157,21 @@ struct SceneEditArgs {
     fov: Option<f32>,
 }
 
+/// What many lights may take (`render` and `view`).
+#[derive(clap::Args)]
+struct LightBudgetArgs {
+    /// Shadow-map budget in MiB (1..=65536): lights beyond it get smaller tiles by power
+    /// (down to 16²), then the dimmest go unshadowed with a warning.
+    #[arg(long, default_value_t = valgi::raster::DEFAULT_SHADOW_MEMORY_MIB,
+          value_parser = clap::value_parser!(u32).range(1..=65536))]
+    shadow_memory: u32,
+    /// Most VALs all lights' RSMs may make together (VAL methods; 1..=2³¹): beyond it every
+    /// RSM view gets a smaller side, its VALs carrying the same total flux.
+    #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
+          value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
+    max_vals: u32,
+}
+
 impl SceneEditArgs {
     fn edits(&self) -> valgi::scene::edits::SceneEdits {
         valgi::scene::edits::SceneEdits {
@@ -224,16 +239,8 @@ struct RenderArgs {
     /// less.
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
-    /// Shadow-map budget in MiB (1..=65536): lights beyond it get smaller tiles by power
-    /// (down to 16²), then the dimmest go unshadowed with a warning.
-    #[arg(long, default_value_t = valgi::raster::DEFAULT_SHADOW_MEMORY_MIB,
-          value_parser = clap::value_parser!(u32).range(1..=65536))]
-    shadow_memory: u32,
-    /// Most VALs all lights' RSMs may make together (VAL methods; 1..=2³¹): beyond it every
-    /// RSM view gets a smaller side, its VALs carrying the same total flux.
-    #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
-          value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
-    max_vals: u32,
+    #[command(flatten)]
+    light_budgets: LightBudgetArgs,
     /// Tessellation: maximum triangle edge length in metres (positive; refused when a built-in
     /// scene would exceed 4 million triangles). Default: 0.05, except for an imported scene
     /// with the sparse methods: the sparse points' spacing √(area / sparse-points).
@@ -302,14 +309,8 @@ struct ViewArgs {
     ssaa: u32,
     #[arg(long, default_value_t = 1024)]
     shadow_res: u32,
-    /// Shadow-map budget in MiB, as for `render`.
-    #[arg(long, default_value_t = valgi::raster::DEFAULT_SHADOW_MEMORY_MIB,
-          value_parser = clap::value_parser!(u32).range(1..=65536))]
-    shadow_memory: u32,
-    /// Most VALs all lights' RSMs may make together, as for `render`.
-    #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
-          value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
-    max_vals: u32,
+    #[command(flatten)]
+    light_budgets: LightBudgetArgs,
     #[arg(long, default_value_t = builtin::BuiltinParams::default().max_edge)]
     max_edge: f32,
     /// Animation time of the first frame, seconds.
@@ -723,8 +724,8 @@ fn main() -> ExitCode {
                     height: args.height,
                     ssaa: args.ssaa,
                     shadow_resolution: args.shadow_res,
-                    shadow_memory_mib: args.shadow_memory,
-                    max_vals: args.max_vals,
+                    shadow_memory_mib: args.light_budgets.shadow_memory,
+                    max_vals: args.light_budgets.max_vals,
                     ..RenderSettings::default()
                 },
                 camera: args.camera,
@@ -770,8 +771,8 @@ fn main() -> ExitCode {
                         height: args.height,
                         ssaa: args.ssaa,
                         shadow_resolution: args.shadow_res,
-                        shadow_memory_mib: args.shadow_memory,
-                        max_vals: args.max_vals,
+                        shadow_memory_mib: args.light_budgets.shadow_memory,
+                        max_vals: args.light_budgets.max_vals,
                         ..RenderSettings::default()
                     },
                     camera: args.camera,

@@ -7,6 +7,11 @@ use glam::{Mat4, Vec3};
 
 use crate::scene::{LightKind, Scene};
 
+/// Y of linear Rec. 709 RGB.
+pub fn luminance(c: Vec3) -> f32 {
+    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
+}
+
 /// `f_r = ρ_d/π + ρ_s·(k+2)/(2π)·max(0, r·ω_i)^k` with `r = reflect(−ω_o, n)`.
 pub fn brdf(rho_d: Vec3, rho_s: Vec3, k: f32, n: Vec3, wi: Vec3, wo: Vec3) -> Vec3 {
     let r = reflect(-wo, n);

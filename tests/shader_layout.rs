@@ -169,58 +169,39 @@ fn workgroup_sizes_match_the_dispatches() {
 /// them) have the same values.
 #[test]
 fn shared_constants_match() {
-    let expected: &[(&str, &str, u32)] = &[
-        (
-            "vals_from_rsm.wgsl",
-            "MAX_CLUSTERS",
-            valgi::light::rsm::MAX_CLUSTERS,
-        ),
-        (
-            "vals_from_rsm.wgsl",
-            "CLUSTER_SAMPLE_SIDE",
-            valgi::light::rsm::CLUSTER_SAMPLE_SIDE,
-        ),
+    use valgi::light::rsm::{CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+    use valgi::raster::types as base;
+    let tile_max = valgi::vals::sparse::OCCLUSION_TILE_MAX;
+    let clusters = [
+        ("MAX_CLUSTERS", MAX_CLUSTERS),
+        ("CLUSTER_SAMPLE_SIDE", CLUSTER_SAMPLE_SIDE),
+    ];
+    let per_file: &[(&str, &[(&str, u32)])] = &[
+        ("vals_from_rsm.wgsl", &clusters),
         (
             "vals_visibility.wgsl",
-            "MAX_CLUSTERS",
-            valgi::light::rsm::MAX_CLUSTERS,
+            &[
+                clusters[0],
+                clusters[1],
+                ("MAX_RAY_TILES", valgi::vals::visibility::MAX_RAY_TILES),
+            ],
         ),
-        (
-            "vals_visibility.wgsl",
-            "CLUSTER_SAMPLE_SIDE",
-            valgi::light::rsm::CLUSTER_SAMPLE_SIDE,
-        ),
-        (
-            "vals_visibility.wgsl",
-            "MAX_RAY_TILES",
-            valgi::vals::visibility::MAX_RAY_TILES,
-        ),
+        ("vals_occlusion.wgsl", &[("TILE_MAX", tile_max)]),
+        ("vals_occluder_bounds.wgsl", &[("TILE_MAX", tile_max)]),
         (
             "direct_light.wgsl",
-            "NO_SHADOW",
-            valgi::raster::types::NO_SHADOW,
-        ),
-        (
-            "direct_light.wgsl",
-            "LIGHT_POINT",
-            valgi::raster::types::LIGHT_POINT,
-        ),
-        (
-            "direct_light.wgsl",
-            "LIGHT_SPOT",
-            valgi::raster::types::LIGHT_SPOT,
-        ),
-        (
-            "direct_light.wgsl",
-            "LIGHT_DIRECTIONAL",
-            valgi::raster::types::LIGHT_DIRECTIONAL,
-        ),
-        (
-            "direct_light.wgsl",
-            "LIGHT_EMITTER",
-            valgi::raster::types::LIGHT_EMITTER,
+            &[
+                ("NO_SHADOW", base::NO_SHADOW),
+                ("LIGHT_POINT", base::LIGHT_POINT),
+                ("LIGHT_SPOT", base::LIGHT_SPOT),
+                ("LIGHT_DIRECTIONAL", base::LIGHT_DIRECTIONAL),
+                ("LIGHT_EMITTER", base::LIGHT_EMITTER),
+            ],
         ),
     ];
+    let expected = per_file
+        .iter()
+        .flat_map(|(file, constants)| constants.iter().map(move |(name, v)| (*file, *name, *v)));
     for (file, name, value) in expected {
         let module = shaders::validate(file).unwrap_or_else(|e| panic!("{file}: {e}"));
         let constant = module
@@ -233,6 +214,6 @@ fn shared_constants_match() {
             naga::Expression::Literal(naga::Literal::U32(v)) => v,
             ref other => panic!("{file}: {name} is {other:?}, not a u32 literal"),
         };
-        assert_eq!(found, *value, "{file}: {name}");
+        assert_eq!(found, value, "{file}: {name}");
     }
 }

@@ -123,11 +123,15 @@ fn rsm_vals(
     rsm: u32,
     max_vals: u32,
 ) -> (Vec<valgi::light::Val>, u32, u32) {
-    let scene_gpu = valgi::raster::scene_gpu::SceneGpu::upload(ctx, scene).unwrap();
-    let rsm = valgi::light::rsm::Rsm::new(ctx, scene, &scene_gpu, rsm, max_vals).unwrap();
+    let render = valgi::raster::RenderSettings {
+        max_vals,
+        ..settings(8)
+    };
+    let raster = valgi::raster::Rasterizer::new(ctx, scene, render).unwrap();
+    let rsm = valgi::light::rsm::Rsm::new(ctx, scene, &raster, rsm).unwrap();
     let mut passes = valgi::gpu::Passes::new(ctx);
     rsm.prepare(ctx, scene, &scene.world_from_node());
-    rsm.record(&mut passes, &scene_gpu).unwrap();
+    rsm.record(&mut passes, &raster.scene_gpu).unwrap();
     passes.finish().unwrap();
     (rsm.read_vals(ctx).unwrap(), rsm.resolution, rsm.pack)
 }

@@ -228,17 +228,20 @@ fn every_val_carries_its_texel_cluster_and_samples_point_at_their_stratum() {
     );
 }
 
-#[test]
-fn the_bvh_follows_rigid_motion_without_a_rebuild() {
-    let Some(ctx) = common::gpu() else { return };
-    let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.5 }).unwrap();
-    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
-    let world = scene.world_from_node();
-    bvh.update(&ctx, &scene, &world);
-    let tracer = valgi::trace::Tracer::new(&scene, &world);
-    // Segments across the box: the BVH agrees with the path tracer's BVH.
-    let mut rng = valgi::sampling::Rng::new(7, 0, 0);
-    let bounds = scene.world_bounds(&world);
+/// Of `n` random segments inside the scene's bounds (every other one cut to a tenth when
+/// `shorten`), how many the BVH and the path tracer's BVH judge alike, and how many the
+/// BVH finds blocked.
+fn agreement_with_tracer(
+    bvh: &valgi::light::bvh::SceneBvh,
+    scene: &valgi::scene::Scene,
+    world: &[Mat4],
+    seed: u64,
+    n: usize,
+    shorten: bool,
+) -> (usize, usize) {
+    let tracer = valgi::trace::Tracer::new(scene, world);
+    let mut rng = valgi::sampling::Rng::new(seed, 0, 0);
+    let bounds = scene.world_bounds(world);
     let (lo, hi) = (bounds.min, bounds.max);
     let mut point = || {
         Vec3::new(
@@ -248,15 +251,32 @@ fn the_bvh_follows_rigid_motion_without_a_rebuild() {
         )
     };
     let (mut agree, mut blocked) = (0, 0);
-    let n = 2000;
-    for _ in 0..n {
-        let (a, b) = (point(), point());
+    for i in 0..n {
+        let a = point();
+        let b = if shorten && i % 2 == 1 {
+            a + (point() - a) * 0.1
+        } else {
+            point()
+        };
         let d = b - a;
         let ours = bvh.occluded(a, b);
         let theirs = !tracer.unoccluded(a, d.normalize(), d.length());
         agree += usize::from(ours == theirs);
         blocked += usize::from(ours);
     }
+    (agree, blocked)
+}
+
+#[test]
+fn the_bvh_follows_rigid_motion_without_a_rebuild() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
+    let world = scene.world_from_node();
+    bvh.update(&ctx, &scene, &world);
+    // Segments across the box: the BVH agrees with the path tracer's BVH.
+    let n = 2000;
+    let (agree, blocked) = agreement_with_tracer(&bvh, &scene, &world, 7, n, false);
     assert!(
         agree >= n * 995 / 1000,
         "{agree} of {n} agree with the tracer"
@@ -269,7 +289,7 @@ fn the_bvh_follows_rigid_motion_without_a_rebuild() {
         .map(|m| Mat4::from_translation(Vec3::new(0.0, 10.0, 0.0)) * *m)
         .collect();
     bvh.update(&ctx, &scene, &lifted);
-    let centre = bounds.center();
+    let centre = scene.world_bounds(&world).center();
     let across = (centre - Vec3::X * 10.0, centre + Vec3::X * 10.0);
     assert!(!bvh.occluded(across.0, across.1));
     let up = Vec3::new(0.0, 10.0, 0.0);
@@ -335,33 +355,9 @@ fn the_top_level_over_many_instances_finds_what_the_tracer_finds() {
         "{} top-level nodes",
         bvh.top_nodes.len()
     );
-    let tracer = valgi::trace::Tracer::new(&scene, &world);
-    let mut rng = valgi::sampling::Rng::new(11, 0, 0);
-    let bounds = scene.world_bounds(&world);
-    let (lo, hi) = (bounds.min, bounds.max);
-    let mut point = || {
-        Vec3::new(
-            lo.x + (hi.x - lo.x) * rng.next_f32(),
-            lo.y + (hi.y - lo.y) * rng.next_f32(),
-            lo.z + (hi.z - lo.z) * rng.next_f32(),
-        )
-    };
-    let (mut agree, mut blocked) = (0, 0);
+    // Short segments as well as long ones: most miss most instances' boxes.
     let n = 3000;
-    for i in 0..n {
-        let a = point();
-        // Short segments as well as long ones: most miss most instances' boxes.
-        let b = if i % 2 == 0 {
-            point()
-        } else {
-            a + (point() - a) * 0.1
-        };
-        let d = b - a;
-        let ours = bvh.occluded(a, b);
-        let theirs = !tracer.unoccluded(a, d.normalize(), d.length());
-        agree += usize::from(ours == theirs);
-        blocked += usize::from(ours);
-    }
+    let (agree, blocked) = agreement_with_tracer(&bvh, &scene, &world, 11, n, true);
     assert!(
         agree >= n * 995 / 1000,
         "{agree} of {n} agree with the tracer"

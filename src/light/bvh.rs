@@ -78,6 +78,9 @@ pub struct SceneBvh {
     /// The top level over the instances' world boxes: leaves hold `prim_count` instances from
     /// `first`, inner nodes their children at `first`, `first + 1` (as the mesh nodes).
     pub top_nodes: Vec<BvhNode>,
+    /// The instances [`SceneBvh::update`] built the top level from (scene order), so a
+    /// frame that places them the same way skips the rebuild and the upload.
+    placed: Option<Vec<BvhInstance>>,
     pub node_buffer: wgpu::Buffer,
     pub triangle_buffer: wgpu::Buffer,
     pub instance_buffer: wgpu::Buffer,
@@ -111,16 +114,7 @@ fn build_mesh(positions: &[Vec3], indices: &[u32]) -> (Vec<BvhNode>, Vec<BvhTria
         BvhBuildParams::medium_build(),
         &mut Duration::default(),
     );
-    let nodes = bvh
-        .nodes
-        .iter()
-        .map(|n| BvhNode {
-            min: Vec3::from(n.aabb.min).into(),
-            prim_count: n.prim_count,
-            max: Vec3::from(n.aabb.max).into(),
-            first: n.first_index,
-        })
-        .collect();
+    let nodes = flat_nodes(&bvh);
     let ordered = bvh
         .primitive_indices
         .iter()
@@ -135,6 +129,19 @@ fn build_mesh(positions: &[Vec3], indices: &[u32]) -> (Vec<BvhNode>, Vec<BvhTria
         })
         .collect();
     (nodes, ordered)
+}
+
+/// An obvhs tree's nodes in the layout the shader reads (same indices).
+fn flat_nodes(bvh: &obvhs::bvh2::Bvh2) -> Vec<BvhNode> {
+    bvh.nodes
+        .iter()
+        .map(|n| BvhNode {
+            min: Vec3::from(n.aabb.min).into(),
+            prim_count: n.prim_count,
+            max: Vec3::from(n.aabb.max).into(),
+            first: n.first_index,
+        })
+        .collect()
 }
 
 /// Möller–Trumbore: the ray parameter of the hit, if the segment's line hits the triangle
@@ -267,6 +274,7 @@ impl SceneBvh {
             meshes,
             instances,
             top_nodes,
+            placed: None,
             node_buffer,
             triangle_buffer,
             instance_buffer,
@@ -306,7 +314,12 @@ impl SceneBvh {
                 })
             })
             .collect();
+        // A scene at rest places its instances the same way every frame: keep the last build.
+        if self.placed.as_ref() == Some(&placed) {
+            return;
+        }
         let (top_nodes, instances) = build_top_level(&placed);
+        self.placed = Some(placed);
         self.top_nodes = top_nodes;
         self.instances = instances;
         ctx.queue.write_buffer(
@@ -393,19 +406,11 @@ impl SceneBvh {
     /// The deepest path from a mesh root or the top level's root to a leaf (the shader's
     /// stack must hold it).
     pub fn max_depth(&self) -> usize {
-        let mut deepest = tree_depth(&self.top_nodes, 0);
-        for range in self.meshes.iter().filter(|m| !m.empty) {
-            let mut stack = vec![(0u32, 1usize)];
-            while let Some((i, depth)) = stack.pop() {
-                deepest = deepest.max(depth);
-                let node = self.nodes[range.first_node as usize + i as usize];
-                if node.prim_count == 0 {
-                    stack.push((node.first, depth + 1));
-                    stack.push((node.first + 1, depth + 1));
-                }
-            }
-        }
-        deepest
+        self.meshes
+            .iter()
+            .filter(|m| !m.empty)
+            .map(|m| tree_depth(&self.nodes[m.first_node as usize..], 0))
+            .fold(tree_depth(&self.top_nodes, 0), usize::max)
     }
 }
 
@@ -439,16 +444,7 @@ fn build_top_level(instances: &[BvhInstance]) -> (Vec<BvhNode>, Vec<BvhInstance>
         BvhBuildParams::fast_build(),
         &mut Duration::default(),
     );
-    let nodes: Vec<BvhNode> = bvh
-        .nodes
-        .iter()
-        .map(|n| BvhNode {
-            min: Vec3::from(n.aabb.min).into(),
-            prim_count: n.prim_count,
-            max: Vec3::from(n.aabb.max).into(),
-            first: n.first_index,
-        })
-        .collect();
+    let nodes = flat_nodes(&bvh);
     if tree_depth(&nodes, 0) > STACK_DEPTH {
         // Deeper than the shader's stack: one leaf of every instance is slower but exact.
         let all = boxes

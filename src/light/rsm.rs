@@ -14,7 +14,7 @@ use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::shadows::setup_lights;
 use crate::raster::types::{GpuLight, Vertex};
-use crate::raster::{cleared, RenderError, ScenePipeline, DEPTH_FORMAT};
+use crate::raster::{cleared, Rasterizer, RenderError, ScenePipeline, DEPTH_FORMAT};
 use crate::scene::{Aabb, Scene};
 
 use super::{ExternalVals, Val};
@@ -274,14 +274,15 @@ pub struct AppendSize {
 }
 
 impl Rsm {
+    /// The RSMs of `scene`'s lights at `resolution` per view, drawn from `raster`'s scene
+    /// upload and within its `max_vals`.
     pub fn new(
         ctx: &GpuContext,
         scene: &Scene,
-        scene_gpu: &SceneGpu,
+        raster: &Rasterizer,
         resolution: u32,
-        max_vals: u32,
     ) -> Result<Self, RenderError> {
-        Self::with_external(ctx, scene, scene_gpu, resolution, max_vals, None)
+        Self::with_external(ctx, scene, raster, resolution, None)
     }
 
     /// The RSMs, with room after their VALs for `external`'s valid candidates, which
@@ -289,11 +290,12 @@ impl Rsm {
     pub fn with_external(
         ctx: &GpuContext,
         scene: &Scene,
-        scene_gpu: &SceneGpu,
+        raster: &Rasterizer,
         requested_resolution: u32,
-        max_vals: u32,
         external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
+        let scene_gpu = &raster.scene_gpu;
+        let max_vals = raster.settings.max_vals;
         let device = &ctx.device;
         let limits = device.limits();
         if requested_resolution == 0 || requested_resolution > limits.max_texture_dimension_2d {

@@ -324,10 +324,7 @@ pub struct PositiveTerms {
 /// fraction of a pixel, which would otherwise put a wall's own lights behind it.
 pub const COPLANAR_COS: f32 = 0.01;
 
-/// Y of linear Rec. 709 RGB.
-pub fn luminance(c: Vec3) -> f32 {
-    c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
-}
+pub use crate::shading::luminance;
 
 /// The distance term of every point light.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -425,13 +425,7 @@ impl NegativeMethod {
     ) -> Result<Self, RenderError> {
         let settings = NegativeSettings::from_options(options)?;
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(
-            ctx,
-            scene,
-            &raster.scene_gpu,
-            settings.rsm,
-            raster.settings.max_vals,
-        )?;
+        let rsm = Rsm::new(ctx, scene, &raster, settings.rsm)?;
         let device = &ctx.device;
         let mesh_bounds: Vec<Aabb> = scene.meshes.iter().map(|m| m.model_bounds()).collect();
         let bounds = scene.instance_bounds(&mesh_bounds, &scene.world_from_node());

@@ -89,13 +89,7 @@ impl BruteMethod {
             )));
         }
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(
-            ctx,
-            scene,
-            &raster.scene_gpu,
-            rsm_resolution,
-            raster.settings.max_vals,
-        )?;
+        let rsm = Rsm::new(ctx, scene, &raster, rsm_resolution)?;
         let device = &ctx.device;
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brute params"),

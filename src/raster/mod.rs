@@ -561,9 +561,7 @@ impl Rasterizer {
 /// directional light's is infinite (it covers the whole scene).
 fn light_power(light: &crate::scene::Light) -> f32 {
     use crate::scene::LightKind;
-    let luminance = glam::Vec3::new(0.2126, 0.7152, 0.0722)
-        .dot(light.radiometric())
-        .max(0.0);
+    let luminance = crate::shading::luminance(light.radiometric()).max(0.0);
     let solid_angle = match light.kind {
         LightKind::Point => 4.0 * std::f32::consts::PI,
         LightKind::Emitter => std::f32::consts::PI,

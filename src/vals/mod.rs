@@ -293,9 +293,8 @@ impl SparseMethod {
         let rsm = Rsm::with_external(
             ctx,
             scene,
-            &raster.scene_gpu,
+            &raster,
             settings.rsm,
-            render.max_vals,
             val_source.as_ref().map(|s| s.external()),
         )?;
         let started = Instant::now();

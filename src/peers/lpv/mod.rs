@@ -261,13 +261,7 @@ impl LpvMethod {
             )));
         }
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(
-            ctx,
-            scene,
-            &raster.scene_gpu,
-            settings.rsm,
-            raster.settings.max_vals,
-        )?;
+        let rsm = Rsm::new(ctx, scene, &raster, settings.rsm)?;
         // Fitted once to the rest pose, so that animation does not move the grid (no flicker).
         let bounds = scene.world_bounds(&scene.world_from_node());
         let (lo, hi) = if bounds.is_empty() {
