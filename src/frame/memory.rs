@@ -71,30 +71,30 @@ pub fn growth_after(samples: &[MemorySample], warmup_frames: u32) -> Option<Grow
     })
 }
 
-/// Resident growth that keeps going: the post-warm-up samples split into two halves, each
-/// half's growth (its peak minus its first sample) as a fraction of the baseline, and the
-/// smaller of the two. A leak grows in both halves; a pool or arena that steps up once grows
-/// in one, so this tells the two apart where [`growth_after`] alone cannot. `None` without
-/// resident figures or with fewer than four samples after warm-up.
+/// Resident growth that keeps going: the post-warm-up samples cut into three consecutive
+/// windows, each window's floor (its smallest resident set), and the smaller of the two rises
+/// from one floor to the next, as a fraction of the first sample. A leak lifts every floor; a
+/// pool or arena that steps up once lifts one, and a transient peak (a frame's scratch
+/// allocations, freed again) lifts none, so this tells them apart where [`growth_after`]'s
+/// peak cannot. `None` without resident figures or with fewer than six samples after warm-up.
 pub fn sustained_resident_growth(samples: &[MemorySample], warmup_frames: u32) -> Option<f64> {
-    let after: Vec<&MemorySample> = samples
+    let after: Vec<u64> = samples
         .iter()
         .filter(|s| s.frame >= warmup_frames)
-        .collect();
-    if after.len() < 4 {
+        .map(|s| s.resident_bytes)
+        .collect::<Option<_>>()?;
+    if after.len() < 6 {
         return None;
     }
-    let base = after[0].resident_bytes? as f64;
-    let (first_half, second_half) = after.split_at(after.len() / 2);
-    let growth = |half: &[&MemorySample]| -> Option<f64> {
-        let start = half.first()?.resident_bytes? as f64;
-        let peak = half.iter().filter_map(|s| s.resident_bytes).max()? as f64;
-        Some((peak - start) / base.max(1.0))
-    };
-    // The second half starts where the first ended, so a rise across the boundary counts.
-    let mut second = vec![*first_half.last()?];
-    second.extend_from_slice(second_half);
-    Some(growth(first_half)?.min(growth(&second)?))
+    let base = after[0].max(1) as f64;
+    let third = after.len() / 3;
+    let floor = |window: &[u64]| *window.iter().min().expect("non-empty window") as f64;
+    let floors = [
+        floor(&after[..third]),
+        floor(&after[third..2 * third]),
+        floor(&after[2 * third..]),
+    ];
+    Some((floors[1] - floors[0]).min(floors[2] - floors[1]) / base)
 }
 
 #[cfg(test)]
@@ -126,23 +126,23 @@ mod tests {
     }
 
     #[test]
-    fn a_steady_leak_is_sustained_growth_and_a_single_step_is_not() {
-        let leak: Vec<MemorySample> = (0..=10)
+    fn a_steady_leak_is_sustained_growth_and_a_step_or_a_peak_is_not() {
+        let leak: Vec<MemorySample> = (0..=11)
             .map(|i| sample(i * 20, 1000 + 10 * i as u64, 0))
             .collect();
+        // Floors 1000, 1040, 1080 of a first sample of 1000.
         let g = sustained_resident_growth(&leak, 0).unwrap();
-        // 40 in the first half (frames 0–80), 60 in the second (80–200), of 1000.
         assert!((g - 0.04).abs() < 1e-9, "{g}");
-        let step: Vec<MemorySample> = (0..=10)
-            .map(|i| sample(i * 20, if i >= 3 { 1030 } else { 1000 }, 0))
-            .collect();
-        assert_eq!(sustained_resident_growth(&step, 0), Some(0.0));
-        // A step right at the halves' boundary is still one step.
-        let boundary: Vec<MemorySample> = (0..=9)
+        let step: Vec<MemorySample> = (0..=11)
             .map(|i| sample(i * 20, if i >= 5 { 1030 } else { 1000 }, 0))
             .collect();
-        assert_eq!(sustained_resident_growth(&boundary, 0), Some(0.0));
-        assert!(sustained_resident_growth(&leak[..3], 0).is_none());
+        assert_eq!(sustained_resident_growth(&step, 0), Some(0.0));
+        // A transient peak in every window (freed the next sample) is no growth.
+        let peaks: Vec<MemorySample> = (0..=11)
+            .map(|i| sample(i * 20, if i % 4 == 1 { 1030 } else { 1000 }, 0))
+            .collect();
+        assert_eq!(sustained_resident_growth(&peaks, 0), Some(0.0));
+        assert!(sustained_resident_growth(&leak[..5], 0).is_none());
     }
 
     #[test]
