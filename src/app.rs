@@ -307,6 +307,11 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             settings.ssaa,
         )?);
     }
+    let view_bytes: u64 = views.iter().map(View::gpu_bytes).sum();
+    settings.check_gpu_memory(
+        &format!("method '{}' with its views", request.method),
+        method.gpu_bytes() + view_bytes,
+    )?;
     let mut frame_ms = Vec::with_capacity(frames as usize);
     let mut non_finite = 0;
     let mut last = None;
@@ -328,6 +333,13 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
             view.camera = rig.camera;
         }
         let frame = record_frame(method.as_mut(), &ctx, &scene, &world_from_node, &views)?;
+        if index == 0 {
+            // Per-view state a method makes on its first frame counts too.
+            settings.check_gpu_memory(
+                &format!("method '{}' after its first frame", request.method),
+                owned_gpu_bytes(method.as_ref(), &views, &frame.results),
+            )?;
+        }
         crate::progress::check()?;
         last_images.clear();
         let write = request.write_images;

@@ -170,6 +170,11 @@ struct LightBudgetArgs {
     #[arg(long, default_value_t = valgi::light::rsm::DEFAULT_MAX_VALS,
           value_parser = clap::value_parser!(u32).range(1..=(1 << 31)))]
     max_vals: u32,
+    /// Cap in MiB (16..=2²⁰) on the GPU memory the method may own: shadow maps and RSMs get at
+    /// most a quarter each, and a setup beyond it is refused with what holds the memory
+    /// (default: the device's own limits).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(16..=(1 << 20)))]
+    gpu_memory: Option<u32>,
 }
 
 impl SceneEditArgs {
@@ -726,6 +731,7 @@ fn main() -> ExitCode {
                     shadow_resolution: args.shadow_res,
                     shadow_memory_mib: args.light_budgets.shadow_memory,
                     max_vals: args.light_budgets.max_vals,
+                    gpu_memory_mib: args.light_budgets.gpu_memory,
                     ..RenderSettings::default()
                 },
                 camera: args.camera,
@@ -773,6 +779,7 @@ fn main() -> ExitCode {
                         shadow_resolution: args.shadow_res,
                         shadow_memory_mib: args.light_budgets.shadow_memory,
                         max_vals: args.light_budgets.max_vals,
+                        gpu_memory_mib: args.light_budgets.gpu_memory,
                         ..RenderSettings::default()
                     },
                     camera: args.camera,

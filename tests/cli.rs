@@ -313,6 +313,55 @@ fn bake_refuses_absurd_vpl_counts() {
     );
 }
 
+/// `--gpu-memory` caps what the method owns: a point light's six 1024² shadow layers (24 MiB)
+/// shrink to fit a quarter of 16 MiB, the whole method stays within 16 MiB, and views that
+/// alone exceed it are refused with the size and the option named.
+#[test]
+fn the_gpu_memory_cap_shrinks_budgets_and_refuses_what_cannot_fit() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-gpu-memory", "x.exr");
+    let out = out.as_str();
+    let gpu_bytes = |extra: &[&str]| {
+        let output = valgi()
+            .args(tiny_render(out, &[&["--method", "sparse"], extra].concat()))
+            .output()
+            .expect("run valgi");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let report: serde_json::Value =
+            serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
+        report["gpu_bytes"].as_u64().expect("gpu_bytes")
+    };
+    let free = gpu_bytes(&[]);
+    let capped = gpu_bytes(&["--gpu-memory", "16"]);
+    assert!(free > 24 << 20, "uncapped: {free} bytes");
+    assert!(capped <= 16 << 20, "capped at 16 MiB: {capped} bytes");
+    let large = [
+        "render",
+        "--scene",
+        "plane-point",
+        "--width",
+        "2048",
+        "--height",
+        "2048",
+        "--gpu-memory",
+        "16",
+        "--out",
+        out,
+    ];
+    assert_refused(&large, &["--gpu-memory 16", "MiB", "raise --gpu-memory"]);
+    assert_refused(
+        &tiny_render(out, &["--gpu-memory", "8"]),
+        &["--gpu-memory", "8"],
+    );
+}
+
 #[test]
 fn mr_refuses_a_sparse_point_count_out_of_range() {
     let dir = common::temp_dir("cli-mr-points");

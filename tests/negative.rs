@@ -111,7 +111,13 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
     let tracer = Tracer::new(&scene, &world);
     let setup = method.rsm.light_setup(&scene, &world);
     let lights = WorldLight::from_scene(&scene, &world);
-    let traced = cpu::positive_lights_traced(&tracer, &setup, &lights, 128, method.samples());
+    let traced = cpu::positive_lights_traced(
+        &tracer,
+        &setup,
+        &lights,
+        &method.rsm.light_sides,
+        method.samples(),
+    );
     assert_eq!(traced.len(), rb.positives.len());
     let pairs: Vec<_> = traced.iter().zip(&rb.positives).collect();
     let agree = agreeing(&pairs);
@@ -617,7 +623,8 @@ fn every_light_gets_its_own_positive_set() {
     let tracer = Tracer::new(&scene, &world);
     let setup = method.rsm.light_setup(&scene, &world);
     let lights = WorldLight::from_scene(&scene, &world);
-    let traced = cpu::positive_lights_traced(&tracer, &setup, &lights, 128, samples);
+    let traced =
+        cpu::positive_lights_traced(&tracer, &setup, &lights, &method.rsm.light_sides, samples);
     for light in 0..3u32 {
         let pairs: Vec<_> = traced
             .iter()

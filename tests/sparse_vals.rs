@@ -122,7 +122,7 @@ fn rsm_vals(
     scene: &Scene,
     rsm: u32,
     max_vals: u32,
-) -> (Vec<valgi::light::Val>, u32, u32) {
+) -> (Vec<valgi::light::Val>, u32, bool) {
     let render = valgi::raster::RenderSettings {
         max_vals,
         ..settings(8)
@@ -133,7 +133,8 @@ fn rsm_vals(
     rsm.prepare(ctx, scene, &scene.world_from_node());
     rsm.record(&mut passes, &raster.scene_gpu).unwrap();
     passes.finish().unwrap();
-    (rsm.read_vals(ctx).unwrap(), rsm.resolution, rsm.pack)
+    let packed = rsm.physical_layers < rsm.layer_count;
+    (rsm.read_vals(ctx).unwrap(), rsm.resolution, packed)
 }
 
 /// More point lights than the device has array layers for their cube faces: the views share
@@ -146,14 +147,14 @@ fn rsm_vals(
 fn rsm_views_beyond_the_array_layers_pack_into_tiles_with_the_same_vals() {
     let Some(ctx) = common::gpu() else { return };
     let single = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
-    let (lone, _, lone_pack) = rsm_vals(&ctx, &single, 8, u32::MAX);
-    assert_eq!((lone.len(), lone_pack), (6 * 64, 1));
+    let (lone, _, lone_packed) = rsm_vals(&ctx, &single, 8, u32::MAX);
+    assert_eq!((lone.len(), lone_packed), (6 * 64, false));
     let lights = ctx.device.limits().max_texture_array_layers / 6 + 40;
     let mut many = single.clone();
     many.lights = vec![single.lights[0].clone(); lights as usize];
-    let (vals, side, pack) = rsm_vals(&ctx, &many, 8, u32::MAX);
+    let (vals, side, packed) = rsm_vals(&ctx, &many, 8, u32::MAX);
     assert_eq!(side, 8);
-    assert!(pack >= 2, "{} views were not packed", 6 * lights);
+    assert!(packed, "{} views were not packed", 6 * lights);
     assert_eq!(vals.len(), lone.len() * lights as usize);
     // Rasterized at another viewport offset, interpolants may differ in the last bit.
     for (i, val) in vals.iter().enumerate() {
@@ -175,6 +176,95 @@ fn rsm_views_beyond_the_array_layers_pack_into_tiles_with_the_same_vals() {
         assert!(
             (total - expected).abs() < 0.02 * expected,
             "{label}: reflected flux {total} vs {expected}"
+        );
+    }
+}
+
+/// Under `--max-vals` the lights share the VALs by power: three co-located point lights of
+/// powers 1 : 4 : 16 get RSM sides 2 : 4 : 8 (VALs 1 : 4 : 16, so every VAL carries the same
+/// flux), laid out in one array, and each light still reflects ρ·4π·I.
+#[test]
+fn lights_share_the_val_budget_by_power() {
+    let Some(ctx) = common::gpu() else { return };
+    let single = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let base = single.lights[0].intensity;
+    let mut scene = single.clone();
+    scene.lights = [1.0, 4.0, 16.0]
+        .iter()
+        .map(|&scale| valgi::scene::Light {
+            intensity: base * scale,
+            ..single.lights[0].clone()
+        })
+        .collect();
+    let render = valgi::raster::RenderSettings {
+        max_vals: 520,
+        ..settings(8)
+    };
+    let raster = valgi::raster::Rasterizer::new(&ctx, &scene, render).unwrap();
+    let rsm = valgi::light::rsm::Rsm::new(&ctx, &scene, &raster, 8).unwrap();
+    assert_eq!(rsm.light_sides, vec![2, 4, 8]);
+    let mut passes = valgi::gpu::Passes::new(&ctx);
+    rsm.prepare(&ctx, &scene, &scene.world_from_node());
+    rsm.record(&mut passes, &raster.scene_gpu).unwrap();
+    passes.finish().unwrap();
+    let vals = rsm.read_vals(&ctx).unwrap();
+    // The box surrounds the light: every texel is lit, in view order.
+    assert_eq!(vals.len(), 6 * (4 + 16 + 64));
+    let mut first = 0;
+    for (light, side) in [(0usize, 2usize), (1, 4), (2, 8)] {
+        let count = 6 * side * side;
+        let own = &vals[first..first + count];
+        first += count;
+        let flux: f64 = own.iter().map(|v| v.flux.x as f64).sum();
+        let expected = 0.5 * 4.0 * std::f64::consts::PI * scene.lights[light].intensity as f64;
+        assert!(
+            (flux - expected).abs() < 0.03 * expected,
+            "light {light} at {side}²: reflected flux {flux} vs {expected}"
+        );
+        let mean = flux / count as f64;
+        let bright_mean = 0.5 * 4.0 * std::f64::consts::PI * (base as f64 * 16.0) / (6.0 * 64.0);
+        assert!(
+            (mean - bright_mean).abs() < 0.05 * bright_mean,
+            "light {light}: {mean} W per VAL vs {bright_mean} for the brightest"
+        );
+    }
+}
+
+/// Kernels longer than the device's workgroups per dimension wrap into another dimension:
+/// with the limit lowered to 3 groups every per-point and per-vertex pass wraps, and the
+/// image is the same to the bit (a thread skipped or run twice would change it).
+#[test]
+fn dispatches_past_the_workgroup_limit_wrap_without_changing_the_image() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let world = scene.world_from_node();
+    for occlusion in [OcclusionMode::Sum, OcclusionMode::Rays] {
+        let render = |max_groups: Option<u32>| {
+            let s = sparse_settings(16, 600, occlusion, true);
+            let mut method = SparseMethod::new(&ctx, &scene, settings(24), s).unwrap();
+            if let Some(max) = max_groups {
+                method.sparse.max_groups_per_dimension = max;
+            }
+            let points = method.sparse.point_count.div_ceil(64);
+            let vertices = method.sparse.vertex_count.div_ceil(64);
+            let frame = method
+                .render(&ctx, &scene, &world, &camera(&scene, 24))
+                .unwrap();
+            (frame.indirect.pixels, points, vertices)
+        };
+        let (whole, point_groups, vertex_groups) = render(None);
+        let (wrapped, _, _) = render(Some(3));
+        assert!(
+            point_groups > 3 && vertex_groups > 3,
+            "{point_groups} point and {vertex_groups} vertex groups do not wrap"
+        );
+        assert!(
+            whole.iter().any(|p| p[0] > 0.0),
+            "{occlusion:?}: black image"
+        );
+        assert!(
+            whole == wrapped,
+            "{occlusion:?}: the wrapped dispatch changed the image"
         );
     }
 }

@@ -1,21 +1,25 @@
-// Compacts every lit RSM texel of every layer into one VAL buffer for all lights, in texel
-// order (layer, row, column), so the VAL list — and every sum over it — is the same from run to
+// Compacts every lit RSM texel of every view into one VAL buffer for all lights, in texel
+// order (view, row, column), so the VAL list — and every sum over it — is the same from run to
 // run and frame to frame. Texels that hit nothing or reflect nothing produce no VAL. Three
 // passes: count the lit texels of each row, scan the counts into row offsets, write each row's
 // VALs at its offset.
 #include "vals_common.wgsl"
 
 struct RsmSize {
-    resolution: u32,
-    layers: u32,
+    // Rows of all views together, in view order.
+    rows: u32,
+    views: u32,
     capacity: u32,
-    // Cluster tiles per layer side.
+    // Cluster tiles per view side.
     tiles: u32,
-    // Views per physical layer side: pack² views share one array layer as tiles.
-    pack: u32,
-    pad0: u32,
-    pad1: u32,
-    pad2: u32,
+}
+
+// Where one view lives in the arrays (`RsmTile` in `src/light/rsm.rs`).
+struct RsmTile {
+    origin: vec2<u32>,
+    layer: u32,
+    side: u32,
+    first_row: u32,
 }
 
 @group(0) @binding(0) var<uniform> size: RsmSize;
@@ -24,64 +28,76 @@ struct RsmSize {
 @group(0) @binding(3) var rsm_flux: texture_2d_array<f32>;
 @group(0) @binding(4) var<storage, read_write> vals: array<Val>;
 @group(0) @binding(5) var<storage, read_write> val_count: array<u32>;
-// Per row (layer-major): its lit-texel count, then its first VAL's index.
+// Per row (view-major): its lit-texel count, then its first VAL's index.
 @group(0) @binding(6) var<storage, read_write> row_offsets: array<u32>;
-// Per tile over all layers, CLUSTER_SAMPLE_SIDE² slots: 1 + the VAL at each stratum's centre
+// Per tile over all views, CLUSTER_SAMPLE_SIDE² slots: 1 + the VAL at each stratum's centre
 // texel (0: unlit; the buffer is cleared every frame).
 @group(0) @binding(7) var<storage, read_write> cluster_samples: array<u32>;
+// Per view, its tile; views may have different sides (the lights share the VALs by power).
+@group(0) @binding(8) var<storage, read> view_tiles: array<RsmTile>;
 
-// `src/light/rsm.rs` holds the same two constants and the CPU twins of the three functions
-// below.
+// `src/light/rsm.rs` holds the same two constants and the CPU twins of the functions below.
 const MAX_CLUSTERS: u32 = 32u;
 const CLUSTER_SAMPLE_SIDE: u32 = 4u;
 
-fn layer_tile(layer: u32, x: u32, y: u32) -> u32 {
-    let tx = x * size.tiles / size.resolution;
-    let ty = y * size.tiles / size.resolution;
-    return layer * size.tiles * size.tiles + ty * size.tiles + tx;
+fn layer_tile(view: u32, side: u32, x: u32, y: u32) -> u32 {
+    let tx = x * size.tiles / side;
+    let ty = y * size.tiles / side;
+    return view * size.tiles * size.tiles + ty * size.tiles + tx;
 }
 
 // The stratum of x in its tile if x is that stratum's centre texel, else CLUSTER_SAMPLE_SIDE.
-fn sample_stratum(x: u32) -> u32 {
-    let t = x * size.tiles / size.resolution;
-    let x0 = t * size.resolution / size.tiles;
-    let x1 = (t + 1u) * size.resolution / size.tiles;
+fn sample_stratum(side: u32, x: u32) -> u32 {
+    let t = x * size.tiles / side;
+    let x0 = t * side / size.tiles;
+    let x1 = (t + 1u) * side / size.tiles;
     let width = max(x1 - x0, 1u);
     let stratum = (x - x0) * CLUSTER_SAMPLE_SIDE / width;
     let centre = x0 + (2u * stratum + 1u) * width / (2u * CLUSTER_SAMPLE_SIDE);
     return select(CLUSTER_SAMPLE_SIDE, stratum, centre == x);
 }
 
-// Texel (x, y) of view `layer` in the packed arrays: xy and the physical layer (the CPU twin
-// is `Rsm::physical_texel`).
-fn rsm_texel(layer: u32, x: u32, y: u32) -> vec3<i32> {
-    let per_layer = size.pack * size.pack;
-    let slot = layer % per_layer;
-    return vec3<i32>(
-        i32((slot % size.pack) * size.resolution + x),
-        i32((slot / size.pack) * size.resolution + y),
-        i32(layer / per_layer),
-    );
+// The view whose rows hold `row`: the last with first_row ≤ row (binary search).
+fn view_of_row(row: u32) -> u32 {
+    var lo = 0u;
+    var hi = size.views;
+    while (hi - lo > 1u) {
+        let mid = (lo + hi) / 2u;
+        if (view_tiles[mid].first_row <= row) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+// Texel (x, y) of a view's tile in the arrays: xy and the physical layer (the CPU twin is
+// `Rsm::physical_texel`).
+fn rsm_texel(tile: RsmTile, x: u32, y: u32) -> vec3<i32> {
+    return vec3<i32>(i32(tile.origin.x + x), i32(tile.origin.y + y), i32(tile.layer));
 }
 
 const SCAN_GROUP: u32 = 256u;
 
 var<workgroup> block_sums: array<u32, SCAN_GROUP>;
 
-fn lit(x: u32, row: u32) -> bool {
-    let t = rsm_texel(row / size.resolution, x, row % size.resolution);
+fn lit(tile: RsmTile, x: u32, y: u32) -> bool {
+    let t = rsm_texel(tile, x, y);
     return textureLoad(rsm_flux, t.xy, t.z, 0).a > 0.5;
 }
 
 @compute @workgroup_size(64, 1, 1)
 fn count_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     let row = id.x + id.y * 65535u * 64u;
-    if (row >= size.resolution * size.layers) {
+    if (row >= size.rows) {
         return;
     }
+    let tile = view_tiles[view_of_row(row)];
+    let y = row - tile.first_row;
     var n = 0u;
-    for (var x = 0u; x < size.resolution; x++) {
-        n += select(0u, 1u, lit(x, row));
+    for (var x = 0u; x < tile.side; x++) {
+        n += select(0u, 1u, lit(tile, x, y));
     }
     row_offsets[row] = n;
 }
@@ -90,7 +106,7 @@ fn count_rows(@builtin(global_invocation_id) id: vec3<u32>) {
 // then every thread turns its rows' counts into offsets.
 @compute @workgroup_size(256, 1, 1)
 fn scan_rows(@builtin(local_invocation_index) lid: u32) {
-    let rows = size.resolution * size.layers;
+    let rows = size.rows;
     let per = (rows + SCAN_GROUP - 1u) / SCAN_GROUP;
     let start = min(lid * per, rows);
     let end = min(start + per, rows);
@@ -121,15 +137,16 @@ fn scan_rows(@builtin(local_invocation_index) lid: u32) {
 @compute @workgroup_size(64, 1, 1)
 fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     let row = id.x + id.y * 65535u * 64u;
-    if (row >= size.resolution * size.layers) {
+    if (row >= size.rows) {
         return;
     }
-    let layer = i32(row / size.resolution);
-    let y = i32(row % size.resolution);
+    let view = view_of_row(row);
+    let tile = view_tiles[view];
+    let y = row - tile.first_row;
     var slot = row_offsets[row];
-    let stratum_y = sample_stratum(u32(y));
-    for (var x = 0u; x < size.resolution; x++) {
-        let t = rsm_texel(u32(layer), x, u32(y));
+    let stratum_y = sample_stratum(tile.side, y);
+    for (var x = 0u; x < tile.side; x++) {
+        let t = rsm_texel(tile, x, y);
         let flux = textureLoad(rsm_flux, t.xy, t.z, 0);
         if (flux.a < 0.5 || slot >= size.capacity) {
             continue;
@@ -138,13 +155,13 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
         val.position_area = textureLoad(rsm_position_area, t.xy, t.z, 0);
         val.normal = vec4<f32>(normalize(textureLoad(rsm_normal, t.xy, t.z, 0).xyz), 0.0);
         // w: the VAL's cluster (a small integer, exact in f32).
-        let tile = layer_tile(u32(layer), x, u32(y));
-        val.flux = vec4<f32>(flux.rgb, f32(tile % MAX_CLUSTERS));
+        let cluster_tile = layer_tile(view, tile.side, x, y);
+        val.flux = vec4<f32>(flux.rgb, f32(cluster_tile % MAX_CLUSTERS));
         vals[slot] = val;
-        let stratum_x = sample_stratum(x);
+        let stratum_x = sample_stratum(tile.side, x);
         if (stratum_x < CLUSTER_SAMPLE_SIDE && stratum_y < CLUSTER_SAMPLE_SIDE) {
             let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
-            cluster_samples[tile * per_tile + stratum_y * CLUSTER_SAMPLE_SIDE + stratum_x] = slot + 1u;
+            cluster_samples[cluster_tile * per_tile + stratum_y * CLUSTER_SAMPLE_SIDE + stratum_x] = slot + 1u;
         }
         slot += 1u;
     }

@@ -1,6 +1,6 @@
 // Reflective shadow map: per texel of one light's view, the surface it sees (position, normal)
 // and the flux that surface reflects: Φ = ρ_d·I(ω)·Ω_texel for point and spot lights, with
-// Ω_texel = Δ²/(1+u²+v²)^{3/2}; Φ = ρ_d·E·A_texel for directional lights. A = Ω·d² (or the
+// Ω_texel = ∫ (1+u²+v²)^{-3/2} over the texel's image-plane square; Φ = ρ_d·E·A_texel for directional lights. A = Ω·d² (or the
 // texel's area). Texels whose surface faces away from the light reflect nothing.
 #include "common.wgsl"
 
@@ -62,6 +62,38 @@ struct RsmOut {
     @location(2) flux: vec4<f32>,
 }
 
+// Solid angle of texel `texel` of a side² perspective view with tan(fov/2) = t: the integral
+// of (1+u²+v²)^{-3/2} over the texel's square on the unit image plane. Small views (a light
+// that --max-vals shrank) take the exact corner formula, where the centre rule would
+// overestimate a 2² face by 4 % and a 1² face by 91 %; larger ones 2×2 Gauss points, where
+// the corner formula's differences would cancel in f32. The CPU twin is
+// `light::rsm::texel_solid_angle`.
+fn texel_solid_angle(texel: vec2<u32>, side: u32, t: f32) -> f32 {
+    let delta = 2.0 * t / f32(side);
+    let lo = vec2<f32>(-t + f32(texel.x) * delta, t - f32(texel.y + 1u) * delta);
+    let hi = lo + vec2<f32>(delta);
+    if (side <= EXACT_SOLID_ANGLE_SIDE) {
+        return abs(corner_solid_angle(hi.x, hi.y) - corner_solid_angle(lo.x, hi.y)
+            - corner_solid_angle(hi.x, lo.y) + corner_solid_angle(lo.x, lo.y));
+    }
+    let centre = 0.5 * (lo + hi);
+    let g = delta / (2.0 * sqrt(3.0));
+    var sum = 0.0;
+    for (var i = 0u; i < 4u; i++) {
+        let uv = centre + g * vec2<f32>(select(-1.0, 1.0, (i & 1u) != 0u), select(-1.0, 1.0, i >= 2u));
+        let q = 1.0 + dot(uv, uv);
+        sum += 1.0 / (q * sqrt(q));
+    }
+    return 0.25 * sum * delta * delta;
+}
+
+const EXACT_SOLID_ANGLE_SIDE: u32 = 16u;
+
+// Solid angle of the image-plane rectangle [0,u]×[0,v] at unit distance (signed).
+fn corner_solid_angle(u: f32, v: f32) -> f32 {
+    return atan(u * v / sqrt(1.0 + u * u + v * v));
+}
+
 @fragment
 fn fs_main(in: VertexOut, @builtin(front_facing) front_facing: bool) -> RsmOut {
     let light = lights[view.light_index];
@@ -85,13 +117,8 @@ fn fs_main(in: VertexOut, @builtin(front_facing) front_facing: bool) -> RsmOut {
         let d = p - light.position.xyz;
         let dist = length(d);
         to_light = -d / max(dist, 1e-30);
-        // Image-plane coordinates of this texel's centre at unit distance.
-        let local = in.clip.xy - vec2<f32>(view.tile_origin);
-        let ndc = vec2<f32>(local.x / f32(view.resolution) * 2.0 - 1.0, 1.0 - local.y / f32(view.resolution) * 2.0);
-        let uv = ndc * view.tan_half_fov;
-        let delta = 2.0 * view.tan_half_fov / f32(view.resolution);
-        let q = 1.0 + dot(uv, uv);
-        let omega = delta * delta / (q * sqrt(q));
+        let texel = vec2<u32>(in.clip.xy - vec2<f32>(view.tile_origin));
+        let omega = texel_solid_angle(texel, view.resolution, view.tan_half_fov);
         var intensity = light.intensity.rgb * range_window(light.direction.w, dist);
         if (light.kind == LIGHT_SPOT) {
             intensity *= spot_attenuation(light, -to_light);

@@ -19,8 +19,9 @@ struct SampleCount {
 @group(0) @binding(5) var<storage, read_write> positives: array<IndirectLight>;
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x;
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    // Wrapped into y past the device's workgroups per dimension (`gpu::linear_groups`).
+    let i = id.x + id.y * groups.x * 64u;
     if (i >= sample_count.count) {
         return;
     }

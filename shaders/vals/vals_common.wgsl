@@ -165,3 +165,9 @@ fn tangent_frame_b(n: vec3<f32>) -> vec3<f32> {
     let a = -1.0 / (sign + n.z);
     return vec3<f32>(n.x * n.y * a, sign + n.y * n.y * a, -n.y);
 }
+
+// The index of a 64-wide kernel's thread when its groups wrap into a second dimension
+// (`gpu::linear_groups`): `groups` is the dispatch's `num_workgroups`.
+fn linear_index(gid: vec3<u32>, groups: vec3<u32>) -> u32 {
+    return gid.x + gid.y * groups.x * 64u;
+}

@@ -94,13 +94,13 @@ fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: V
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     if (lid == 0u) {
         shared_count = min(val_count[0], arrayLength(&vals));
     }
     let count = workgroupUniformLoad(&shared_count);
     let tile = clamp(params.tile, 1u, TILE_MAX);
-    let index = gid.x;
+    let index = linear_index(gid, groups);
     let is_active = index < params.point_count;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
     let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;

@@ -32,8 +32,8 @@ fn find_instance(v: u32) -> u32 {
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = gid.x;
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let v = linear_index(gid, groups);
     if (v >= params.vertex_count || params.instance_count == 0u) {
         return;
     }

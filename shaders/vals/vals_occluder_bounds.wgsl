@@ -19,9 +19,9 @@ fn point_at(i: u32) -> WorldPoint {
 
 // One invocation per tile.
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let tile = clamp(params.tile, 1u, TILE_MAX);
-    let index = gid.x;
+    let index = linear_index(gid, groups);
     let first = index * tile;
     if (first >= params.point_count) {
         return;

@@ -115,9 +115,9 @@ fn add_occluder(shares: ptr<function, Shares>, rcv: Receiver, lights: PointLight
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
     let tile = clamp(params.tile, 1u, TILE_MAX);
-    let index = gid.x;
+    let index = linear_index(gid, groups);
     let is_active = index < params.point_count;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
     var point: WorldPoint;

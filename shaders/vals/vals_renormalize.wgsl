@@ -14,8 +14,8 @@
 @group(0) @binding(7) var<storage, read_write> clamp_count: array<atomic<u32>>;
 
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let index = gid.x;
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let index = linear_index(gid, groups);
     if (index >= params.point_count) {
         return;
     }

@@ -68,8 +68,9 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
 
 // One invocation per (point, cluster): x = point, y = cluster.
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let index = gid.x;
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    // Points along x (wrapping into z past the device's limit), clusters along y.
+    let index = gid.x + gid.z * groups.x * 64u;
     let cluster = gid.y;
     if (index >= params.point_count || cluster >= MAX_CLUSTERS) {
         return;

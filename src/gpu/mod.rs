@@ -53,6 +53,20 @@ pub enum GpuError {
 }
 
 /// `1.5 GiB`, `256 KiB`, `12 B`: sizes in error messages.
+/// Workgroups `(x, y)` that cover `groups` in a row when one dimension holds at most
+/// `max_per_dimension` (`max_compute_workgroups_per_dimension`): a long 1-D kernel wraps into a
+/// second dimension, and its shader counts `gid.x + gid.y · x · group_size`
+/// (`linear_index` in `shaders/vals/vals_common.wgsl`). The extra threads of the last row
+/// fall past the end and return, as the last group's do in one dimension.
+pub fn linear_groups(groups: u32, max_per_dimension: u32) -> (u32, u32) {
+    let max = max_per_dimension.max(1);
+    if groups <= max {
+        (groups.max(1), 1)
+    } else {
+        (max, groups.div_ceil(max))
+    }
+}
+
 pub fn format_bytes(bytes: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut value = bytes as f64;
@@ -489,5 +503,24 @@ impl GpuContext {
                 label: Some(name),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::linear_groups;
+
+    #[test]
+    fn long_dispatches_wrap_into_a_second_dimension_covering_every_group() {
+        assert_eq!(linear_groups(0, 65535), (1, 1));
+        assert_eq!(linear_groups(65535, 65535), (65535, 1));
+        assert_eq!(linear_groups(65536, 65535), (65535, 2));
+        for groups in [1, 7, 100, 1000] {
+            let (x, y) = linear_groups(groups, 3);
+            assert!(
+                x <= 3 && x * y >= groups && x * (y - 1) < groups,
+                "{groups}: {x}×{y}"
+            );
+        }
     }
 }

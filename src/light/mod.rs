@@ -132,7 +132,13 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             "RsmSize",
             "vals_from_rsm.wgsl",
             rsm::RsmSize,
-            [resolution, layers, capacity, tiles, pack, pad0, pad1, pad2]
+            [rows, views, capacity, tiles]
+        ),
+        shared_layout!(
+            "RsmTile",
+            "vals_from_rsm.wgsl",
+            rsm::RsmTile,
+            [origin, layer, side, first_row]
         ),
     ]);
     layouts

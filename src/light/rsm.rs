@@ -74,16 +74,12 @@ pub struct RsmView {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct RsmSize {
-    pub resolution: u32,
-    pub layers: u32,
+    /// Rows of all views together (Σ sides).
+    pub rows: u32,
+    pub views: u32,
     pub capacity: u32,
-    /// Cluster tiles per layer side ([`cluster_tiles`]).
+    /// Cluster tiles per view side ([`cluster_tiles`]).
     pub tiles: u32,
-    /// Views per physical layer side ([`Rsm::pack`]).
-    pub pack: u32,
-    pub pad0: u32,
-    pub pad1: u32,
-    pub pad2: u32,
 }
 
 /// The most VAL clusters a frame has: visibility is kept per (sparse point, cluster), one
@@ -139,21 +135,216 @@ pub fn budget_resolution(requested: u32, views: u32, max_vals: u32) -> Option<u3
     (side > 0).then_some(side)
 }
 
-/// [`Rsm::physical_texel`] for a given packing.
-pub fn physical_texel(pack: u32, resolution: u32, layer: u32, x: u32, y: u32) -> (u32, u32, u32) {
-    let per_layer = pack * pack;
-    let slot = layer % per_layer;
-    (
-        layer / per_layer,
-        (slot % pack) * resolution + x,
-        (slot / pack) * resolution + y,
-    )
+/// Views of at most this side take the exact texel solid angle ([`texel_solid_angle`]).
+pub const EXACT_SOLID_ANGLE_SIDE: u32 = 16;
+
+/// Solid angle of texel (x, y) of a `side`² perspective view with tan(fov/2) = `t`, as the RSM
+/// pass computes it (`texel_solid_angle` in `vals_rsm.wgsl`): the integral of
+/// (1+u²+v²)^{-3/2} over the texel's square on the unit image plane — exact from its corners
+/// for small views (the centre rule would give a 2² cube face 4 % too much, a 1² face 91 %),
+/// by 2×2 Gauss points for larger ones (where differences of corner terms cancel in f32).
+pub fn texel_solid_angle(x: u32, y: u32, side: u32, t: f32) -> f32 {
+    let delta = 2.0 * t / side as f32;
+    let (u0, v0) = (-t + x as f32 * delta, t - (y + 1) as f32 * delta);
+    let (u1, v1) = (u0 + delta, v0 + delta);
+    if side <= EXACT_SOLID_ANGLE_SIDE {
+        let corner = |u: f32, v: f32| (u * v / (1.0 + u * u + v * v).sqrt()).atan();
+        return (corner(u1, v1) - corner(u0, v1) - corner(u1, v0) + corner(u0, v0)).abs();
+    }
+    let (uc, vc) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
+    let g = delta / (2.0 * 3f32.sqrt());
+    let sum: f32 = [(-g, -g), (g, -g), (-g, g), (g, g)]
+        .iter()
+        .map(|&(du, dv)| {
+            let q = 1.0 + (uc + du).powi(2) + (vc + dv).powi(2);
+            1.0 / (q * q.sqrt())
+        })
+        .sum();
+    0.25 * sum * delta * delta
 }
 
-/// Views per physical layer side: 1 while the views fit the array layers, else the smallest
-/// `k` whose `k²` views per layer do, with `k·resolution` within the texture side.
-pub fn pack_factor(views: u32, resolution: u32, max_layers: u32, max_side: u32) -> Option<u32> {
-    (1..=max_side / resolution.max(1)).find(|&k| views.div_ceil(k * k) <= max_layers)
+/// One light's claim on the VAL budget: its views (six for a cube) and its power in watts
+/// (luminance-weighted; `f32::INFINITY` for a sun, whose RSM covers the whole scene).
+#[derive(Clone, Copy, Debug)]
+pub struct SideRequest {
+    pub views: u32,
+    pub power: f32,
+}
+
+/// Each light's RSM side under `max_vals` VALs in all (`None` when not even one texel per
+/// view fits).
+///
+/// While every light fits at `requested`, every light gets it. Otherwise the VALs are shared
+/// in proportion to power: a light's side is the largest with `views·side² ≤ λ·power`, the
+/// same λ for all, clamped to `1..=requested` and λ the largest that fits. So every VAL
+/// carries about the same flux whatever light made it — a dim light is not sampled as finely
+/// as a bright one, whose VALs would otherwise each carry more of the image's error. Suns
+/// keep the largest side that fits beside one texel per view of every other light.
+pub fn share_sides(requests: &[SideRequest], requested: u32, max_vals: u32) -> Option<Vec<u32>> {
+    let texels = |views: u32, side: u32| views as u64 * side as u64 * side as u64;
+    let total_views: u64 = requests.iter().map(|r| r.views as u64).sum();
+    if total_views > max_vals as u64 {
+        return None;
+    }
+    let all: u64 = requests.iter().map(|r| texels(r.views, requested)).sum();
+    if all <= max_vals as u64 {
+        return Some(vec![requested; requests.len()]);
+    }
+    let is_sun = |r: &SideRequest| r.power.is_infinite() && r.power > 0.0;
+    let sun_views: u32 = requests.iter().filter(|r| is_sun(r)).map(|r| r.views).sum();
+    let other_views = total_views - sun_views as u64;
+    let sun_budget = (max_vals as u64 - other_views) as u32;
+    let sun_side = budget_resolution(requested, sun_views, sun_budget)?;
+    let budget = max_vals as u64 - texels(sun_views, sun_side);
+    // Power per view: NaN and negative powers claim nothing beyond their one texel.
+    let weight = |r: &SideRequest| {
+        if r.power.is_finite() && r.power > 0.0 {
+            r.power as f64 / r.views.max(1) as f64
+        } else {
+            0.0
+        }
+    };
+    let side_at = |r: &SideRequest, lambda: f64| {
+        if is_sun(r) {
+            sun_side
+        } else {
+            ((lambda * weight(r)).sqrt().floor().min(requested as f64) as u32).max(1)
+        }
+    };
+    let used = |lambda: f64| -> u64 {
+        requests
+            .iter()
+            .map(|r| texels(r.views, side_at(r, lambda)))
+            .sum()
+    };
+    // λ at which the weakest light with power reaches `requested`: past it nothing changes.
+    let smallest_weight = requests
+        .iter()
+        .map(weight)
+        .filter(|&w| w > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let mut hi = if smallest_weight.is_finite() {
+        (requested as f64 + 1.0).powi(2) / smallest_weight
+    } else {
+        0.0
+    };
+    let mut lo = 0.0;
+    if used(hi) <= budget {
+        lo = hi;
+    } else {
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if used(mid) <= budget {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+    }
+    Some(requests.iter().map(|r| side_at(r, lo)).collect())
+}
+
+/// Where one RSM view lives in the texture arrays, and its rows in the compaction
+/// (`RsmTile` in `shaders/light/vals_from_rsm.wgsl`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct RsmTile {
+    /// Top-left texel in its physical layer.
+    pub origin: [u32; 2],
+    /// Physical array layer.
+    pub layer: u32,
+    /// Side in texels (the light's RSM resolution).
+    pub side: u32,
+    /// Index of the view's first row among all views' rows, in view order.
+    pub first_row: u32,
+    /// WGSL rounds the struct to its 8-byte alignment.
+    pub _pad: u32,
+}
+
+/// The views' tiles in layers of `side`² texels.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RsmPacking {
+    pub side: u32,
+    pub layers: u32,
+    /// Per view, in view order.
+    pub tiles: Vec<RsmTile>,
+}
+
+/// Packs square views of the given sides into the fewest texels of texture array: layers of
+/// side `k·largest` for the `k` whose shelf packing (views sorted large to small, rows left to
+/// right) takes the least memory within `max_layers` and `max_side` (`None` when no `k` does).
+/// Views of one side pack row-major, `k²` to a layer, with no hole before the last view; while
+/// the views fit the array layers one to a layer, that is `k = 1`.
+pub fn pack_views(sides: &[u32], max_layers: u32, max_side: u32) -> Option<RsmPacking> {
+    let largest = sides.iter().copied().max().unwrap_or(1).max(1);
+    let mut order: Vec<usize> = (0..sides.len()).collect();
+    order.sort_by_key(|&v| std::cmp::Reverse(sides[v]));
+    let shelf_pack = |layer_side: u32| -> Option<Vec<RsmTile>> {
+        let mut tiles = vec![RsmTile::default(); sides.len()];
+        let (mut layer, mut x, mut y, mut shelf) = (0u32, 0u32, 0u32, 0u32);
+        for &v in &order {
+            let s = sides[v].max(1);
+            if x + s > layer_side {
+                (x, y) = (0, y + shelf);
+                shelf = 0;
+            }
+            if y + s > layer_side {
+                (layer, x, y, shelf) = (layer + 1, 0, 0, 0);
+            }
+            if layer >= max_layers {
+                return None;
+            }
+            tiles[v] = RsmTile {
+                origin: [x, y],
+                layer,
+                side: s,
+                ..Default::default()
+            };
+            x += s;
+            shelf = shelf.max(s);
+        }
+        Some(tiles)
+    };
+    let mut best: Option<(u64, RsmPacking)> = None;
+    for k in 1..=(max_side / largest).max(1) {
+        let side = k * largest;
+        if side > max_side {
+            break;
+        }
+        let Some(mut tiles) = shelf_pack(side) else {
+            continue;
+        };
+        let layers = tiles.iter().map(|t| t.layer + 1).max().unwrap_or(0);
+        let texels = layers as u64 * side as u64 * side as u64;
+        let mut first_row = 0;
+        for t in &mut tiles {
+            t.first_row = first_row;
+            first_row += t.side;
+        }
+        if best.as_ref().is_none_or(|(b, _)| texels < *b) {
+            best = Some((
+                texels,
+                RsmPacking {
+                    side,
+                    layers,
+                    tiles,
+                },
+            ));
+        }
+        if layers <= 1 {
+            // A larger layer only adds texels.
+            break;
+        }
+    }
+    best.map(|(_, packing)| packing)
+}
+
+/// The view whose rows include `row` (rows numbered over all views in view order): the
+/// CPU twin of `view_of_row` in `vals_from_rsm.wgsl`.
+pub fn view_of_row(tiles: &[RsmTile], row: u32) -> usize {
+    tiles
+        .partition_point(|t| t.first_row <= row)
+        .saturating_sub(1)
 }
 
 /// The stratum of a texel in its tile (one axis), if the texel is that stratum's sample:
@@ -173,21 +364,35 @@ const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 const NORMAL_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba16Float;
 const FLUX_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
+/// GPU bytes one RSM texel and its VAL slot take: position (16), normal (8), flux (16) and
+/// depth (4) texels, and the 48-byte [`GpuVal`].
+pub const BYTES_PER_VAL: u64 = 16 + 8 + 16 + 4 + std::mem::size_of::<GpuVal>() as u64;
+
 /// Default `--max-vals`: a million VALs (about 90 MB of RSM and VAL storage); every scene
 /// built in fits at the methods' default `rsm`.
 pub const DEFAULT_MAX_VALS: u32 = 1 << 20;
 
 /// The RSMs of every light and the VAL buffer made from them.
 ///
-/// A *layer* here is one light view of `resolution`² texels (six per point light). When the
-/// views outnumber the device's array layers, `pack`² of them share one physical layer of
-/// `pack·resolution` texels a side, as tiles in row-major order; every texture read goes
-/// through [`Rsm::physical_texel`] (and its WGSL twin), so consumers still think in views.
+/// A *layer* here is one light view (six per point light) of its light's side² texels: every
+/// light has `resolution` while all fit `--max-vals`, else a side by its power
+/// ([`share_sides`]). The views are tiles in physical layers of the arrays ([`pack_views`]);
+/// every texture read goes through [`Rsm::physical_texel`] (and its WGSL twin), so consumers
+/// still think in views.
 pub struct Rsm {
+    /// The largest side of any view (the requested `--rsm` unless the budget shrank every
+    /// light).
     pub resolution: u32,
     pub layer_count: u32,
-    /// Views per physical layer side (1: one view per array layer).
-    pub pack: u32,
+    /// Per light, its views' side.
+    pub light_sides: Vec<u32>,
+    /// Per view, its tile.
+    pub view_tiles: Vec<RsmTile>,
+    /// Physical layers of the arrays, and their side.
+    pub physical_layers: u32,
+    pub physical_side: u32,
+    /// Views in each physical layer (what one render pass draws).
+    views_by_layer: Vec<Vec<usize>>,
     /// Capacity in RSM VALs (every texel of every layer).
     pub capacity: u32,
     /// Further slots after the RSM's for [`ExternalVals`] (0 without).
@@ -233,8 +438,8 @@ pub const APPEND_GROUP: u32 = 64;
 /// `vals_rsm.wgsl`: the layer's view, the instance transforms and the lights.
 const VIEW_BINDINGS: &[Slot] = &[Slot::Uniform, Slot::Storage, Slot::Storage];
 
-/// `vals_from_rsm.wgsl`: the RSM size, its position, normal and flux arrays, and the VALs,
-/// their count, the row offsets and the cluster samples it writes.
+/// `vals_from_rsm.wgsl`: the RSM size, its position, normal and flux arrays, the VALs, their
+/// count, the row offsets and the cluster samples it writes, and the views' tiles.
 const COMPACT_BINDINGS: &[Slot] = &[
     Slot::Uniform,
     Slot::TextureArray,
@@ -244,6 +449,7 @@ const COMPACT_BINDINGS: &[Slot] = &[
     Slot::StorageRw,
     Slot::StorageRw,
     Slot::StorageRw,
+    Slot::Storage,
 ];
 
 /// `vals_append.wgsl`: its size block, the external candidates, and the VALs, their count and
@@ -295,7 +501,11 @@ impl Rsm {
         external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
         let scene_gpu = &raster.scene_gpu;
-        let max_vals = raster.settings.max_vals;
+        let max_vals = raster.settings.val_budget();
+        let budget = raster.settings.budget_name(
+            &format!("--max-vals {}", raster.settings.max_vals),
+            &format!("{max_vals} VALs"),
+        );
         let device = &ctx.device;
         let limits = device.limits();
         if requested_resolution == 0 || requested_resolution > limits.max_texture_dimension_2d {
@@ -305,40 +515,78 @@ impl Rsm {
             )));
         }
         let layer_count: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
-        let resolution = budget_resolution(requested_resolution, layer_count, max_vals)
-            .ok_or_else(|| {
+        let requests: Vec<SideRequest> = scene
+            .lights
+            .iter()
+            .map(|light| SideRequest {
+                views: light.kind.shadow_layers(),
+                power: crate::raster::light_power(light),
+            })
+            .collect();
+        let light_sides =
+            share_sides(&requests, requested_resolution, max_vals).ok_or_else(|| {
                 RenderError::Settings(format!(
-                    "--max-vals {max_vals}: scene '{}' has {layer_count} light views ({}), \
-                     so not even one VAL per view fits; raise --max-vals to at least {layer_count}",
+                    "{budget}: scene '{}' has {layer_count} light views ({}), so not even one VAL \
+                     per view fits; raise --max-vals to at least {layer_count}",
                     scene.name,
                     crate::gpu::count_of(scene.lights.len(), "light"),
                 ))
             })?;
-        if resolution < requested_resolution {
+        let reduced = light_sides
+            .iter()
+            .filter(|&&side| side < requested_resolution)
+            .count();
+        if reduced > 0 {
             log::warn!(
                 "scene '{}': {layer_count} RSM views at --rsm {requested_resolution} would make \
-                 {} VALs, over --max-vals {max_vals}; every view uses {resolution}² instead \
-                 (each VAL carries its share of the flux, so the light's power is unchanged)",
+                 {} VALs, over {budget}; {reduced} of {} get smaller RSMs by \
+                 power (down to {}²; each VAL carries its share of the flux, so every light's \
+                 power is unchanged)",
                 scene.name,
-                layer_count as u64 * requested_resolution as u64 * requested_resolution as u64,
+                requests
+                    .iter()
+                    .map(|r| r.views as u64
+                        * requested_resolution as u64
+                        * requested_resolution as u64)
+                    .sum::<u64>(),
+                crate::gpu::count_of(scene.lights.len(), "light"),
+                light_sides
+                    .iter()
+                    .min()
+                    .copied()
+                    .unwrap_or(requested_resolution),
             );
         }
-        let pack = pack_factor(
-            layer_count,
-            resolution,
+        let view_sides: Vec<u32> = requests
+            .iter()
+            .zip(&light_sides)
+            .flat_map(|(r, &side)| std::iter::repeat_n(side, r.views as usize))
+            .collect();
+        let resolution = view_sides
+            .iter()
+            .copied()
+            .max()
+            .unwrap_or(requested_resolution);
+        let packing = pack_views(
+            &view_sides,
             limits.max_texture_array_layers,
             limits.max_texture_dimension_2d,
         )
         .ok_or_else(|| {
             RenderError::Settings(format!(
-                "scene '{}' needs {layer_count} RSM views of {resolution}²; the device's {} \
+                "scene '{}' needs {layer_count} RSM views of up to {resolution}²; the device's {} \
                  array layers of at most {}² cannot hold them: lower --rsm or --max-vals",
                 scene.name, limits.max_texture_array_layers, limits.max_texture_dimension_2d
             ))
         })?;
-        let physical_side = pack * resolution;
-        let physical_layers = layer_count.div_ceil(pack * pack);
-        let texels = layer_count as u64 * resolution as u64 * resolution as u64;
+        let physical_side = packing.side;
+        let physical_layers = packing.layers;
+        let mut views_by_layer = vec![Vec::new(); physical_layers as usize];
+        for (view, tile) in packing.tiles.iter().enumerate() {
+            views_by_layer[tile.layer as usize].push(view);
+        }
+        let rows: u64 = view_sides.iter().map(|&s| s as u64).sum();
+        let texels: u64 = view_sides.iter().map(|&s| s as u64 * s as u64).sum();
         let external_slots = external.map_or(0, |e| e.rows as u64 * e.row_length as u64);
         let slots = texels + external_slots;
         if slots > u32::MAX as u64 {
@@ -352,7 +600,7 @@ impl Rsm {
             .min(limits.max_buffer_size);
         if val_bytes > max_binding {
             return Err(RenderError::Settings(format!(
-                "--rsm {resolution} with {layer_count} layers and {external_slots} external VALs needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm or the external VALs"
+                "--rsm {resolution} with {layer_count} layers and {external_slots} external VALs needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm, --max-vals or the external VALs"
             )));
         }
         let mut bytes = GpuBytes::default();
@@ -403,7 +651,7 @@ impl Rsm {
                 + crate::gpu::resources::block_bytes(DEPTH_FORMAT));
         let (textures, depth) = ctx.scoped(
             &format!(
-                "the RSMs of scene '{}' ({}: {layers} layers of {resolution}×{resolution})",
+                "the RSMs of scene '{}' ({}: {layers} views of up to {resolution}×{resolution} in {physical} layers of {physical_side}²)",
                 scene.name,
                 crate::gpu::count_of(scene.lights.len(), "light")
             ),
@@ -516,7 +764,8 @@ impl Rsm {
 
         let cs = wgpu::ShaderStages::COMPUTE;
         let compact_bgl = GroupLayout::new(device, "vals from rsm", cs, COMPACT_BINDINGS);
-        let tiles = cluster_tiles(resolution, layer_count);
+        let smallest = view_sides.iter().copied().min().unwrap_or(resolution);
+        let tiles = cluster_tiles(smallest, layer_count);
         let cluster_samples = bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -536,14 +785,10 @@ impl Rsm {
             device,
             "rsm size",
             bytemuck::bytes_of(&RsmSize {
-                resolution,
-                layers: layer_count,
+                rows: rows as u32,
+                views: layer_count,
                 capacity,
                 tiles,
-                pack,
-                pad0: 0,
-                pad1: 0,
-                pad2: 0,
             }),
             wgpu::BufferUsages::UNIFORM,
         );
@@ -551,10 +796,21 @@ impl Rsm {
             device,
             &wgpu::BufferDescriptor {
                 label: Some("rsm row offsets"),
-                size: layers as u64 * resolution as u64 * 4,
+                size: rows.max(1) * 4,
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             },
+        );
+        let no_tiles = [RsmTile::default()];
+        let tiles_buffer = bytes.buffer_init(
+            device,
+            "rsm view tiles",
+            bytemuck::cast_slice(if packing.tiles.is_empty() {
+                &no_tiles
+            } else {
+                &packing.tiles
+            }),
+            wgpu::BufferUsages::STORAGE,
         );
         let compact_group = compact_bgl.bind(
             device,
@@ -567,6 +823,7 @@ impl Rsm {
                 &val_count_buffer,
                 &row_offsets,
                 &cluster_samples,
+                &tiles_buffer,
             ],
         );
         let module = ctx.shader("vals_from_rsm.wgsl");
@@ -630,7 +887,11 @@ impl Rsm {
         Ok(Self {
             resolution,
             layer_count,
-            pack,
+            light_sides,
+            view_tiles: packing.tiles,
+            physical_layers,
+            physical_side,
+            views_by_layer,
             capacity,
             external_capacity: external_slots as u32,
             vals_buffer,
@@ -671,13 +932,14 @@ impl Rsm {
             };
             for _ in 0..layers {
                 let view = &setup.views[layer];
+                let tile = &self.view_tiles[layer];
                 let perspective = view.origin[3] > 0.5;
                 let rsm_view = RsmView {
                     clip_from_world: view.clip_from_world,
                     light_index: light_index as u32,
-                    resolution: self.resolution,
+                    resolution: tile.side,
                     tan_half_fov: if perspective {
-                        0.5 * view.texel[0] * self.resolution as f32
+                        0.5 * view.texel[0] * tile.side as f32
                     } else {
                         0.0
                     },
@@ -686,10 +948,7 @@ impl Rsm {
                     } else {
                         view.texel[0] * view.texel[0]
                     },
-                    tile_origin: {
-                        let (_, x, y) = self.physical_texel(layer as u32, 0, 0);
-                        [x, y]
-                    },
+                    tile_origin: tile.origin,
                     _pad: [0; 2],
                 };
                 ctx.queue.write_buffer(
@@ -711,23 +970,14 @@ impl Rsm {
     ) -> crate::raster::shadows::LightSetup {
         let bounds = scene.instance_bounds(&self.mesh_bounds, world_from_node);
         // No margin: cube faces must meet exactly so that no direction is counted twice.
-        setup_lights(
-            scene,
-            world_from_node,
-            &bounds,
-            &vec![self.resolution; scene.lights.len()],
-            0.0,
-        )
+        setup_lights(scene, world_from_node, &bounds, &self.light_sides, 0.0)
     }
 
     /// Renders every RSM layer and compacts the lit texels into VALs (passes "rsm"), then
     /// appends the external VALs' valid candidates (pass "vals append"); their producer must
     /// have recorded its passes before this.
     pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
-        let per_physical = (self.pack * self.pack) as usize;
-        for (physical, views) in self.layer_views.iter().enumerate() {
-            let first = physical * per_physical;
-            let last = (first + per_physical).min(self.layer_groups.len());
+        for (views, in_layer) in self.layer_views.iter().zip(&self.views_by_layer) {
             passes.render(
                 "rsm",
                 &[cleared(&views[0]), cleared(&views[1]), cleared(&views[2])],
@@ -741,12 +991,12 @@ impl Rsm {
                 }),
                 |pass| {
                     pass.set_pipeline(&self.pipeline);
-                    for (layer, group) in (first..last).zip(&self.layer_groups[first..last]) {
-                        let (_, x, y) = self.physical_texel(layer as u32, 0, 0);
-                        let r = self.resolution;
+                    for &view in in_layer {
+                        let tile = &self.view_tiles[view];
+                        let ([x, y], r) = (tile.origin, tile.side);
                         pass.set_viewport(x as f32, y as f32, r as f32, r as f32, 0.0, 1.0);
                         pass.set_scissor_rect(x, y, r, r);
-                        pass.set_bind_group(0, group, &[]);
+                        pass.set_bind_group(0, &self.layer_groups[view], &[]);
                         scene_gpu.draw(pass, Some(1));
                     }
                 },
@@ -754,12 +1004,9 @@ impl Rsm {
         }
         if self.layer_count > 0 {
             // One thread per row; rows past 65535 workgroups wrap into a second dimension.
-            let groups = (self.resolution * self.layer_count).div_ceil(ROW_GROUP);
-            let (gx, gy) = if groups <= 65535 {
-                (groups, 1)
-            } else {
-                (65535, groups.div_ceil(65535))
-            };
+            let rows: u32 = self.view_tiles.iter().map(|t| t.side).sum();
+            let groups = rows.div_ceil(ROW_GROUP);
+            let (gx, gy) = crate::gpu::linear_groups(groups, 65535);
             passes
                 .encoder()
                 .clear_buffer(&self.cluster_samples, 0, None);
@@ -813,10 +1060,11 @@ impl Rsm {
         crate::gpu::read_buffer(ctx, &self.cluster_samples)
     }
 
-    /// Where texel (x, y) of view `layer` lives: (physical layer, x, y). Views fill their
-    /// physical layer `pack` to a row (`rsm_texel` in `vals_from_rsm.wgsl` is the WGSL twin).
+    /// Where texel (x, y) of view `layer` lives: (physical layer, x, y) (`rsm_texel` in
+    /// `vals_from_rsm.wgsl` is the WGSL twin).
     pub fn physical_texel(&self, layer: u32, x: u32, y: u32) -> (u32, u32, u32) {
-        physical_texel(self.pack, self.resolution, layer, x, y)
+        let tile = &self.view_tiles[layer as usize];
+        (tile.layer, tile.origin[0] + x, tile.origin[1] + y)
     }
 
     /// Tiles over all layers (each with `CLUSTER_SAMPLE_SIDE²` sample slots).
@@ -844,32 +1092,175 @@ mod tests {
         assert_eq!(budget_resolution(64, 0, 1), Some(64));
     }
 
-    #[test]
-    fn views_pack_only_when_the_array_layers_run_out() {
-        assert_eq!(pack_factor(2048, 64, 2048, 16384), Some(1));
-        assert_eq!(pack_factor(2049, 64, 2048, 16384), Some(2));
-        assert_eq!(pack_factor(6000, 64, 2048, 16384), Some(2));
-        assert_eq!(pack_factor(10_000, 64, 2048, 16384), Some(3));
-        // 4·4096 > 16384 would be needed.
-        assert_eq!(pack_factor(100_000, 4096, 2048, 16384), None);
+    fn point_lights(powers: &[f32]) -> Vec<SideRequest> {
+        powers
+            .iter()
+            .map(|&power| SideRequest { views: 6, power })
+            .collect()
+    }
+
+    fn vals(requests: &[SideRequest], sides: &[u32]) -> u64 {
+        requests
+            .iter()
+            .zip(sides)
+            .map(|(r, &s)| r.views as u64 * s as u64 * s as u64)
+            .sum()
     }
 
     #[test]
-    fn packed_views_tile_their_layers_without_overlap() {
-        let (pack, side) = (3, 5);
-        let mut seen = std::collections::HashSet::new();
-        for layer in 0..20 {
+    fn vals_are_shared_by_power() {
+        // Everything fits: the requested side for all, however unequal the powers.
+        let few = point_lights(&[1.0, 1000.0]);
+        assert_eq!(share_sides(&few, 64, u32::MAX), Some(vec![64, 64]));
+        // Equal powers: the same side for all, the one the uniform budget gives.
+        let equal = point_lights(&[2.0; 1000]);
+        let sides = share_sides(&equal, 64, 1 << 20).unwrap();
+        assert!(sides.iter().all(|&s| s == 13), "{sides:?}");
+        assert_eq!(budget_resolution(64, 6000, 1 << 20), Some(13));
+        // Four times the power: four times the VALs (twice the side, to the texel).
+        let unequal = [
+            SideRequest {
+                views: 1,
+                power: 4.0,
+            },
+            SideRequest {
+                views: 1,
+                power: 1.0,
+            },
+        ];
+        let sides = share_sides(&unequal, 64, 5000).unwrap();
+        assert!(vals(&unequal, &sides) <= 5000);
+        assert!(
+            sides[0].abs_diff(2 * sides[1]) <= 1 && sides[0] >= 60,
+            "{sides:?}"
+        );
+        // The bright light is capped at the request; the dim ones take what it leaves.
+        let capped = point_lights(&[1e6, 1.0, 1.0]);
+        let sides = share_sides(&capped, 16, 6 * 16 * 16 + 2 * 6 * 64).unwrap();
+        assert_eq!(sides, vec![16, 8, 8]);
+    }
+
+    #[test]
+    fn texel_solid_angles_tile_a_cube_face_exactly() {
+        // Six faces of tan(fov/2) = 1 tile the sphere: each is 4π/6 at every side.
+        for side in [1, 2, 3, 16, 17, 64, 512] {
+            let mut face = 0.0f64;
             for y in 0..side {
                 for x in 0..side {
-                    let (l, px, py) = physical_texel(pack, side, layer, x, y);
-                    assert!(px < pack * side && py < pack * side);
-                    assert!(
-                        seen.insert((l, px, py)),
-                        "view {layer} texel {x},{y} reused"
-                    );
+                    face += texel_solid_angle(x, y, side, 1.0) as f64;
+                }
+            }
+            let exact = 4.0 * std::f64::consts::PI / 6.0;
+            assert!(
+                (face / exact - 1.0).abs() < 2e-4,
+                "{side}²: {face} vs {exact}"
+            );
+        }
+        // A lone texel of a narrow view: nearly the flat Δ².
+        let narrow = texel_solid_angle(0, 0, 1, 0.01);
+        assert!((narrow / 0.0004 - 1.0).abs() < 1e-3, "{narrow}");
+    }
+
+    #[test]
+    fn a_sun_keeps_its_side_and_powerless_lights_keep_one_texel() {
+        let mut requests = point_lights(&[1.0; 100]);
+        requests.push(SideRequest {
+            views: 1,
+            power: f32::INFINITY,
+        });
+        requests.push(SideRequest {
+            views: 6,
+            power: f32::NAN,
+        });
+        requests.push(SideRequest {
+            views: 1,
+            power: 0.0,
+        });
+        let sides = share_sides(&requests, 256, 100_000).unwrap();
+        assert_eq!(sides[100], 256);
+        assert_eq!(&sides[101..], &[1, 1]);
+        assert!(vals(&requests, &sides) <= 100_000);
+        // Not one texel a view: refused.
+        assert_eq!(share_sides(&point_lights(&[1.0; 10]), 8, 59), None);
+        assert_eq!(share_sides(&[], 8, 0), Some(vec![]));
+    }
+
+    #[test]
+    fn views_pack_one_to_a_layer_until_the_array_layers_run_out() {
+        let one_each = pack_views(&[64; 2048], 2048, 16384).unwrap();
+        assert_eq!((one_each.side, one_each.layers), (64, 2048));
+        assert!(one_each.tiles.iter().all(|t| t.origin == [0, 0]));
+        // Four times the layers: two a side, row-major, every layer full.
+        let packed = pack_views(&[64; 8192], 2048, 16384).unwrap();
+        assert_eq!((packed.side, packed.layers), (128, 2048));
+        let t = &packed.tiles;
+        assert_eq!(
+            (t[1].origin, t[2].origin, t[3].origin),
+            ([64, 0], [0, 64], [64, 64])
+        );
+        assert_eq!(
+            (t[4].layer, t[4].origin, t[5].first_row),
+            (1, [0, 0], 5 * 64)
+        );
+        // One view past a full array: the side whose last layer wastes least (5·64, 82 layers
+        // of 25 views, one slot empty).
+        let over = pack_views(&[64; 2049], 2048, 16384).unwrap();
+        assert_eq!((over.side, over.layers), (320, 82));
+        assert_eq!(pack_views(&[4096; 100_000], 2048, 16384), None);
+        assert_eq!(view_of_row(t, 0), 0);
+        assert_eq!(view_of_row(t, 64 * 5 + 63), 5);
+        assert_eq!(view_of_row(t, 64 * 8192 - 1), 8191);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+        #[test]
+        fn shared_sides_fit_the_budget_and_follow_power(
+            powers in proptest::collection::vec(0.0f32..1e4, 1..40),
+            requested in 1u32..128,
+            per_view in 1u32..5000,
+        ) {
+            let requests = point_lights(&powers);
+            let max_vals = per_view * 6 * powers.len() as u32;
+            let sides = share_sides(&requests, requested, max_vals).unwrap();
+            proptest::prop_assert!(vals(&requests, &sides) <= max_vals as u64);
+            for (i, &a) in sides.iter().enumerate() {
+                proptest::prop_assert!((1..=requested).contains(&a));
+                for (j, &b) in sides.iter().enumerate() {
+                    if powers[i] > powers[j] {
+                        proptest::prop_assert!(a >= b, "{powers:?} -> {sides:?}");
+                    }
                 }
             }
         }
-        assert_eq!(physical_texel(1, 8, 7, 3, 4), (7, 3, 4));
+
+        #[test]
+        fn packed_views_never_overlap_and_stay_inside_their_layers(
+            sides in proptest::collection::vec(1u32..40, 1..200),
+            max_layers in 1u32..8,
+        ) {
+            // At most 200·39² texels: one layer of 1024² always holds them.
+            let packing = pack_views(&sides, max_layers, 1024).expect("fits one layer");
+            proptest::prop_assert!(packing.layers <= max_layers && packing.side <= 1024);
+            let mut rows = 0;
+            for (v, t) in packing.tiles.iter().enumerate() {
+                proptest::prop_assert_eq!(t.side, sides[v]);
+                proptest::prop_assert_eq!(t.first_row, rows);
+                rows += t.side;
+                proptest::prop_assert!(t.layer < packing.layers);
+                proptest::prop_assert!(t.origin[0] + t.side <= packing.side);
+                proptest::prop_assert!(t.origin[1] + t.side <= packing.side);
+                proptest::prop_assert_eq!(view_of_row(&packing.tiles, t.first_row + t.side - 1), v);
+                for u in &packing.tiles[..v] {
+                    let apart = u.layer != t.layer
+                        || u.origin[0] + u.side <= t.origin[0]
+                        || t.origin[0] + t.side <= u.origin[0]
+                        || u.origin[1] + u.side <= t.origin[1]
+                        || t.origin[1] + t.side <= u.origin[1];
+                    proptest::prop_assert!(apart, "{u:?} overlaps {t:?}");
+                }
+            }
+        }
     }
 }

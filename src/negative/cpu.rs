@@ -12,6 +12,7 @@ use std::f32::consts::PI;
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3, Vec4};
 
+use crate::light::rsm::texel_solid_angle;
 use crate::raster::shadows::LightSetup;
 use crate::raster::types::{LIGHT_DIRECTIONAL, LIGHT_EMITTER, LIGHT_POINT};
 use crate::scene::CameraView;
@@ -92,17 +93,6 @@ pub fn frustum_solid_angle(half_x: f32, half_y: f32) -> f32 {
     4.0 * (half_x.sin() * half_y.sin()).asin()
 }
 
-/// Solid angle of the RSM texel (x, y) of a perspective layer with tan(fov/2) = t, as the RSM
-/// pass computes it: Δ²/(1+u²+v²)^{3/2} at the texel centre.
-fn texel_solid_angle(x: u32, y: u32, resolution: u32, t: f32) -> f32 {
-    let r = resolution as f32;
-    let u = ((x as f32 + 0.5) / r * 2.0 - 1.0) * t;
-    let v = (1.0 - (y as f32 + 0.5) / r * 2.0) * t;
-    let delta = 2.0 * t / r;
-    let q = 1.0 + u * u + v * v;
-    delta * delta / (q * q.sqrt())
-}
-
 /// The texel of an NDC position on an R×R layer.
 fn ndc_texel(ndc_x: f32, ndc_y: f32, resolution: u32) -> [u32; 2] {
     let r = resolution as f32;
@@ -127,12 +117,13 @@ const MAX_CANDIDATES: u32 = 1 << 22;
 pub fn positive_samples(
     setup: &LightSetup,
     lights: &[WorldLight],
-    resolution: u32,
+    light_sides: &[u32],
     n: u32,
 ) -> Vec<PositiveSample> {
     let mut out = vec![];
     let mut layer = 0u32;
     for (light_index, (gpu, world)) in setup.lights.iter().zip(lights).enumerate() {
+        let resolution = light_sides[light_index];
         let sample = |layer: u32, texel: [u32; 2], flux_scale: f32| PositiveSample {
             layer,
             texel_x: texel[0],
@@ -214,7 +205,7 @@ pub fn positive_lights_traced(
     tracer: &Tracer,
     setup: &LightSetup,
     lights: &[WorldLight],
-    resolution: u32,
+    light_sides: &[u32],
     samples: &[PositiveSample],
 ) -> Vec<IndirectLight> {
     samples
@@ -222,6 +213,7 @@ pub fn positive_lights_traced(
         .map(|s| {
             let view = &setup.views[s.layer as usize];
             let light = &lights[s.light as usize];
+            let resolution = light_sides[s.light as usize];
             let world_from_clip = Mat4::from_cols_array_2d(&view.clip_from_world).inverse();
             let r = resolution as f32;
             let ndc_x = (s.texel_x as f32 + 0.5) / r * 2.0 - 1.0;

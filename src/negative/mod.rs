@@ -720,8 +720,12 @@ impl Method for NegativeMethod {
         self.rsm.record(passes, &self.raster.scene_gpu)?;
         let setup = self.rsm.light_setup(frame.scene, frame.world_from_node);
         let lights = WorldLight::from_scene(frame.scene, frame.world_from_node);
-        let samples =
-            cpu::positive_samples(&setup, &lights, self.rsm.resolution, self.settings.positive);
+        let samples = cpu::positive_samples(
+            &setup,
+            &lights,
+            &self.rsm.light_sides,
+            self.settings.positive,
+        );
         if samples != self.samples {
             if !samples.is_empty() {
                 // The shader reads the RSM arrays directly: texels where the packed views
@@ -752,10 +756,14 @@ impl Method for NegativeMethod {
         }
         let n = self.samples.len() as u32;
         if n > 0 {
+            let (x, y) = crate::gpu::linear_groups(
+                n.div_ceil(POSITIVE_GROUP),
+                ctx.device.limits().max_compute_workgroups_per_dimension,
+            );
             passes.compute("negative positives", |pass| {
                 pass.set_pipeline(&self.positives_pipeline);
                 pass.set_bind_group(0, &self.positives_group, &[]);
-                pass.dispatch_workgroups(n.div_ceil(POSITIVE_GROUP), 1, 1);
+                pass.dispatch_workgroups(x, y, 1);
             })?;
         }
         Ok(())

@@ -31,9 +31,54 @@ pub struct RenderSettings {
     pub pcf_radius: u32,
     /// Budget of the shadow maps in MiB: lights share it by power ([`shadow_atlas`]).
     pub shadow_memory_mib: u32,
-    /// Most VALs the RSMs of all lights may make together: beyond it every view's RSM side
-    /// shrinks ([`crate::light::rsm::budget_resolution`]).
+    /// Most VALs the RSMs of all lights may make together: beyond it the lights share them
+    /// by power ([`crate::light::rsm::share_sides`]).
     pub max_vals: u32,
+    /// Cap on the GPU memory a method may own, in MiB (`--gpu-memory`; `None`: the device's
+    /// own limits). Shadow maps and RSMs each get at most a quarter of it, and a method whose
+    /// buffers and textures exceed it is refused before it renders.
+    pub gpu_memory_mib: Option<u32>,
+}
+
+impl RenderSettings {
+    /// The shadow maps' budget in bytes: `--shadow-memory`, within a quarter of `--gpu-memory`.
+    pub fn shadow_budget_bytes(&self) -> u64 {
+        let own = self.shadow_memory_mib as u64 * (1 << 20);
+        self.gpu_memory_mib
+            .map_or(own, |gpu| own.min(gpu as u64 * (1 << 20) / 4))
+    }
+
+    /// Most VALs the RSMs may make: `--max-vals`, within a quarter of `--gpu-memory` at
+    /// [`crate::light::rsm::BYTES_PER_VAL`] each.
+    pub fn val_budget(&self) -> u32 {
+        self.gpu_memory_mib.map_or(self.max_vals, |gpu| {
+            let fit = gpu as u64 * (1 << 20) / 4 / crate::light::rsm::BYTES_PER_VAL;
+            self.max_vals.min(fit.min(u32::MAX as u64) as u32)
+        })
+    }
+
+    /// How a message names a budget: the option itself (`option`, e.g. "--max-vals 5"), or,
+    /// under `--gpu-memory`, the `amount` in force and where it comes from.
+    pub fn budget_name(&self, option: &str, amount: &str) -> String {
+        match self.gpu_memory_mib {
+            None => option.to_string(),
+            Some(gpu) => format!("{amount} ({option} within a quarter of --gpu-memory {gpu})"),
+        }
+    }
+
+    /// An error when `owned` bytes exceed `--gpu-memory`, naming what holds them.
+    pub fn check_gpu_memory(&self, what: &str, owned: u64) -> Result<(), RenderError> {
+        match self.gpu_memory_mib {
+            Some(gpu) if owned > gpu as u64 * (1 << 20) => Err(RenderError::Settings(format!(
+                "{what} needs {} of GPU memory, over --gpu-memory {gpu} MiB: lower the image \
+                 size, --rsm, --sparse-points, --shadow-memory or --max-vals, or raise \
+                 --gpu-memory to at least {} MiB",
+                crate::gpu::format_bytes(owned),
+                owned.div_ceil(1 << 20),
+            ))),
+            _ => Ok(()),
+        }
+    }
 }
 
 impl Default for RenderSettings {
@@ -46,6 +91,7 @@ impl Default for RenderSettings {
             pcf_radius: 1,
             shadow_memory_mib: DEFAULT_SHADOW_MEMORY_MIB,
             max_vals: crate::light::rsm::DEFAULT_MAX_VALS,
+            gpu_memory_mib: None,
         }
     }
 }
@@ -557,9 +603,9 @@ impl Rasterizer {
     }
 }
 
-/// Power of a light in watts (luminance-weighted), what its shadow-map share follows; a
-/// directional light's is infinite (it covers the whole scene).
-fn light_power(light: &crate::scene::Light) -> f32 {
+/// Power of a light in watts (luminance-weighted), what its shadow-map and RSM shares
+/// follow; a directional light's is infinite (it covers the whole scene).
+pub fn light_power(light: &crate::scene::Light) -> f32 {
     use crate::scene::LightKind;
     let luminance = crate::shading::luminance(light.radiometric()).max(0.0);
     let solid_angle = match light.kind {
@@ -588,7 +634,7 @@ fn plan_shadow_atlas(
         })
         .collect();
     let bytes_per_texel = crate::gpu::resources::block_bytes(DEPTH_FORMAT);
-    let budget_bytes = settings.shadow_memory_mib as u64 * (1 << 20);
+    let budget_bytes = settings.shadow_budget_bytes();
     shadow_atlas::allocate(
         &requests,
         settings.shadow_resolution,
@@ -600,9 +646,12 @@ fn plan_shadow_atlas(
         |shadow_atlas::AtlasError::LayerOverBudget { layer_bytes, .. }| {
             RenderError::Settings(format!(
                 "--shadow-res {res}: one {res}×{res} shadow layer takes {} MiB, more than \
-             --shadow-memory {} MiB; lower --shadow-res or raise --shadow-memory to at least {}",
+             {}; lower --shadow-res or raise --shadow-memory to at least {}",
                 layer_bytes.div_ceil(1 << 20),
-                settings.shadow_memory_mib,
+                settings.budget_name(
+                    &format!("--shadow-memory {}", settings.shadow_memory_mib),
+                    &format!("{} MiB", settings.shadow_budget_bytes() >> 20)
+                ),
                 layer_bytes.div_ceil(1 << 20),
                 res = settings.shadow_resolution,
             ))

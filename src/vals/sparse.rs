@@ -18,7 +18,7 @@ use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
 use crate::gpu::bindings::{GroupLayout, Slot};
-use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
+use crate::gpu::{linear_groups, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::raster::scene_gpu::SceneGpu;
@@ -126,6 +126,10 @@ pub struct SparseGpu {
     pub point_count: u32,
     pub vertex_count: u32,
     pub instance_count: u32,
+    /// Workgroups one dispatch dimension may hold (the device's
+    /// `max_compute_workgroups_per_dimension`): longer kernels wrap into another dimension
+    /// ([`crate::gpu::linear_groups`]). Lower only to exercise the wrap.
+    pub max_groups_per_dimension: u32,
     /// Bytes of the per-point buffers (static + solution).
     pub point_bytes: u64,
     /// Bytes of the per-instance-vertex lights.
@@ -592,6 +596,7 @@ impl SparseGpu {
             point_count,
             vertex_count,
             instance_count: ranges.len() as u32,
+            max_groups_per_dimension: limits.max_compute_workgroups_per_dimension,
             point_bytes,
             vertex_light_bytes: vertex_light_size,
             link_bytes,
@@ -737,15 +742,15 @@ impl SparseGpu {
             self.solutions_recorded
                 .set(self.solutions_recorded.get() + 1);
             let clusters = self.rsm_tiles.clamp(1, MAX_CLUSTERS);
+            let (x, chunks) = linear_groups(
+                self.point_count.div_ceil(POINT_GROUP),
+                self.max_groups_per_dimension,
+            );
             passes.compute("visibility", |pass| {
                 pass.set_pipeline(&self.visibility_pipeline);
                 pass.set_bind_group(0, &self.visibility_group, &[]);
                 pass.set_bind_group(1, &self.bvh.group, &[]);
-                pass.dispatch_workgroups(
-                    self.point_count.div_ceil(POINT_GROUP).max(1),
-                    clusters,
-                    1,
-                );
+                pass.dispatch_workgroups(x, clusters, chunks);
             })?;
         }
         let groups = [
@@ -779,11 +784,13 @@ impl SparseGpu {
         [gather, renormalize, occlusion, interpolate]: [&wgpu::BindGroup; 4],
     ) -> Result<(), GpuError> {
         let points = self.point_count.div_ceil(POINT_GROUP);
+        let max_groups = self.max_groups_per_dimension;
         let mut compute = |kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
+            let (x, y) = linear_groups(n, max_groups);
             passes.compute(kernel.label, |pass| {
                 pass.set_pipeline(&kernel.pipeline);
                 pass.set_bind_group(0, group, &[]);
-                pass.dispatch_workgroups(n.max(1), 1, 1);
+                pass.dispatch_workgroups(x, y, 1);
             })
         };
         compute(&self.gather, gather, points)?;
