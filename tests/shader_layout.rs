@@ -171,7 +171,10 @@ fn workgroup_sizes_match_the_dispatches() {
 fn shared_constants_match() {
     use valgi::light::rsm::{CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
     use valgi::raster::types as base;
-    let tile_max = valgi::vals::sparse::OCCLUSION_TILE_MAX;
+    let occlusion = [
+        ("TILE_MAX", valgi::vals::sparse::OCCLUSION_TILE_MAX),
+        ("SUPER_TILE", valgi::vals::sparse::OCCLUSION_SUPER_TILE),
+    ];
     let clusters = [
         ("MAX_CLUSTERS", MAX_CLUSTERS),
         ("CLUSTER_SAMPLE_SIDE", CLUSTER_SAMPLE_SIDE),
@@ -186,8 +189,15 @@ fn shared_constants_match() {
                 ("MAX_RAY_TILES", valgi::vals::visibility::MAX_RAY_TILES),
             ],
         ),
-        ("vals_occlusion.wgsl", &[("TILE_MAX", tile_max)]),
-        ("vals_occluder_bounds.wgsl", &[("TILE_MAX", tile_max)]),
+        ("vals_occlusion.wgsl", &occlusion),
+        ("vals_occluder_bounds.wgsl", &occlusion),
+        (
+            "vals_rsm.wgsl",
+            &[(
+                "EXACT_SOLID_ANGLE_SIDE",
+                valgi::light::rsm::EXACT_SOLID_ANGLE_SIDE,
+            )],
+        ),
         (
             "direct_light.wgsl",
             &[

@@ -366,21 +366,27 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
                 radius: p.disc_radius,
             })
             .collect();
-        for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
+        // Tiles of 4 points make super-tiles of 256, so the pass skips whole super-tiles.
+        for (mode, tile) in [(OcclusionMode::Sum, 64), (OcclusionMode::Union, 4)] {
             let mut so = s;
             so.options.occlusion = mode;
+            so.options.tile = tile;
             let (occluding, _, occluded) = run_sparse(&ctx, &scene, 32, so, Stage::Occlusion);
             // The tile bounds the pass culls with, against their CPU twin.
             let tile = so.options.tile;
-            let bounds = occluding.sparse.read_occluder_bounds(&ctx, tile).unwrap();
+            let (bounds, supers) = occluding.sparse.read_occluder_bounds(&ctx, tile).unwrap();
+            let span = (tile * valgi::vals::sparse::OCCLUSION_SUPER_TILE) as usize;
             assert_eq!(bounds.len(), discs.len().div_ceil(tile as usize));
-            for (k, (gpu, chunk)) in bounds.iter().zip(discs.chunks(tile as usize)).enumerate() {
+            assert_eq!(supers.len(), discs.len().div_ceil(span));
+            let tiles = bounds.iter().zip(discs.chunks(tile as usize));
+            let super_tiles = supers.iter().zip(discs.chunks(span));
+            for (k, (gpu, chunk)) in tiles.chain(super_tiles).enumerate() {
                 let cpu = math::occluder_bounds(chunk);
                 assert!(
                     (gpu.center - cpu.center).length() < 1e-5
                         && (gpu.radius - cpu.radius).abs() < 1e-5
                         && (gpu.max_disc_radius - cpu.max_disc_radius).abs() < 1e-6,
-                    "tile {k}: {gpu:?} vs {cpu:?}"
+                    "bounds {k}: {gpu:?} vs {cpu:?}"
                 );
             }
             let mut darkened = 0;

@@ -1,10 +1,12 @@
 // Bounds of every tile of occluder discs, for the occlusion pass to skip tiles that cannot
 // hide any of a point's light (CPU twin: `vals::math::occluder_bounds`): per tile of
 // `params.tile` points, the centre and radius of a sphere around its disc centres, then its
-// largest disc radius — two vec4 per tile.
+// largest disc radius — two vec4 per tile; then the same for every super-tile of SUPER_TILE
+// tiles, so that far regions cost the occlusion pass one test per super-tile.
 #include "vals_common.wgsl"
 
 const TILE_MAX: u32 = 256u;
+const SUPER_TILE: u32 = 64u;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
@@ -17,16 +19,8 @@ fn point_at(i: u32) -> WorldPoint {
     return world_point(points_model[i], point_meta, instances[point_meta.y]);
 }
 
-// One invocation per tile.
-@compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let tile = clamp(params.tile, 1u, TILE_MAX);
-    let index = linear_index(gid, groups);
-    let first = index * tile;
-    if (first >= params.point_count) {
-        return;
-    }
-    let end = min(first + tile, params.point_count);
+// The bounds of points [first, end) into slot `slot` (two vec4).
+fn write_bounds(first: u32, end: u32, slot: u32) {
     var lo = vec3<f32>(3.4e38);
     var hi = vec3<f32>(-3.4e38);
     var max_disc_radius = 0.0;
@@ -41,6 +35,25 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     for (var i = first; i < end; i++) {
         radius = max(radius, length(point_at(i).position - centre));
     }
-    occluder_bounds[2u * index] = vec4<f32>(centre, radius);
-    occluder_bounds[2u * index + 1u] = vec4<f32>(max_disc_radius, 0.0, 0.0, 0.0);
+    occluder_bounds[2u * slot] = vec4<f32>(centre, radius);
+    occluder_bounds[2u * slot + 1u] = vec4<f32>(max_disc_radius, 0.0, 0.0, 0.0);
+}
+
+// One invocation per tile, then one per super-tile (SUPER_TILE tiles), whose bounds follow
+// the tiles' in the buffer.
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let index = linear_index(gid, groups);
+    let tiles = (params.point_count + tile - 1u) / tile;
+    if (index < tiles) {
+        let first = index * tile;
+        write_bounds(first, min(first + tile, params.point_count), index);
+        return;
+    }
+    let span = tile * SUPER_TILE;
+    let first = (index - tiles) * span;
+    if (first < params.point_count) {
+        write_bounds(first, min(first + span, params.point_count), index);
+    }
 }

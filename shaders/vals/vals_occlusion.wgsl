@@ -6,11 +6,14 @@
 // A tile of discs none of which can take a share of a point's light sphere is skipped
 // (`tile_may_occlude`, from `vals_occluder_bounds.wgsl`'s bounds; CPU twin
 // `vals::math::tile_may_occlude`): the result is the same to the bit, and far tiles cost one
-// test instead of a tile of discs.
+// test instead of a tile of discs — and a super-tile of SUPER_TILE tiles none of which can is
+// skipped with one test (its bounds contain all its discs' centres, so the same test is safe),
+// which keeps the pass near-linear in the points when most of the scene is far.
 #include "vals_common.wgsl"
 
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
+const SUPER_TILE: u32 = 64u;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
@@ -19,7 +22,8 @@ const TILE_MAX: u32 = 256u;
 @group(0) @binding(4) var<storage, read_write> point_diffuse: array<vec4<u32>>;
 @group(0) @binding(5) var<storage, read_write> point_glossy: array<vec4<u32>>;
 @group(0) @binding(6) var<storage, read> point_extra: array<vec2<u32>>;
-// Per tile: (centre of its disc centres, radius), (largest disc radius, 0, 0, 0).
+// Per tile, then per super-tile: (centre of its disc centres, radius), (largest disc radius,
+// 0, 0, 0).
 @group(0) @binding(7) var<storage, read> occluder_bounds: array<vec4<f32>>;
 
 struct Disc {
@@ -29,8 +33,17 @@ struct Disc {
 }
 
 var<workgroup> tile_discs: array<Disc, TILE_MAX>;
-// 1 when some invocation of the workgroup needs the current tile.
+// 1 when some invocation of the workgroup needs the current tile (super-tile).
 var<workgroup> tile_needed: u32;
+var<workgroup> super_needed: u32;
+
+// Whether the tile or super-tile in bounds slot `slot` may hide one of the point's lights.
+fn slot_may_occlude(slot: u32, x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, lights: PointLights, glossy_on: bool) -> bool {
+    let bounds = occluder_bounds[2u * slot];
+    let max_disc_radius = occluder_bounds[2u * slot + 1u].x;
+    return tile_may_occlude(x, n, t, b, lights.diffuse_position, lights.diffuse_sphere, bounds, max_disc_radius)
+        || (glossy_on && tile_may_occlude(x, n, t, b, lights.glossy_position, lights.glossy_sphere, bounds, max_disc_radius));
+}
 
 // False only when no disc of the tile can take a share of the sphere (centre `light`, radius
 // `sphere`) seen from x; see `vals::math::tile_may_occlude` for why each test is safe.
@@ -136,51 +149,69 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         b = tangent_frame_b(point.normal);
     }
     var shares = Shares(0.0, 1.0, 0.0, 1.0);
-    for (var base = 0u; base < params.point_count; base += tile) {
-        var needed = false;
+    let tiles = (params.point_count + tile - 1u) / tile;
+    let span = tile * SUPER_TILE;
+    for (var super_base = 0u; super_base < params.point_count; super_base += span) {
+        // Uniform control flow around the barriers: every invocation runs every iteration and
+        // only the active ones vote.
+        var super_may = false;
         if (is_active) {
-            let bounds = occluder_bounds[2u * (base / tile)];
-            let max_disc_radius = occluder_bounds[2u * (base / tile) + 1u].x;
-            needed = tile_may_occlude(point.position, point.normal, t, b, lights.diffuse_position, lights.diffuse_sphere, bounds, max_disc_radius)
-                || (glossy_on && tile_may_occlude(point.position, point.normal, t, b, lights.glossy_position, lights.glossy_sphere, bounds, max_disc_radius));
+            super_may = slot_may_occlude(tiles + super_base / span, point.position, point.normal, t, b, lights, glossy_on);
         }
         if (lid == 0u) {
-            tile_needed = 0u;
+            super_needed = 0u;
         }
         workgroupBarrier();
-        if (needed) {
-            tile_needed = 1u;
+        if (super_may) {
+            super_needed = 1u;
         }
-        if (workgroupUniformLoad(&tile_needed) == 0u) {
+        if (workgroupUniformLoad(&super_needed) == 0u) {
             continue;
         }
-        let m = min(tile, params.point_count - base);
-        for (var i = lid; i < m; i += GROUP) {
-            let point_meta = points_meta[base + i];
-            let p = world_point(points_model[base + i], point_meta, instances[point_meta.y]);
-            tile_discs[i] = Disc(vec4<f32>(p.position, p.disc_radius), vec4<f32>(p.normal, 0.0));
-        }
-        workgroupBarrier();
-        if (is_active && needed) {
-            // The point's own disc is in the list: at distance 0 from the point,
-            // occluder_share gives it exactly 0, so it needs no test. Written out 4 at a time for llvmpipe's
-            // loop limit (see vals_gather.wgsl).
-            let rcv = Receiver(point.position, point.normal, t, b);
-            var j = 0u;
-            let full = m - m % 4u;
-            while (j < full) {
-                add_occluder(&shares, rcv, lights, tile_discs[j + 0u], glossy_on);
-                add_occluder(&shares, rcv, lights, tile_discs[j + 1u], glossy_on);
-                add_occluder(&shares, rcv, lights, tile_discs[j + 2u], glossy_on);
-                add_occluder(&shares, rcv, lights, tile_discs[j + 3u], glossy_on);
-                j += 4u;
+        let super_end = min(super_base + span, params.point_count);
+        for (var base = super_base; base < super_end; base += tile) {
+            var needed = false;
+            if (is_active && super_may) {
+                needed = slot_may_occlude(base / tile, point.position, point.normal, t, b, lights, glossy_on);
             }
-            while (j < m) {
-                add_occluder(&shares, rcv, lights, tile_discs[j], glossy_on);
-                j += 1u;
+            if (lid == 0u) {
+                tile_needed = 0u;
             }
+            workgroupBarrier();
+            if (needed) {
+                tile_needed = 1u;
+            }
+            if (workgroupUniformLoad(&tile_needed) == 0u) {
+                continue;
+            }
+            let m = min(tile, params.point_count - base);
+            for (var i = lid; i < m; i += GROUP) {
+                let point_meta = points_meta[base + i];
+                let p = world_point(points_model[base + i], point_meta, instances[point_meta.y]);
+                tile_discs[i] = Disc(vec4<f32>(p.position, p.disc_radius), vec4<f32>(p.normal, 0.0));
+            }
+            workgroupBarrier();
+            if (is_active && needed) {
+                // The point's own disc is in the list: at distance 0 from the point,
+                // occluder_share gives it exactly 0, so it needs no test. Written out 4 at a
+                // time for llvmpipe's loop limit (see vals_gather.wgsl).
+                let rcv = Receiver(point.position, point.normal, t, b);
+                var j = 0u;
+                let full = m - m % 4u;
+                while (j < full) {
+                    add_occluder(&shares, rcv, lights, tile_discs[j + 0u], glossy_on);
+                    add_occluder(&shares, rcv, lights, tile_discs[j + 1u], glossy_on);
+                    add_occluder(&shares, rcv, lights, tile_discs[j + 2u], glossy_on);
+                    add_occluder(&shares, rcv, lights, tile_discs[j + 3u], glossy_on);
+                    j += 4u;
+                }
+                while (j < m) {
+                    add_occluder(&shares, rcv, lights, tile_discs[j], glossy_on);
+                    j += 1u;
+                }
+            }
+            workgroupBarrier();
         }
-        workgroupBarrier();
     }
     if (!is_active) {
         return;

@@ -36,6 +36,19 @@ pub use crate::light::{
 /// `vals_occlusion.wgsl` and `vals_occluder_bounds.wgsl`).
 pub const OCCLUSION_TILE_MAX: u32 = 256;
 
+/// Tiles per occlusion super-tile (`SUPER_TILE` in `vals_occlusion.wgsl` and
+/// `vals_occluder_bounds.wgsl`): the pass tests a super-tile's bounds before its tiles'.
+pub const OCCLUSION_SUPER_TILE: u32 = 64;
+
+/// Tiles and super-tiles of `point_count` points at `tile` points a tile.
+pub fn occlusion_tiles(point_count: u32, tile: u32) -> (u32, u32) {
+    let tile = tile.clamp(1, OCCLUSION_TILE_MAX);
+    (
+        point_count.div_ceil(tile),
+        point_count.div_ceil(tile * OCCLUSION_SUPER_TILE),
+    )
+}
+
 /// Invocations per workgroup of the solution kernels (gather, renormalize, occlusion,
 /// interpolation: `@workgroup_size(64, 1, 1)`, checked against naga by
 /// `tests/shader_layout.rs`).
@@ -458,11 +471,12 @@ impl SparseGpu {
                 (&clamp_buffer, true),
             ],
         )?;
-        // Two vec4 per tile of occluder discs; at most one tile per point.
+        // Two vec4 per tile and super-tile of occluder discs; at most one tile per point.
+        let (most_tiles, most_supers) = occlusion_tiles(point_count.max(1), 1);
         let occluder_bounds = empty(
             &mut bytes,
             "occluder bounds",
-            32 * point_count.max(1) as u64,
+            32 * (most_tiles + most_supers) as u64,
         );
         let occluder_bounds_kernel = make(
             "occluder bounds",
@@ -639,25 +653,30 @@ impl SparseGpu {
     }
 
     /// The per-(point, cluster) visibility of the last recorded frame, V·255 per byte.
-    /// The occlusion pass's tile bounds of the last frame that ran it, per tile (`tile`
-    /// points each) as [`math::OccluderBounds`].
+    /// The occlusion pass's bounds of the last frame that ran it as
+    /// [`math::OccluderBounds`]: per tile (`tile` points each), then per super-tile
+    /// ([`OCCLUSION_SUPER_TILE`] tiles each).
     pub fn read_occluder_bounds(
         &self,
         ctx: &GpuContext,
         tile: u32,
-    ) -> Result<Vec<super::math::OccluderBounds>, GpuError> {
+    ) -> Result<
+        (
+            Vec<super::math::OccluderBounds>,
+            Vec<super::math::OccluderBounds>,
+        ),
+        GpuError,
+    > {
         let buffer = &self.occluder_bounds.buffers[3];
         let raw: Vec<[f32; 4]> = crate::gpu::read_buffer(ctx, buffer)?;
-        let tiles = self.point_count.div_ceil(tile.clamp(1, OCCLUSION_TILE_MAX)) as usize;
-        Ok(raw
-            .chunks_exact(2)
-            .take(tiles)
-            .map(|pair| super::math::OccluderBounds {
-                center: Vec3::new(pair[0][0], pair[0][1], pair[0][2]),
-                radius: pair[0][3],
-                max_disc_radius: pair[1][0],
-            })
-            .collect())
+        let (tiles, supers) = occlusion_tiles(self.point_count, tile);
+        let mut all = raw.chunks_exact(2).map(|pair| super::math::OccluderBounds {
+            center: Vec3::new(pair[0][0], pair[0][1], pair[0][2]),
+            radius: pair[0][3],
+            max_disc_radius: pair[1][0],
+        });
+        let tile_bounds = all.by_ref().take(tiles as usize).collect();
+        Ok((tile_bounds, all.take(supers as usize).collect()))
     }
 
     pub fn read_visibility(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
@@ -799,15 +818,17 @@ impl SparseGpu {
         }
         let disc_occlusion = matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union);
         if last >= Stage::Occlusion && disc_occlusion {
-            let tiles = self
-                .point_count
-                .div_ceil(options.tile.clamp(1, OCCLUSION_TILE_MAX));
+            let (tiles, supers) = occlusion_tiles(self.point_count, options.tile);
             let own = self
                 .occluder_bounds
                 .group
                 .as_ref()
                 .expect("bound at creation");
-            compute(&self.occluder_bounds, own, tiles.div_ceil(POINT_GROUP))?;
+            compute(
+                &self.occluder_bounds,
+                own,
+                (tiles + supers).div_ceil(POINT_GROUP),
+            )?;
             compute(&self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {
