@@ -129,8 +129,9 @@ struct MrArgs {
     /// RSM resolution of the virtual lights.
     #[arg(long, default_value_t = 128)]
     rsm: u32,
-    /// Rays per real pixel for the object's shadow and bounce on the real surfaces (0: off).
-    #[arg(long, default_value_t = 16)]
+    /// Rays per real pixel for the object's shadow and bounce on the real surfaces (0: off,
+    /// at most 4096).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(0..=4096))]
     differential_rays: u32,
     /// Output folder.
     #[arg(long)]

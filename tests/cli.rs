@@ -362,6 +362,53 @@ fn the_gpu_memory_cap_shrinks_budgets_and_refuses_what_cannot_fit() {
     );
 }
 
+/// A scene without one triangle has no sparse points and no vertices: the sparse method
+/// renders it (black, with a warning) instead of dispatching kernels over placeholder buffers,
+/// and a point count one mesh cannot hold is refused before placement (which would take
+/// minutes).
+#[test]
+fn sparse_handles_a_scene_without_faces_and_refuses_oversized_meshes_early() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-no-faces", "x.png");
+    let corpus = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/corpus/obj/ok-missing-faces.obj"
+    );
+    let output = valgi()
+        .args([
+            "render", "--scene", corpus, "--method", "sparse", "--width", "16", "--height", "16",
+            "--rsm", "8", "--out", &out,
+        ])
+        .output()
+        .expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(std::path::Path::new(&out).exists());
+    let started = std::time::Instant::now();
+    assert_refused(
+        &[
+            "render",
+            "--scene",
+            "cornell",
+            "--method",
+            "sparse",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--sparse-points",
+            "1048576",
+            "--out",
+            &out,
+        ],
+        &["--sparse-points 1048576", "mesh 'floor'", "65536"],
+    );
+    // Refused before placement: far below the minutes placement takes.
+    assert!(started.elapsed().as_secs() < 60, "{:?}", started.elapsed());
+}
+
 #[test]
 fn mr_refuses_a_sparse_point_count_out_of_range() {
     let dir = common::temp_dir("cli-mr-points");

@@ -271,7 +271,7 @@ fn agreement_with_tracer(
 fn the_bvh_follows_rigid_motion_without_a_rebuild() {
     let Some(ctx) = common::gpu() else { return };
     let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.5 }).unwrap();
-    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
+    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene).unwrap();
     let world = scene.world_from_node();
     bvh.update(&ctx, &scene, &world);
     // Segments across the box: the BVH agrees with the path tracer's BVH.
@@ -348,7 +348,7 @@ fn the_top_level_over_many_instances_finds_what_the_tracer_finds() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell_copies(6);
     let world = scene.world_from_node();
-    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene);
+    let mut bvh = valgi::light::bvh::SceneBvh::new(&ctx, &scene).unwrap();
     bvh.update(&ctx, &scene, &world);
     assert!(
         bvh.top_nodes.len() > 100,

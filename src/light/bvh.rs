@@ -16,7 +16,7 @@ use obvhs::BvhBuildParams;
 
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::resources::GpuBytes;
-use crate::gpu::GpuContext;
+use crate::gpu::{GpuContext, GpuError};
 use crate::scene::merge::flat_region_indices;
 use crate::scene::{Aabb, Material, Scene};
 
@@ -196,7 +196,7 @@ pub fn safe_inverse(d: Vec3) -> Vec3 {
 pub const STACK_DEPTH: usize = 64;
 
 impl SceneBvh {
-    pub fn new(ctx: &GpuContext, scene: &Scene) -> Self {
+    pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let mut nodes = Vec::new();
         let mut triangles = Vec::new();
         let mut meshes = Vec::with_capacity(scene.meshes.len());
@@ -234,6 +234,17 @@ impl SceneBvh {
         let instances = vec![BvhInstance::default(); scene.instances.len().max(1)];
         // A binary tree over n leaves has at most 2n − 1 nodes.
         let top_nodes = vec![UNREACHABLE_LEAF; 2 * scene.instances.len().max(1)];
+        for (what, size) in [
+            ("nodes", std::mem::size_of_val(nodes.as_slice())),
+            ("triangles", std::mem::size_of_val(triangles.as_slice())),
+            ("instances", std::mem::size_of_val(instances.as_slice())),
+        ] {
+            ctx.check_storage_buffer(
+                &format!("the shadow-ray BVH {what} of scene '{}'", scene.name),
+                size as u64,
+                "Use a coarser --max-edge, or a scene with fewer triangles or instances",
+            )?;
+        }
         let mut bytes = GpuBytes::default();
         let init = |bytes: &mut GpuBytes, label: &str, data: &[u8]| {
             use wgpu::util::DeviceExt;
@@ -268,7 +279,7 @@ impl SceneBvh {
                 &top_buffer,
             ],
         );
-        Self {
+        Ok(Self {
             nodes,
             triangles,
             meshes,
@@ -282,7 +293,7 @@ impl SceneBvh {
             bytes,
             layout,
             group,
-        }
+        })
     }
 
     /// Places the instances for this frame and builds the top level over them (CPU records

@@ -980,6 +980,16 @@ impl<'a> Importer<'a> {
             .name()
             .map(str::to_string)
             .unwrap_or_else(|| node_name.to_string());
+        // The gltf crate's projection() unwraps the object its `type` names; a file whose type
+        // and object disagree would panic there.
+        let raw = &self.raw["cameras"][camera.index()];
+        let kind = raw["type"].as_str().unwrap_or("");
+        if !raw[kind].is_object() {
+            self.warn(format!(
+                "camera '{name}' has type '{kind}' but no '{kind}' object; skipped"
+            ));
+            return;
+        }
         match camera.projection() {
             gltf::camera::Projection::Perspective(p) => {
                 let yfov = p.yfov();

@@ -297,6 +297,15 @@ impl SparseMethod {
             settings.rsm,
             val_source.as_ref().map(|s| s.external()),
         )?;
+        if let Some((mesh, count)) = points::oversized_mesh(scene, settings.sparse_points) {
+            return Err(RenderError::Settings(format!(
+                "--sparse-points {}: mesh '{mesh}' of scene '{}' would get {count} sparse \
+                 points; links address at most {} per mesh: lower --sparse-points",
+                settings.sparse_points,
+                scene.name,
+                points::MAX_POINTS_PER_MESH
+            )));
+        }
         let started = Instant::now();
         let (points, meshes_computed) =
             points::scene_points(scene, settings.sparse_points, settings.seed);

@@ -353,6 +353,24 @@ pub fn is_two_sided(scene: &Scene, mesh: &Mesh) -> bool {
         .is_some_and(|m| m.double_sided)
 }
 
+/// Most sparse points one mesh may hold: vertex links address them with 16 bits.
+pub const MAX_POINTS_PER_MESH: usize = 1 << 16;
+
+/// The first mesh that `total` points would give more than [`MAX_POINTS_PER_MESH`] (both
+/// sides of a two-sided mesh count), with its count — checked before any placement, which at
+/// such counts takes minutes.
+pub fn oversized_mesh(scene: &Scene, total: usize) -> Option<(&str, usize)> {
+    scene
+        .meshes
+        .iter()
+        .zip(points_per_mesh(scene, total))
+        .map(|(mesh, count)| {
+            let sides = if is_two_sided(scene, mesh) { 2 } else { 1 };
+            (mesh.name.as_str(), count * sides)
+        })
+        .find(|&(_, count)| count > MAX_POINTS_PER_MESH)
+}
+
 /// Points for every mesh of the scene, from the process-wide cache where this mesh was
 /// already processed with the same count and seed. Returns the points and how many meshes
 /// were computed (not cached).

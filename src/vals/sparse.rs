@@ -521,7 +521,7 @@ impl SparseGpu {
         )?;
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
-        let bvh = SceneBvh::new(ctx, scene);
+        let bvh = SceneBvh::new(ctx, scene)?;
         if bvh.max_depth() > crate::light::bvh::STACK_DEPTH {
             return Err(RenderError::Settings(format!(
                 "scene '{}': a mesh BVH is {} levels deep; the visibility rays' stack holds {}",
@@ -747,7 +747,7 @@ impl SparseGpu {
         last: Stage,
     ) -> Result<(), GpuError> {
         passes.encoder().clear_buffer(&self.clamp_buffer, 0, None);
-        if options.occlusion == OcclusionMode::Rays {
+        if options.occlusion == OcclusionMode::Rays && self.point_count > 0 {
             passes.encoder().copy_buffer_to_buffer(
                 &self.visibility_buffer,
                 0,
@@ -805,6 +805,11 @@ impl SparseGpu {
         let points = self.point_count.div_ceil(POINT_GROUP);
         let max_groups = self.max_groups_per_dimension;
         let mut compute = |kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
+            if n == 0 {
+                // No points or no vertices (a scene without faces): nothing to do, and the
+                // placeholder buffers bound in their place are smaller than one element.
+                return Ok(());
+            }
             let (x, y) = linear_groups(n, max_groups);
             passes.compute(kernel.label, |pass| {
                 pass.set_pipeline(&kernel.pipeline);
