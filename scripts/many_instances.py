@@ -44,7 +44,7 @@ def box_mesh():
     return positions, normals, indices
 
 
-def scene(count):
+def scene(count, light_height=None):
     positions, normals, indices = box_mesh()
     blob = b"".join(struct.pack("<3f", *p) for p in positions)
     blob += b"".join(struct.pack("<3f", *n) for n in normals)
@@ -59,7 +59,8 @@ def scene(count):
         nodes.append({"mesh": 0, "translation": [x, 0.5, z]})
     # The floor: the same box, flattened and spread under the grid.
     nodes.append({"mesh": 1, "translation": [0, -0.05, 0], "scale": [extent + 2, 0.1, extent + 2]})
-    height = extent
+    # By default the light rises with the grid, so it lights all of it.
+    height = light_height or extent
     nodes.append({
         "translation": [0, height, 0],
         "rotation": [-math.sqrt(0.5), 0, 0, math.sqrt(0.5)],  # look down −y
@@ -109,6 +110,8 @@ def main():
                         help="valgi's --max-edge: a box face is split into (1/max-edge)² quads")
     parser.add_argument("--points-per-instance", type=int, default=64,
                         help="valgi's --sparse-points is this times the instance count")
+    parser.add_argument("--light-height", type=float, default=None,
+                        help="spot light height in m (default: the grid's side, lighting all of it)")
     parser.add_argument("--out", default="out/many-instances")
     parser.add_argument("--valgi", default=str(ROOT / "target/release/valgi"))
     args = parser.parse_args()
@@ -119,7 +122,7 @@ def main():
     failed = 0
     for count in [int(c) for c in args.counts.split(",")]:
         path = out / f"instances-{count}.gltf"
-        path.write_text(json.dumps(scene(count)))
+        path.write_text(json.dumps(scene(count, args.light_height)))
         for mode in args.modes.split(","):
             command = [args.valgi, "render", "--scene", str(path), "--method", "sparse",
                        "--occlusion", mode, "--max-edge", str(args.max_edge),
