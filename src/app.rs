@@ -501,12 +501,14 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
 /// The tessellation a scene was loaded with and why.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Tessellation {
-    /// Longest triangle edge asked for, metres (the triangle budget may raise it; the
-    /// scene's warnings say so).
+    /// Longest triangle edge asked for, metres.
     pub max_edge: f32,
     /// `"option"` (given), `"sparse spacing"` (an imported scene for a sparse method) or
     /// `"default"` (the built-in scenes' 5 cm).
     pub source: &'static str,
+    /// The edge the meshes were refined to: `max_edge` unless the triangle budget raised it
+    /// (the scene's warnings say so); `None` when nothing was refined.
+    pub used_max_edge: Option<f32>,
 }
 
 impl Tessellation {
@@ -514,6 +516,10 @@ impl Tessellation {
         let mut map = serde_json::Map::new();
         map.insert("max_edge".into(), serde_json::json!(self.max_edge));
         map.insert("max_edge_source".into(), serde_json::json!(self.source));
+        map.insert(
+            "max_edge_used".into(),
+            serde_json::json!(self.used_max_edge),
+        );
         map
     }
 }
@@ -538,18 +544,11 @@ pub fn load_scene(
         allow_external_paths,
         emitter_lights,
     };
-    if let Some(max_edge) = max_edge {
-        let scene = scene::load_with(spec, &params)?;
-        return Ok((
-            scene,
-            Tessellation {
-                max_edge,
-                source: "option",
-            },
-        ));
-    }
     let mut failure = None;
-    let (scene, chosen) = scene::load_choosing_max_edge(spec, &params, |raw| {
+    let (scene, edges) = scene::load_choosing_max_edge(spec, &params, |raw| {
+        if max_edge.is_some() {
+            return None;
+        }
         let mut finest: Option<f32> = None;
         for (method, options) in methods {
             if !crate::vals::uses_sparse_points(method) {
@@ -566,17 +565,17 @@ pub fn load_scene(
     if let Some(e) = failure {
         return Err(e.into());
     }
+    let (max_edge, source) = match (max_edge, edges.chosen) {
+        (Some(given), _) => (given, "option"),
+        (None, Some(spacing)) => (spacing, "sparse spacing"),
+        (None, None) => (fallback, "default"),
+    };
     Ok((
         scene,
-        match chosen {
-            Some(max_edge) => Tessellation {
-                max_edge,
-                source: "sparse spacing",
-            },
-            None => Tessellation {
-                max_edge: fallback,
-                source: "default",
-            },
+        Tessellation {
+            max_edge,
+            source,
+            used_max_edge: edges.used,
         },
     ))
 }

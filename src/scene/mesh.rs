@@ -264,19 +264,80 @@ pub fn tessellate(mesh: &mut Mesh, max_edge: f32) -> bool {
 /// Triangle budget of [`tessellate_instanced`] over all of a scene's meshes.
 pub const MAX_IMPORTED_TRIANGLES: usize = 2_000_000;
 
+/// Number of triangles [`tessellate`] makes of the triangle `corners` for an edge bound
+/// whose square is `max2`, counting down `budget`; `None` once the budget runs out.
+///
+/// Exact, because refinement is local: whether an edge is split depends only on its length,
+/// which both triangles on it see alike, and the midpoint is the same `(a + b) / 2` from
+/// either side; so each input triangle refines as if alone, through [`split_triangle`] itself.
+fn refined_triangle_count(corners: [Vec3; 3], max2: f32, budget: usize) -> Option<usize> {
+    let mut count = 0usize;
+    let mut stack = vec![corners];
+    let mut children = Vec::with_capacity(4);
+    while let Some(p) = stack.pop() {
+        let long = |k: usize| (p[k] - p[(k + 1) % 3]).length_squared() > max2;
+        let marks = [long(0), long(1), long(2)];
+        if !marks.iter().any(|&m| m) {
+            count += 1;
+            if count > budget {
+                return None;
+            }
+            continue;
+        }
+        let local = [
+            p[0],
+            p[1],
+            p[2],
+            (p[0] + p[1]) * 0.5,
+            (p[1] + p[2]) * 0.5,
+            (p[2] + p[0]) * 0.5,
+        ];
+        let m = [0, 1, 2].map(|k| marks[k].then_some(3 + k as u32));
+        children.clear();
+        split_triangle([0, 1, 2], m, &local, &mut children);
+        stack.extend(children.iter().map(|c| c.map(|i| local[i as usize])));
+    }
+    Some(count)
+}
+
+/// What [`tessellate_instanced`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct TessellationOutcome {
+    /// The world-space edge bound the meshes were refined to: the one asked for, or the
+    /// shortest that keeps the scene within [`MAX_IMPORTED_TRIANGLES`]. `None` when nothing
+    /// was tessellated (an invalid bound).
+    pub used_max_edge: Option<f32>,
+    /// Triangles over all meshes afterwards.
+    pub triangles: usize,
+    /// Warnings, each prefixed with the source.
+    pub warnings: Vec<String>,
+}
+
 /// Refines every instanced mesh of `scene` so that no edge is longer than `max_edge` metres in
 /// world space (at the rest pose): a mesh placed with scale s is tessellated to `max_edge / s`
 /// in its model space, s being the largest axis scale of any instance of it. When the refined
-/// scene would exceed [`MAX_IMPORTED_TRIANGLES`] (estimated from the world-space areas and edge
-/// lengths before any work), the edge length is raised to fit and a warning says so. Returns
-/// the warnings, each prefixed with `source`.
-pub fn tessellate_instanced(scene: &mut Scene, max_edge: f32, source: &str) -> Vec<String> {
-    let mut warnings = Vec::new();
+/// scene would exceed [`MAX_IMPORTED_TRIANGLES`] (counted exactly, before any refinement, by
+/// [`refined_triangle_count`]), the edge is raised to the shortest that fits, within 1 %, and
+/// a warning says so.
+pub fn tessellate_instanced(scene: &mut Scene, max_edge: f32, source: &str) -> TessellationOutcome {
+    tessellate_within(scene, max_edge, source, MAX_IMPORTED_TRIANGLES)
+}
+
+/// [`tessellate_instanced`] with a triangle budget of `triangle_budget`.
+fn tessellate_within(
+    scene: &mut Scene,
+    max_edge: f32,
+    source: &str,
+    triangle_budget: usize,
+) -> TessellationOutcome {
+    let mut outcome = TessellationOutcome::default();
+    let existing: usize = scene.meshes.iter().map(|m| m.indices.len() / 3).sum();
     if !(max_edge.is_finite() && max_edge > 0.0) {
-        warnings.push(format!(
+        outcome.warnings.push(format!(
             "{source}: max_edge {max_edge} is not a positive length; meshes not tessellated"
         ));
-        return warnings;
+        outcome.triangles = existing;
+        return outcome;
     }
     let world = scene.world_from_node();
     let mut scale = vec![0.0f32; scene.meshes.len()];
@@ -290,38 +351,65 @@ pub fn tessellate_instanced(scene: &mut Scene, max_edge: f32, source: &str) -> V
             *s = s.max(largest);
         }
     }
-    // Midpoint refinement to edges ≤ L leaves triangles with edges in (L/2, L]; 0.2 L² is a
-    // typical area among them, and a sliver needs about (longest edge / L) pieces.
-    let estimate = |edge: f64| -> f64 {
-        let mut total = 0.0f64;
+    // Meshes no instance places are left as they are, and count as they are.
+    let unplaced: usize = scene
+        .meshes
+        .iter()
+        .zip(&scale)
+        .filter(|(_, &s)| s <= 0.0)
+        .map(|(m, _)| m.indices.len() / 3)
+        .sum();
+    let budget = triangle_budget.saturating_sub(unplaced);
+    // Triangles the placed meshes would have at world edge `edge`; `None` past the budget.
+    let count = |edge: f64| -> Option<usize> {
+        let mut total = 0usize;
         for (mesh, &s) in scene.meshes.iter().zip(&scale) {
             if s <= 0.0 {
                 continue;
             }
-            let s = s as f64;
+            let model_edge = (edge / s as f64) as f32;
+            let max2 = model_edge * model_edge;
             for t in mesh.indices.chunks_exact(3) {
                 let Some([a, b, c]) = triangle(t, mesh.positions.len()) else {
                     continue;
                 };
-                let (pa, pb, pc) = (mesh.positions[a], mesh.positions[b], mesh.positions[c]);
-                let area = 0.5 * (pb - pa).cross(pc - pa).length() as f64 * s * s;
-                let longest = (pb - pa)
-                    .length()
-                    .max((pc - pb).length())
-                    .max((pa - pc).length()) as f64
-                    * s;
-                total += (area / (0.2 * edge * edge)).max(longest / edge).max(1.0);
+                let corners = [mesh.positions[a], mesh.positions[b], mesh.positions[c]];
+                total += refined_triangle_count(corners, max2, budget.checked_sub(total)?)?;
             }
         }
-        total
+        Some(total)
     };
+    if count(f64::INFINITY).is_none() {
+        // Over budget before any refinement: refining could only add to it.
+        outcome.warnings.push(format!(
+            "{source}: the meshes already have {existing} triangles, over the budget of \
+             {triangle_budget}; not tessellated (--max-edge {max_edge} m not applied)"
+        ));
+        outcome.triangles = existing;
+        return outcome;
+    }
     let mut edge = max_edge as f64;
-    let predicted = estimate(edge);
-    if predicted > MAX_IMPORTED_TRIANGLES as f64 {
-        edge *= (predicted / MAX_IMPORTED_TRIANGLES as f64).sqrt();
-        warnings.push(format!(
-            "{source}: --max-edge {max_edge} m would refine the meshes to about {predicted:.0} \
-             triangles (budget {MAX_IMPORTED_TRIANGLES}); using {edge:.3} m instead"
+    if count(edge).is_none() {
+        // Bracket the shortest edge that fits, then bisect (in log space) to 1 %. An edge
+        // longer than every edge of the scene fits (checked above), so the doubling ends.
+        let mut low = edge;
+        let mut high = edge * 2.0;
+        while count(high).is_none() && high < f64::MAX / 2.0 {
+            low = high;
+            high *= 2.0;
+        }
+        while high / low > 1.01 {
+            let mid = (low * high).sqrt();
+            if count(mid).is_some() {
+                high = mid;
+            } else {
+                low = mid;
+            }
+        }
+        edge = high;
+        outcome.warnings.push(format!(
+            "{source}: --max-edge {max_edge} m would refine the meshes past the budget of \
+             {triangle_budget} triangles; using {edge:.4} m, the shortest edge that fits"
         ));
     }
     let mut incomplete = Vec::new();
@@ -334,12 +422,14 @@ pub fn tessellate_instanced(scene: &mut Scene, max_edge: f32, source: &str) -> V
         }
     }
     if !incomplete.is_empty() {
-        warnings.push(format!(
-            "{source}: mesh(es) {} keep edges longer than {edge:.3} m (triangle cap reached)",
+        outcome.warnings.push(format!(
+            "{source}: mesh(es) {} keep edges longer than {edge:.4} m (triangle cap reached)",
             incomplete.join(", ")
         ));
     }
-    warnings
+    outcome.used_max_edge = Some(edge as f32);
+    outcome.triangles = scene.meshes.iter().map(|m| m.indices.len() / 3).sum();
+    outcome
 }
 
 /// Re-triangulates triangle `t` whose edges k = (t[k], t[k+1]) have midpoints `m[k]` where
@@ -607,6 +697,7 @@ pub fn longest_edge(mesh: &Mesh) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::{Instance, Node, Trs};
     use std::collections::HashMap;
 
     /// A closed unit cube with shared corner vertices (8 vertices, 12 outward triangles).
@@ -733,6 +824,106 @@ mod tests {
         for n in &mesh.normals {
             assert!((n.length() - 1.0).abs() < 1e-5);
         }
+    }
+
+    /// The cube, sheared and stretched so its triangles have unequal edges, plus a sliver.
+    fn lopsided_mesh() -> Mesh {
+        let mut mesh = closed_cube(1.0);
+        for p in &mut mesh.positions {
+            *p = Vec3::new(p.x * 2.3 + 0.4 * p.y, p.y * 0.7, p.z * 1.1 + 0.3 * p.x);
+        }
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend([
+            Vec3::new(0.0, 3.0, 0.0),
+            Vec3::new(4.0, 3.0, 0.0),
+            Vec3::new(2.0, 3.05, 0.0),
+        ]);
+        mesh.indices.extend([base, base + 1, base + 2]);
+        mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
+        mesh.uv0 = vec![Vec2::ZERO; mesh.positions.len()];
+        mesh
+    }
+
+    #[test]
+    fn refined_triangle_count_is_what_tessellation_makes() {
+        for edge in [5.0, 1.0, 0.61, 0.3, 0.137, 0.05] {
+            let original = lopsided_mesh();
+            let mut refined = original.clone();
+            assert!(tessellate(&mut refined, edge));
+            let counted: usize = original
+                .indices
+                .chunks_exact(3)
+                .map(|t| {
+                    let p = |i: u32| original.positions[i as usize];
+                    refined_triangle_count([p(t[0]), p(t[1]), p(t[2])], edge * edge, usize::MAX)
+                        .unwrap()
+                })
+                .sum();
+            assert_eq!(counted, refined.triangle_count(), "edge {edge}");
+        }
+        // The budget stops the count as soon as it is exceeded.
+        let p = [Vec3::ZERO, Vec3::X, Vec3::Y];
+        let all = refined_triangle_count(p, 0.01, usize::MAX).unwrap();
+        assert!(all > 100);
+        assert_eq!(refined_triangle_count(p, 0.01, all), Some(all));
+        assert_eq!(refined_triangle_count(p, 0.01, all - 1), None);
+    }
+
+    fn scene_of(mesh: Mesh, scale: f32) -> Scene {
+        Scene {
+            nodes: vec![Node {
+                name: "placed".into(),
+                parent: None,
+                local: Trs {
+                    scale: Vec3::splat(scale),
+                    ..Trs::default()
+                },
+            }],
+            meshes: vec![mesh],
+            instances: vec![Instance { mesh: 0, node: 0 }],
+            ..Scene::default()
+        }
+    }
+
+    #[test]
+    fn an_edge_too_fine_for_the_budget_is_raised_to_the_shortest_that_fits() {
+        let budget = 3000;
+        let mut scene = scene_of(lopsided_mesh(), 2.0);
+        let outcome = tessellate_within(&mut scene, 0.01, "test.gltf", budget);
+        let used = outcome.used_max_edge.unwrap();
+        assert!(used > 0.01, "used {used}");
+        assert_eq!(outcome.triangles, scene.meshes[0].triangle_count());
+        assert!(
+            outcome.triangles <= budget,
+            "{} triangles",
+            outcome.triangles
+        );
+        assert!(outcome.warnings.iter().any(|w| w.contains("test.gltf")
+            && w.contains("3000")
+            && w.contains("shortest edge that fits")));
+        // Model-space edges are the world edge over the instance's scale of 2.
+        assert!(longest_edge(&scene.meshes[0]) <= used / 2.0 + 1e-6);
+        // Tight: 2 % finer no longer fits.
+        let mut finer = lopsided_mesh();
+        tessellate(&mut finer, used / 1.02 / 2.0);
+        assert!(
+            finer.triangle_count() > budget,
+            "{}",
+            finer.triangle_count()
+        );
+
+        // Within the budget, the edge asked for is the one used, without a warning.
+        let mut scene = scene_of(lopsided_mesh(), 2.0);
+        let outcome = tessellate_within(&mut scene, 0.5, "test.gltf", budget);
+        assert_eq!(outcome.used_max_edge, Some(0.5));
+        assert!(outcome.warnings.is_empty(), "{:?}", outcome.warnings);
+
+        // Already over the budget: left alone, with a warning.
+        let mut scene = scene_of(lopsided_mesh(), 2.0);
+        let outcome = tessellate_within(&mut scene, 0.5, "test.gltf", 5);
+        assert_eq!(outcome.used_max_edge, None);
+        assert_eq!(outcome.triangles, 13);
+        assert!(outcome.warnings[0].contains("already have 13 triangles"));
     }
 
     #[test]

@@ -758,15 +758,25 @@ pub fn is_file_spec(spec: &str) -> bool {
     std::path::Path::new(spec).extension().is_some() || spec.contains('/') || spec.contains('\\')
 }
 
+/// The tessellation [`load_choosing_max_edge`] settled on.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EdgeChoice {
+    /// What the `choose` callback returned: always `None` for built-in scenes, whose
+    /// tessellation is `params.max_edge`.
+    pub chosen: Option<f32>,
+    /// The world-space edge the meshes were refined to: the one asked for unless the triangle
+    /// budget raised it; `None` when nothing was refined.
+    pub used: Option<f32>,
+}
+
 /// [`load_with`], except that an imported scene's tessellation may be chosen from the scene
 /// as read: `choose` sees it before tessellation and returns the longest edge to refine to,
-/// or `None` for `params.max_edge`. Returns the scene and what `choose` returned (always
-/// `None` for built-in scenes, whose tessellation is `params.max_edge`).
+/// or `None` for `params.max_edge`. Returns the scene and the edges chosen and used.
 pub fn load_choosing_max_edge(
     spec: &str,
     params: &LoadParams,
     choose: impl FnOnce(&Scene) -> Option<f32>,
-) -> Result<(Scene, Option<f32>), SceneError> {
+) -> Result<(Scene, EdgeChoice), SceneError> {
     let resolved = resolve_alias(spec)?;
     let spec = resolved.as_str();
     let path = std::path::Path::new(spec);
@@ -785,7 +795,13 @@ pub fn load_choosing_max_edge(
             },
         )?;
         emitters::add_emitter_lights(&mut scene, params.emitter_lights);
-        return Ok((scene, None));
+        return Ok((
+            scene,
+            EdgeChoice {
+                chosen: None,
+                used: Some(params.max_edge),
+            },
+        ));
     }
     let policy = params.policy();
     let mut scene = match extension.as_deref() {
@@ -813,10 +829,16 @@ pub fn load_choosing_max_edge(
         }
     };
     let chosen = choose(&scene);
-    let warnings = mesh::tessellate_instanced(&mut scene, chosen.unwrap_or(params.max_edge), spec);
-    scene.warnings.extend(warnings);
+    let outcome = mesh::tessellate_instanced(&mut scene, chosen.unwrap_or(params.max_edge), spec);
+    scene.warnings.extend(outcome.warnings);
     emitters::add_emitter_lights(&mut scene, params.emitter_lights);
-    Ok((scene, chosen))
+    Ok((
+        scene,
+        EdgeChoice {
+            chosen,
+            used: outcome.used_max_edge,
+        },
+    ))
 }
 
 #[cfg(test)]
