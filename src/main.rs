@@ -146,6 +146,10 @@ struct SceneEditArgs {
     /// (W/m², travelling along D) | headlight:INTENSITY[,R,G,B] (at the camera).
     #[arg(long = "light", value_name = "SPEC", value_parser = parse_light, allow_hyphen_values = true)]
     lights: Vec<valgi::scene::edits::LightSpec>,
+    /// Drop the scene's own lights and emissive surfaces, so that only the --light options
+    /// light it (in every method and in the reference).
+    #[arg(long)]
+    no_scene_lights: bool,
     /// Camera position X,Y,Z in world space (looks at --camera-target, default the scene's
     /// centre).
     #[arg(long, value_name = "X,Y,Z", value_parser = parse_eye, allow_hyphen_values = true)]
@@ -187,6 +191,7 @@ impl SceneEditArgs {
                 target: self.camera_target,
                 yfov_degrees: self.fov,
             },
+            drop_scene_lights: self.no_scene_lights,
         }
     }
 }

@@ -174,6 +174,20 @@ pub fn parse_point(option: &str, text: &str) -> Result<Vec3, String> {
 pub struct SceneEdits {
     pub lights: Vec<LightSpec>,
     pub camera: CameraEdit,
+    /// Drop the scene's own lights and emission before adding [`SceneEdits::lights`]
+    /// (`--no-scene-lights`): the asset is lit by the command line's lights alone, in every
+    /// method and in the reference (which would otherwise still sample emissive triangles).
+    pub drop_scene_lights: bool,
+}
+
+/// Removes every light of `scene` (punctual lights and the proxies of emissive surfaces) and
+/// every material's emission, so that nothing but lights added afterwards lights it.
+fn drop_lights_and_emission(scene: &mut Scene) {
+    scene.lights.clear();
+    for material in &mut scene.materials {
+        material.emissive = Vec3::ZERO;
+        material.emissive_texture = None;
+    }
 }
 
 /// Name of the camera [`SceneEdits::apply`] adds.
@@ -181,7 +195,7 @@ pub const EDIT_CAMERA_NAME: &str = "command line";
 
 impl SceneEdits {
     pub fn is_empty(&self) -> bool {
-        self.lights.is_empty() && self.camera.is_empty()
+        self.lights.is_empty() && self.camera.is_empty() && !self.drop_scene_lights
     }
 
     /// Adds the lights and the camera to `scene`. `selector` is the camera the user chose (as
@@ -193,6 +207,9 @@ impl SceneEdits {
         selector: Option<&str>,
         aspect: f32,
     ) -> Result<Option<String>, SceneError> {
+        if self.drop_scene_lights {
+            drop_lights_and_emission(scene);
+        }
         let mut selector = selector.map(str::to_string);
         let needs_camera_node = self
             .lights
@@ -453,7 +470,7 @@ mod tests {
                     .unwrap(),
                 "sun:1,-1,0,2".parse().unwrap(),
             ],
-            camera: CameraEdit::default(),
+            ..SceneEdits::default()
         };
         assert_eq!(edits.apply(&mut scene, None, 1.0).unwrap(), None);
         let world = scene.world_from_node();
@@ -469,6 +486,27 @@ mod tests {
     }
 
     #[test]
+    fn dropping_scene_lights_leaves_only_the_added_ones_and_no_emission() {
+        let params = crate::scene::LoadParams::default();
+        let mut scene = crate::scene::load_with("emissive-quad", &params).unwrap();
+        assert!(!scene.lights.is_empty(), "the quad's proxy lights");
+        assert!(scene.materials.iter().any(|m| m.emissive != Vec3::ZERO));
+        let edits = SceneEdits {
+            lights: vec!["point:0,1,0,2".parse().unwrap()],
+            drop_scene_lights: true,
+            ..SceneEdits::default()
+        };
+        assert!(!edits.is_empty());
+        edits.apply(&mut scene, None, 1.0).unwrap();
+        assert_eq!(scene.lights.len(), 1);
+        assert_eq!(scene.lights[0].kind, LightKind::Point);
+        assert!(scene
+            .materials
+            .iter()
+            .all(|m| m.emissive == Vec3::ZERO && m.emissive_texture.is_none()));
+    }
+
+    #[test]
     fn camera_eye_and_target_give_a_camera_looking_there() {
         let mut scene = cornell();
         let edits = SceneEdits {
@@ -478,6 +516,7 @@ mod tests {
                 target: Some(Vec3::new(0.0, 0.25, 0.0)),
                 yfov_degrees: Some(30.0),
             },
+            ..SceneEdits::default()
         };
         let selector = edits.apply(&mut scene, Some("0"), 1.5).unwrap();
         let world = scene.world_from_node();
@@ -507,6 +546,7 @@ mod tests {
                 yfov_degrees: Some(20.0),
                 ..CameraEdit::default()
             },
+            ..SceneEdits::default()
         };
         let selector = edits.apply(&mut scene, None, 1.0).unwrap();
         assert_eq!(scene.cameras.len(), cameras, "no camera added");
@@ -521,6 +561,7 @@ mod tests {
                 yfov_degrees: Some(0.0),
                 ..CameraEdit::default()
             },
+            ..SceneEdits::default()
         };
         assert!(bad
             .apply(&mut scene, None, 1.0)
