@@ -337,8 +337,9 @@ struct ViewArgs {
     /// Show a two-view rig (--views stereo) as a red/cyan anaglyph (switchable in the panel).
     #[arg(long)]
     anaglyph: bool,
-    /// With --frames: after the first frame change this method option as the panel would,
-    /// and run on until the rebuild is in (the report times it and the UI frames meanwhile).
+    /// With --frames: after the first frame change this method option (or `method=NAME`) as
+    /// the panel would, and run on until the rebuild is in (the report times it and the UI
+    /// frames meanwhile).
     #[arg(long, value_name = "KEY=VALUE", requires = "frames")]
     change_option: Option<String>,
     #[arg(long)]

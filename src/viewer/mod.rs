@@ -91,8 +91,9 @@ pub struct ViewerRequest {
     pub screenshot: Option<PathBuf>,
     /// Show a two-view rig as a red/cyan anaglyph instead of side by side.
     pub anaglyph: bool,
-    /// Scripted runs: after the first frame, change this method option (key, value) as the
-    /// panel would, and run on until the rebuild is in (the report gives its figures).
+    /// Scripted runs: after the first frame, change this method option (key, value; the key
+    /// `method` switches the method) as the panel would, and run on until the rebuild is in
+    /// (the report gives its figures).
     pub change_option: Option<(String, String)>,
 }
 
@@ -728,10 +729,8 @@ impl Running {
         };
         let previous = std::mem::replace(&mut self.last_redraw, now);
         // Charged before the poll: the interval in which the rebuild landed was waited
-        // through while it ran.
-        if self.method.is_some() {
-            self.state.rebuilds.note_frame(previous, now);
-        }
+        // through while it ran. The first build counts too (the panel is drawn meanwhile).
+        self.state.rebuilds.note_frame(previous, now);
         self.poll_rebuild();
         self.walk(dt);
         if self.frames_done > 0 {
@@ -870,17 +869,22 @@ impl Running {
         }
         if scripted && self.frames_done == 1 && drawing {
             if let Some((key, value)) = self.request.change_option.clone() {
-                let spec = method::entry(self.method_name)?
-                    .options
-                    .iter()
-                    .find(|o| o.name == key)
-                    .ok_or_else(|| {
-                        RenderError::Settings(format!(
-                            "--change-option: method '{}' has no option '{key}'",
-                            self.method_name
-                        ))
-                    })?;
-                actions.push(Action::SetOption(spec.name, value));
+                if key == "method" {
+                    // The panel's method menu: a new method with its default options.
+                    actions.push(Action::SetMethod(method::entry(&value)?.name));
+                } else {
+                    let spec = method::entry(self.method_name)?
+                        .options
+                        .iter()
+                        .find(|o| o.name == key)
+                        .ok_or_else(|| {
+                            RenderError::Settings(format!(
+                                "--change-option: method '{}' has no option '{key}'",
+                                self.method_name
+                            ))
+                        })?;
+                    actions.push(Action::SetOption(spec.name, value));
+                }
             }
         }
         for action in actions {
