@@ -339,6 +339,14 @@ struct ViewArgs {
     /// Write the last frame's window to this PNG (with --frames).
     #[arg(long, requires = "frames")]
     screenshot: Option<PathBuf>,
+    /// Show a two-view rig (--views stereo) as a red/cyan anaglyph (switchable in the panel).
+    #[arg(long)]
+    anaglyph: bool,
+    /// With --frames: after the first frame change this method option (or `method=NAME`) as
+    /// the panel would, and run on until the rebuild is in (the report times it and the UI
+    /// frames meanwhile).
+    #[arg(long, value_name = "KEY=VALUE", requires = "frames")]
+    change_option: Option<String>,
     #[arg(long)]
     allow_external_paths: bool,
     /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
@@ -798,6 +806,18 @@ fn main() -> ExitCode {
                     exposure: args.exposure,
                     frames: args.frames,
                     screenshot: args.screenshot,
+                    anaglyph: args.anaglyph,
+                    change_option: match args.change_option {
+                        None => None,
+                        Some(kv) => match kv.split_once('=') {
+                            Some((k, v)) => Some((k.to_string(), v.to_string())),
+                            None => {
+                                return Err(valgi::raster::RenderError::Settings(format!(
+                                    "--change-option {kv}: expected KEY=VALUE"
+                                )))
+                            }
+                        },
+                    },
                 })
             })();
             match request

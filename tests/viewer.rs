@@ -82,7 +82,17 @@ fn view_screenshot_matches_render_in_each_view() {
         return;
     }
     let dir = common::temp_dir("viewer");
-    for rig in ["mono", "stereo"] {
+    let cave = format!(
+        "cave:{}",
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("data/cave/cornell_4wall.json")
+            .display()
+    );
+    for (rig, views) in [
+        ("mono", "mono"),
+        ("stereo", "stereo"),
+        ("cave", cave.as_str()),
+    ] {
         let shot = dir.join(format!("shot_{rig}.png"));
         let base = [
             "--scene",
@@ -96,7 +106,7 @@ fn view_screenshot_matches_render_in_each_view() {
             "--shadow-res",
             "256",
             "--views",
-            rig,
+            views,
         ];
         let mut view_args = vec!["view"];
         view_args.extend(base);
@@ -117,15 +127,21 @@ fn view_screenshot_matches_render_in_each_view() {
         run(render);
 
         let shot = load(&shot);
-        let names: &[&str] = if rig == "mono" {
-            &["render_mono.png"]
-        } else {
-            &["render_stereo_left.png", "render_stereo_right.png"]
+        // A CAVE rig is shown as its walls side by side, in the file's order.
+        let names: &[&str] = match rig {
+            "mono" => &["render_mono.png"],
+            "stereo" => &["render_stereo_left.png", "render_stereo_right.png"],
+            _ => &[
+                "render_cave_left.png",
+                "render_cave_front.png",
+                "render_cave_right.png",
+                "render_cave_floor.png",
+            ],
         };
         let mut regions = vec![];
+        let mut x0 = 0;
         for (i, name) in names.iter().enumerate() {
             let reference = load(&dir.join(name));
-            let x0 = i as u32 * reference.width();
             let (max_diff, mean) = compare(&shot, x0, &reference);
             eprintln!("{rig} view {i}: max difference {max_diff} levels, mean {mean:.1}");
             assert!(mean > 10.0, "{rig} view {i} is black (mean {mean:.2})");
@@ -133,10 +149,129 @@ fn view_screenshot_matches_render_in_each_view() {
                 max_diff <= MAX_LEVELS,
                 "{rig} view {i} differs from `valgi render` by {max_diff} levels"
             );
+            x0 += reference.width();
             regions.push(reference);
         }
         if rig == "stereo" {
             assert_ne!(regions[0], regions[1], "the two eyes see the same image");
         }
     }
+}
+
+#[test]
+fn anaglyph_takes_red_from_the_left_eye_and_cyan_from_the_right() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_anaglyph");
+    let base = [
+        "--scene",
+        "cornell",
+        "--method",
+        "direct",
+        "--width",
+        SIZE,
+        "--height",
+        SIZE,
+        "--shadow-res",
+        "256",
+        "--views",
+        "stereo",
+    ];
+    let shot = dir.join("shot.png");
+    let mut view_args = vec!["view"];
+    view_args.extend(base);
+    view_args.extend(["--anaglyph", "--frames", "2", "--screenshot"]);
+    view_args.push(shot.to_str().unwrap());
+    let Some(command) = windowed(&view_args) else {
+        return;
+    };
+    let report = run(command);
+    assert!(
+        report.contains("\"stereo_display\":\"anaglyph\""),
+        "report: {report}"
+    );
+    let reference = dir.join("render.png");
+    let mut render = Command::new(env!("CARGO_BIN_EXE_valgi"));
+    render
+        .arg("render")
+        .args(base)
+        .args(["--out", reference.to_str().unwrap()]);
+    run(render);
+    let shot = load(&shot);
+    let left = load(&dir.join("render_left.png"));
+    let right = load(&dir.join("render_right.png"));
+    assert_ne!(left, right, "the two eyes see the same image");
+    let mut max_diff = 0u8;
+    let mut second_region_sum = 0u64;
+    for (x, y, l) in left.enumerate_pixels() {
+        let r = right.get_pixel(x, y);
+        let q = shot.get_pixel(x, y);
+        let expected = [l[0], r[1], r[2]];
+        for c in 0..3 {
+            max_diff = max_diff.max(expected[c].abs_diff(q[c]));
+        }
+        let beside = shot.get_pixel(x + left.width(), y);
+        second_region_sum += beside.0.iter().map(|&v| v as u64).sum::<u64>();
+    }
+    eprintln!("anaglyph: max difference {max_diff} levels");
+    assert!(
+        max_diff <= MAX_LEVELS,
+        "the anaglyph differs from (left red, right green/blue) by {max_diff} levels"
+    );
+    // Both eyes land in the first region; the second stays clear.
+    assert_eq!(
+        second_region_sum, 0,
+        "the right eye's region was drawn into"
+    );
+}
+
+#[test]
+fn an_option_change_rebuilds_off_the_ui_thread_and_reports_its_figures() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let args = [
+        "view",
+        "--scene",
+        "cornell",
+        "--method",
+        "sparse",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--shadow-res",
+        "128",
+        "--opt",
+        "rsm=16",
+        "--opt",
+        "sparse-points=64",
+        "--frames",
+        "2",
+        "--change-option",
+        "sparse-points=96",
+    ];
+    let Some(command) = windowed(&args) else {
+        return;
+    };
+    let stdout = run(command);
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
+    let report: serde_json::Value = serde_json::from_str(line).expect("JSON report");
+    eprintln!("{}", report["rebuild"]);
+    assert_eq!(report["rebuild"]["ok"], true, "report: {report}");
+    assert_eq!(report["rebuild"]["method"], "sparse");
+    // The rebuilt method is the one drawing: its own figures, as `render` reports them.
+    assert_eq!(report["sparse_points"], 96, "report: {report}");
+    assert!(report["options"]
+        .as_str()
+        .unwrap()
+        .contains("sparse-points=96"));
+    assert!(report["vals"].as_u64().unwrap() > 0, "report: {report}");
+    assert!(report["gpu_bytes"].as_u64().unwrap() > 0);
+    assert!(report["frame_interval_ms"]["frames"].as_u64().unwrap() >= 2);
 }

@@ -383,8 +383,9 @@ impl ViewResult {
     }
 }
 
-/// Every rendering method: a view-free update, then one record per view.
-pub trait Method {
+/// Every rendering method: a view-free update, then one record per view. `Send`, so that a
+/// method can be built on a worker thread (`valgi view` rebuilds off its UI thread).
+pub trait Method: Send {
     /// The method's name as given to `--method`.
     fn name(&self) -> &'static str;
 
@@ -465,7 +466,7 @@ pub trait Method {
 /// atlas's bounces 2..B over the VAL bounce). Per view, the layer hands the underlying
 /// method a target of its own to draw into, then writes the view's `radiance_indirect`
 /// (that light plus its own).
-pub trait IndirectLayer {
+pub trait IndirectLayer: Send {
     /// The composed method's name (as given to `--method`).
     fn method_name(&self) -> &'static str;
     /// Per-frame uploads (transforms) and per-view state for this frame's views.

@@ -61,7 +61,7 @@ pub struct ExternalVals {
 
 /// Something that makes [`ExternalVals`] every frame (a depth sensor's frame turned into
 /// surfels), for a method to append to its RSM VALs.
-pub trait ValSource {
+pub trait ValSource: Send {
     /// The candidate buffer and its shape (fixed for the source's life).
     fn external(&self) -> &ExternalVals;
     /// Uploads this frame's input and records the passes that fill its candidates.

@@ -2,18 +2,22 @@
 //! [`record_frame`] over the rig's views (one lighting update, one record per view) on the
 //! window's device; each view's resolved output is then drawn into its region of the window
 //! by a small render pass (`present.wgsl`, the PNG tone map), and the egui panel on top, with
-//! no CPU readback. `--screenshot` reads back one frame, the last, drawn into an offscreen
-//! texture by the same passes.
+//! no CPU readback. `--screenshot` (and the F12 key) reads back one frame drawn into an
+//! offscreen texture by the same passes. Method rebuilds run on a worker thread while the
+//! running method keeps drawing; the state the panel and input change lives in
+//! [`state::ViewerState`], testable without a window.
+
+pub mod state;
 
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{mpsc, Arc};
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
-use glam::{EulerRot, Mat4, Quat, Vec3};
+use glam::{Mat4, Vec3};
 use winit::application::ApplicationHandler;
-use winit::event::{ElementState, MouseButton, WindowEvent};
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, EventLoop};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
@@ -27,6 +31,9 @@ use crate::method::{self, MethodOptions, OptionKind};
 use crate::raster::types::{shared_layout, SharedLayout};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, CameraView, Scene};
+
+pub use state::{CameraControl, Components, DragMode, FlyCamera, OrbitCamera, StereoDisplay};
+use state::{ViewerState, FOV_RANGE_DEGREES};
 
 /// `present.wgsl` (fragment): the tone map's parameters and the view's direct and indirect
 /// radiance.
@@ -82,24 +89,12 @@ pub struct ViewerRequest {
     pub frames: Option<u32>,
     /// Write the last frame's window contents here (PNG).
     pub screenshot: Option<PathBuf>,
-}
-
-/// Which radiance the window shows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Components {
-    Direct,
-    Indirect,
-    Both,
-}
-
-impl Components {
-    fn bits(self) -> u32 {
-        match self {
-            Components::Direct => 1,
-            Components::Indirect => 2,
-            Components::Both => 3,
-        }
-    }
+    /// Show a two-view rig as a red/cyan anaglyph instead of side by side.
+    pub anaglyph: bool,
+    /// Scripted runs: after the first frame, change this method option (key, value; the key
+    /// `method` switches the method) as the panel would, and run on until the rebuild is in
+    /// (the report gives its figures).
+    pub change_option: Option<(String, String)>,
 }
 
 #[repr(C)]
@@ -123,62 +118,59 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
     )]
 }
 
-/// A camera flown by WASD and mouse drags: a position, a heading about world +y and a pitch.
-#[derive(Clone, Copy, Debug)]
-pub struct FlyCamera {
-    pub position: Vec3,
-    pub yaw: f32,
-    pub pitch: f32,
-}
-
-impl FlyCamera {
-    /// The heading and pitch of `camera`'s view direction (its roll is dropped).
-    pub fn from_view(camera: &CameraView) -> Self {
-        let forward = -camera
-            .world_from_view
-            .z_axis
-            .truncate()
-            .normalize_or(Vec3::NEG_Z);
-        Self {
-            position: camera.position(),
-            yaw: (-forward.x).atan2(-forward.z),
-            pitch: forward.y.clamp(-1.0, 1.0).asin(),
-        }
-    }
-
-    pub fn world_from_view(&self) -> Mat4 {
-        let rotation = Quat::from_euler(EulerRot::YXZ, self.yaw, self.pitch, 0.0);
-        Mat4::from_rotation_translation(rotation, self.position)
-    }
-
-    /// Moves by `local` (view-space x right, y up, z backwards) metres.
-    pub fn translate_local(&mut self, local: Vec3) {
-        let rotation = Quat::from_euler(EulerRot::YXZ, self.yaw, self.pitch, 0.0);
-        self.position += rotation * local;
-    }
-
-    /// Turns by a drag of `dx`, `dy` radians (right and down positive).
-    pub fn turn(&mut self, dx: f32, dy: f32) {
-        self.yaw -= dx;
-        let limit = std::f32::consts::FRAC_PI_2 - 1e-3;
-        self.pitch = (self.pitch - dy).clamp(-limit, limit);
-    }
-}
-
 /// What the panel changes; applied after the UI pass.
 enum Action {
     SetMethod(&'static str),
     SetOption(&'static str, String),
-    ResetCamera,
+    /// Back to a scene camera (`None`: the first).
+    ResetCamera(Option<String>),
+    SetDragMode(DragMode),
+    Screenshot,
 }
 
-/// The knobs that take effect in the next frame without rebuilding anything.
-struct Knobs {
-    exposure: f32,
-    components: Components,
-    playing: bool,
-    time: f32,
-    speed: f32,
+/// A method built on a worker thread, or why it could not be.
+type Built = Result<Box<dyn Method>, String>;
+
+/// The worker of the rebuild in flight: its generation and where its method arrives.
+struct Worker {
+    generation: u64,
+    receiver: mpsc::Receiver<Built>,
+}
+
+/// The numbers of the render JSON line that the panel shows, from the last frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Figures {
+    /// GPU bytes the method and the views' targets own (`gpu_bytes`).
+    gpu_bytes: u64,
+    /// VALs of the last update (`vals`), sparse points (`sparse_points`) and the points that
+    /// clamped their (diffuse, glossy) renormalization (`renormalize_clamped`), for methods
+    /// that have them.
+    vals: Option<u64>,
+    sparse_points: Option<u64>,
+    renormalize_clamped: Option<(u64, u64)>,
+}
+
+impl Figures {
+    fn of(method: &dyn Method, views: &[View], results: &[ViewResult]) -> Self {
+        let report = method.report();
+        let count = |key: &str| report.get(key).and_then(|v| v.as_u64());
+        let clamps = report.get("renormalize_clamped").and_then(|v| {
+            let pair = v.as_array()?;
+            Some((pair.first()?.as_u64()?, pair.get(1)?.as_u64()?))
+        });
+        Self {
+            // As `render`'s report counts it: the method's own bytes and each view's.
+            gpu_bytes: method.gpu_bytes()
+                + views
+                    .iter()
+                    .zip(results)
+                    .map(|(v, r)| r.view_bytes(v))
+                    .sum::<u64>(),
+            vals: count("vals"),
+            sparse_points: count("sparse_points"),
+            renormalize_clamped: clamps,
+        }
+    }
 }
 
 /// Loads the scene, opens the window and runs until it is closed (or `frames` are done).
@@ -189,6 +181,18 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     }
     if !request.time.is_finite() || !request.exposure.is_finite() {
         return Err(RenderError::Settings("--time and --exposure must be finite".into()).into());
+    }
+    if request.anaglyph
+        && request
+            .views
+            .views(&dummy_camera(), (1, 1), Vec3::ZERO)
+            .len()
+            != 2
+    {
+        return Err(RenderError::Settings(
+            "--anaglyph needs a two-view rig (--views stereo[:IPD])".into(),
+        )
+        .into());
     }
     if let Some(path) = &request.screenshot {
         crate::image_io::prepare_output(path).map_err(AppError::from)?;
@@ -222,7 +226,7 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     })?;
     let mut app = App {
         request: request.clone(),
-        scene,
+        scene: Arc::new(scene),
         running: None,
         error: None,
         report: None,
@@ -238,7 +242,8 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
 
 struct App {
     request: ViewerRequest,
-    scene: Scene,
+    /// Shared with the rebuild workers.
+    scene: Arc<Scene>,
     running: Option<Running>,
     error: Option<ViewerError>,
     report: Option<serde_json::Value>,
@@ -283,6 +288,9 @@ impl ApplicationHandler for App {
             WindowEvent::KeyboardInput { event, .. } => {
                 if let PhysicalKey::Code(code) = event.physical_key {
                     if event.state == ElementState::Pressed && !consumed {
+                        if code == KeyCode::F12 && !event.repeat {
+                            running.pending_actions.push(Action::Screenshot);
+                        }
                         running.keys_down.insert(code);
                     } else if event.state == ElementState::Released {
                         running.keys_down.remove(&code);
@@ -296,16 +304,22 @@ impl ApplicationHandler for App {
             } => {
                 running.dragging = state == ElementState::Pressed && !consumed;
             }
+            WindowEvent::MouseWheel { delta, .. } if !consumed => {
+                let lines = match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y,
+                    // Pixel deltas (touchpads): about 50 pixels per line.
+                    MouseScrollDelta::PixelDelta(p) => p.y as f32 / 50.0,
+                };
+                let (current, pivot) = (running.camera_now, running.pivot);
+                running.state.wheel(&current, pivot, lines);
+            }
             WindowEvent::CursorMoved { position, .. } => {
                 let now = (position.x as f32, position.y as f32);
                 if let (true, Some(last)) = (running.dragging, running.cursor) {
-                    let radians_per_pixel = 0.005;
-                    let mut fly = running.fly_or_scene_camera();
-                    fly.turn(
-                        (now.0 - last.0) * radians_per_pixel,
-                        (now.1 - last.1) * radians_per_pixel,
-                    );
-                    running.fly = Some(fly);
+                    let (current, pivot) = (running.camera_now, running.pivot);
+                    running
+                        .state
+                        .drag(&current, pivot, now.0 - last.0, now.1 - last.1);
                 }
                 running.cursor = Some(now);
             }
@@ -336,42 +350,66 @@ struct PresentTarget {
     size: (u32, u32),
 }
 
+/// The present pass's pipelines: all channels, and the two eyes of an anaglyph (red from the
+/// left eye, green and blue from the right, by the colour target's write mask).
+struct PresentPipelines {
+    full: wgpu::RenderPipeline,
+    red: wgpu::RenderPipeline,
+    cyan: wgpu::RenderPipeline,
+}
+
 struct Running {
     request: ViewerRequest,
     window: Arc<Window>,
     surface: wgpu::Surface<'static>,
     config: wgpu::SurfaceConfiguration,
-    ctx: GpuContext,
+    /// Shared with the rebuild workers (wgpu's device and queue are `Send + Sync`).
+    ctx: Arc<GpuContext>,
     method_name: &'static str,
     options: MethodOptions,
     edits: BTreeMap<&'static str, String>,
     method_error: Option<String>,
-    method: Box<dyn Method>,
+    /// `None` until the first build is in.
+    method: Option<Box<dyn Method>>,
+    worker: Option<Worker>,
     views: Vec<View>,
     results: Vec<ViewResult>,
     present_layout: GroupLayout,
-    present_pipeline: wgpu::RenderPipeline,
+    present: PresentPipelines,
     present_targets: Vec<PresentTarget>,
     egui_ctx: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
-    knobs: Knobs,
-    /// `None` until the user moves: the scene's (possibly animated) camera is used as is.
-    fly: Option<FlyCamera>,
+    state: ViewerState,
+    /// The rig's camera of the last frame (before the rig offsets its views) and the scene
+    /// centre: where drags and the wheel start from.
+    camera_now: Mat4,
+    yfov_now: f32,
+    pivot: Vec3,
     keys_down: HashSet<KeyCode>,
     dragging: bool,
     cursor: Option<(f32, f32)>,
+    /// Input handled between redraws (the screenshot key).
+    pending_actions: Vec<Action>,
     timings: FrameTimings,
+    figures: Figures,
+    /// CPU wall time of the last frame's record and submit, ms.
     frame_ms: f64,
+    /// Interval between the starts of the last two redraws, ms.
+    frame_interval_ms: f64,
     frames_done: u32,
+    /// Sum over the frames drawn of the passes' total (the `frame_total_ms` that `render
+    /// --frames` lists), ms: the window path's overhead is the frame interval beyond it.
+    pass_total_sum_ms: f64,
     last_redraw: Instant,
+    screenshots_written: Vec<PathBuf>,
 }
 
 impl Running {
     fn new(
         event_loop: &ActiveEventLoop,
         request: &ViewerRequest,
-        scene: &Scene,
+        scene: &Arc<Scene>,
     ) -> Result<Self, ViewerError> {
         let s = request.settings;
         let view_count = request
@@ -398,7 +436,7 @@ impl Running {
         let surface = instance
             .create_surface(window.clone())
             .map_err(|e| ViewerError::Window(format!("cannot draw into the window: {e}")))?;
-        let ctx = GpuContext::for_surface(&instance, &surface)?;
+        let ctx = Arc::new(GpuContext::for_surface(&instance, &surface)?);
         let caps = surface.get_capabilities(&ctx.adapter);
         // egui blends in gamma space, so it wants a non-sRGB target; the present pass then
         // applies the OETF itself.
@@ -432,18 +470,22 @@ impl Running {
 
         let fs = wgpu::ShaderStages::FRAGMENT;
         let present_layout = GroupLayout::new(&ctx.device, "present", fs, PRESENT_BINDINGS);
-        let present_pipeline = present_pipeline(&ctx, &present_layout.layout, format);
-
+        let present = PresentPipelines {
+            full: present_pipeline(&ctx, &present_layout.layout, format, wgpu::ColorWrites::ALL),
+            red: present_pipeline(
+                &ctx,
+                &present_layout.layout,
+                format,
+                wgpu::ColorWrites::RED | wgpu::ColorWrites::ALPHA,
+            ),
+            cyan: present_pipeline(
+                &ctx,
+                &present_layout.layout,
+                format,
+                wgpu::ColorWrites::GREEN | wgpu::ColorWrites::BLUE,
+            ),
+        };
         let method_entry = method::entry(&request.method)?;
-        let mut edits = BTreeMap::new();
-        for spec in method_entry.options {
-            let given = request.options.entries().find(|(k, _)| *k == spec.name);
-            edits.insert(
-                spec.name,
-                given.map_or(spec.default.to_string(), |(_, v)| v.to_string()),
-            );
-        }
-        let method = method::create(&request.method, &ctx, scene, s, &request.options)?;
 
         let egui_ctx = egui::Context::default();
         let egui_state = egui_winit::State::new(
@@ -456,6 +498,15 @@ impl Running {
         );
         let egui_renderer =
             egui_wgpu::Renderer::new(&ctx.device, format, egui_wgpu::RendererOptions::default());
+        let mut state = ViewerState::new(
+            request.camera.clone(),
+            request.time,
+            request.exposure,
+            scene.animation_duration(),
+        );
+        if request.anaglyph {
+            state.stereo_display = StereoDisplay::Anaglyph;
+        }
         let mut running = Self {
             request: request.clone(),
             window,
@@ -464,40 +515,46 @@ impl Running {
             ctx,
             method_name: method_entry.name,
             options: request.options.clone(),
-            edits,
+            edits: BTreeMap::new(),
             method_error: None,
-            method,
+            method: None,
+            worker: None,
             views: vec![],
             results: vec![],
             present_layout,
-            present_pipeline,
+            present,
             present_targets: vec![],
             egui_ctx,
             egui_state,
             egui_renderer,
-            knobs: Knobs {
-                exposure: request.exposure,
-                components: Components::Both,
-                playing: !scene.animations.is_empty(),
-                time: request.time,
-                speed: 1.0,
-            },
-            fly: None,
+            state,
+            camera_now: Mat4::IDENTITY,
+            yfov_now: 1.0,
+            pivot: Vec3::ZERO,
             keys_down: HashSet::new(),
             dragging: false,
             cursor: None,
+            pending_actions: vec![],
             timings: FrameTimings::default(),
+            figures: Figures::default(),
             frame_ms: 0.0,
+            frame_interval_ms: 0.0,
             frames_done: 0,
+            pass_total_sum_ms: 0.0,
             last_redraw: Instant::now(),
+            screenshots_written: vec![],
         };
+        running.reset_edits();
         running.make_views((s.width, s.height), scene)?;
+        // The first build runs on the worker too: the window opens (and redraws its panel)
+        // while the scene is preprocessed.
+        running.start_rebuild(method_entry.name, request.options.clone(), scene);
         Ok(running)
     }
 
     /// Views of the rig at `size` each, side by side from the window's top-left corner.
     fn make_views(&mut self, size: (u32, u32), scene: &Scene) -> Result<(), ViewerError> {
-        let world_from_node = scene.world_from_node_at(self.knobs.time);
+        let world_from_node = scene.world_from_node_at(self.state.time);
         let camera = self.base_camera(scene, size, &world_from_node)?;
         let rig =
             self.request
@@ -540,7 +597,8 @@ impl Running {
         Ok(())
     }
 
-    /// The scene's camera at this frame, or the flown one.
+    /// The scene's camera at this frame, or the flown or orbited one, with the field of
+    /// view of the slider.
     fn base_camera(
         &self,
         scene: &Scene,
@@ -549,20 +607,16 @@ impl Running {
     ) -> Result<CameraView, ViewerError> {
         let mut camera = scene
             .camera_view(
-                self.request.camera.as_deref(),
+                self.state.scene_camera.as_deref(),
                 size.0 as f32 / size.1 as f32,
                 world_from_node,
             )
             .map_err(AppError::from)?;
-        if let Some(fly) = &self.fly {
-            camera.world_from_view = fly.world_from_view();
+        if let Some(world_from_view) = self.state.world_from_view() {
+            camera.world_from_view = world_from_view;
         }
+        self.state.apply_fov(&mut camera);
         Ok(camera)
-    }
-
-    fn fly_or_scene_camera(&self) -> FlyCamera {
-        self.fly
-            .unwrap_or_else(|| FlyCamera::from_view(&self.views[0].camera))
     }
 
     fn resize(&mut self, width: u32, height: u32, scene: &Scene) -> Result<(), ViewerError> {
@@ -581,9 +635,9 @@ impl Running {
         Ok(())
     }
 
-    /// Rebuilds the method with `options`; on failure the running method stays and the
-    /// panel shows why.
-    fn rebuild_method(&mut self, name: &'static str, options: MethodOptions, scene: &Scene) {
+    /// Builds method `name` with `options` on a worker thread; the running method keeps
+    /// drawing until it is in. A newer request supersedes this one (its method is dropped).
+    fn start_rebuild(&mut self, name: &'static str, options: MethodOptions, scene: &Arc<Scene>) {
         let size = self.views.first().map_or(
             (self.request.settings.width, self.request.settings.height),
             |v| (v.width, v.height),
@@ -593,14 +647,57 @@ impl Running {
             height: size.1,
             ..self.request.settings
         };
-        match method::create(name, &self.ctx, scene, settings, &options) {
+        let generation = self.state.rebuilds.request(name, options.clone());
+        let (sender, receiver) = mpsc::channel();
+        let (ctx, scene) = (self.ctx.clone(), scene.clone());
+        let spawned = std::thread::Builder::new()
+            .name("valgi-rebuild".into())
+            .spawn(move || {
+                let built = method::create(name, &ctx, &scene, settings, &options)
+                    .map_err(|e| e.to_string());
+                // The window may have closed, or a newer rebuild superseded this one.
+                let _ = sender.send(built);
+            });
+        match spawned {
+            Ok(_) => {
+                self.worker = Some(Worker {
+                    generation,
+                    receiver,
+                })
+            }
+            Err(e) => {
+                self.state.rebuilds.finish(generation, false);
+                self.method_error = Some(format!("cannot start the rebuild: {e}"));
+            }
+        }
+    }
+
+    /// Installs the worker's method when it is in; on failure the running method stays and
+    /// the panel shows why.
+    fn poll_rebuild(&mut self) {
+        let Some(worker) = &self.worker else {
+            return;
+        };
+        let built = match worker.receiver.try_recv() {
+            Ok(built) => built,
+            Err(mpsc::TryRecvError::Empty) => return,
+            Err(mpsc::TryRecvError::Disconnected) => {
+                Err("the rebuild stopped without a result (see the log)".to_string())
+            }
+        };
+        let generation = worker.generation;
+        self.worker = None;
+        let Some(done) = self.state.rebuilds.finish(generation, built.is_ok()) else {
+            return;
+        };
+        match built {
             Ok(m) => {
-                self.method = m;
-                self.method_name = name;
-                self.options = options;
+                self.method = Some(m);
+                self.method_name = done.method;
+                self.options = done.options;
                 self.method_error = None;
             }
-            Err(e) => self.method_error = Some(e.to_string()),
+            Err(e) => self.method_error = Some(e),
         }
         self.reset_edits();
     }
@@ -621,62 +718,76 @@ impl Running {
 
     /// One frame: camera and animation step, the frame's record, the present and panel
     /// passes. Returns true when a scripted run is done.
-    fn redraw(&mut self, scene: &Scene) -> Result<bool, ViewerError> {
+    fn redraw(&mut self, scene: &Arc<Scene>) -> Result<bool, ViewerError> {
         let now = Instant::now();
         let scripted = self.request.frames.is_some();
+        self.frame_interval_ms = (now - self.last_redraw).as_secs_f64() * 1000.0;
         let dt = if scripted {
             SCRIPTED_FRAME_S
         } else {
-            (now - self.last_redraw).as_secs_f32().min(0.25)
+            (self.frame_interval_ms as f32 / 1000.0).min(0.25)
         };
-        self.last_redraw = now;
-        self.fly_step(dt);
-        if self.knobs.playing && self.frames_done > 0 {
-            self.knobs.time += dt;
-            let duration = scene.animation_duration();
-            if duration > 0.0 && !scripted {
-                self.knobs.time %= duration;
-            }
+        let previous = std::mem::replace(&mut self.last_redraw, now);
+        // Charged before the poll: the interval in which the rebuild landed was waited
+        // through while it ran. The first build counts too (the panel is drawn meanwhile).
+        self.state.rebuilds.note_frame(previous, now);
+        self.poll_rebuild();
+        self.walk(dt);
+        if self.frames_done > 0 {
+            self.state.advance(dt, !scripted);
         }
-        let world_from_node = scene.world_from_node_at(self.knobs.time);
+        let world_from_node = scene.world_from_node_at(self.state.time);
         let size = self.views.first().map_or((1, 1), |v| (v.width, v.height));
         let camera = self.base_camera(scene, size, &world_from_node)?;
-        let rig =
-            self.request
-                .views
-                .views(&camera, size, scene_pivot(scene, &world_from_node, &camera));
+        self.pivot = scene_pivot(scene, &world_from_node, &camera);
+        self.camera_now = camera.world_from_view;
+        self.yfov_now = camera.yfov;
+        let rig = self.request.views.views(&camera, size, self.pivot);
         for (view, r) in self.views.iter_mut().zip(rig) {
             view.camera = r.camera;
         }
         let started = Instant::now();
-        let frame = record_frame(
-            self.method.as_mut(),
-            &self.ctx,
-            scene,
-            &world_from_node,
-            &self.views,
-        )?;
-        self.results = frame.results;
-        self.timings = frame.timings;
+        let drawing = self.method.is_some();
+        if let Some(method) = self.method.as_mut() {
+            let frame = record_frame(
+                method.as_mut(),
+                &self.ctx,
+                scene,
+                &world_from_node,
+                &self.views,
+            )?;
+            self.results = frame.results;
+            self.timings = frame.timings;
+            self.pass_total_sum_ms += self.timings.merged().total_ms();
+            self.figures = Figures::of(method.as_ref(), &self.views, &self.results);
+        }
 
         let raw_input = self.egui_state.take_egui_input(&self.window);
-        let mut actions = vec![];
+        let mut actions = std::mem::take(&mut self.pending_actions);
         let mut full = {
-            let panel = PanelData {
+            let mut panel = PanelData {
                 method_name: self.method_name,
                 edits: &mut self.edits,
                 method_error: self.method_error.as_deref(),
-                knobs: &mut self.knobs,
+                state: &mut self.state,
                 timings: &self.timings,
+                figures: &self.figures,
                 frame_ms: self.frame_ms,
-                has_animation: !scene.animations.is_empty(),
-                flying: self.fly.is_some(),
+                cameras: scene
+                    .cameras
+                    .iter()
+                    .enumerate()
+                    .map(|(i, c)| format!("{i}: {}", c.name))
+                    .collect(),
+                yfov_degrees: self.yfov_now.to_degrees(),
+                two_views: self.views.len() == 2,
                 view_names: self.views.iter().map(|v| v.name.clone()).collect(),
+                screenshots: &self.screenshots_written,
             };
-            let mut panel = panel;
             self.egui_ctx
                 .run_ui(raw_input, |ui| panel.show(ui, &mut actions))
         };
+        // Keep redrawing while a rebuild runs, so the spinner turns and the result lands.
         self.egui_state
             .handle_platform_output(&self.window, full.platform_output);
         let pixels_per_point = full.pixels_per_point;
@@ -718,14 +829,23 @@ impl Running {
             let target = output.texture.create_view(&Default::default());
             self.draw(&mut encoder, &target, &jobs, &screen);
         }
-        let last = self
-            .request
-            .frames
-            .is_some_and(|n| self.frames_done + 1 >= n);
-        let shot = match (&self.request.screenshot, last) {
-            (Some(_), true) => Some(self.offscreen_target()),
+        // A scripted run ends after its frames once no rebuild is in flight.
+        let last = drawing
+            && self.state.rebuilds.pending().is_none()
+            && self
+                .request
+                .frames
+                .is_some_and(|n| self.frames_done + 1 >= n);
+        let key_shot = actions.iter().any(|a| matches!(a, Action::Screenshot));
+        let shot_path = match (&self.request.screenshot, last) {
+            (Some(path), true) => Some(path.clone()),
+            _ if key_shot => {
+                let dir = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
+                Some(self.state.next_screenshot_path(&dir))
+            }
             _ => None,
         };
+        let shot = shot_path.as_ref().map(|_| self.offscreen_target());
         if let Some(texture) = &shot {
             let target = texture.create_view(&Default::default());
             self.draw(&mut encoder, &target, &jobs, &screen);
@@ -739,9 +859,33 @@ impl Running {
             self.egui_renderer.free_texture(&id);
         }
         self.frame_ms = started.elapsed().as_secs_f64() * 1000.0;
-        self.frames_done += 1;
-        if let (Some(texture), Some(path)) = (shot, self.request.screenshot.clone()) {
+        if drawing {
+            self.state.push_frame_ms(self.frame_interval_ms as f32);
+            self.frames_done += 1;
+        }
+        if let (Some(texture), Some(path)) = (shot, shot_path) {
             self.write_screenshot(&texture, &path)?;
+            self.screenshots_written.push(path);
+        }
+        if scripted && self.frames_done == 1 && drawing {
+            if let Some((key, value)) = self.request.change_option.clone() {
+                if key == "method" {
+                    // The panel's method menu: a new method with its default options.
+                    actions.push(Action::SetMethod(method::entry(&value)?.name));
+                } else {
+                    let spec = method::entry(self.method_name)?
+                        .options
+                        .iter()
+                        .find(|o| o.name == key)
+                        .ok_or_else(|| {
+                            RenderError::Settings(format!(
+                                "--change-option: method '{}' has no option '{key}'",
+                                self.method_name
+                            ))
+                        })?;
+                    actions.push(Action::SetOption(spec.name, value));
+                }
+            }
         }
         for action in actions {
             self.apply(action, scene);
@@ -749,21 +893,30 @@ impl Running {
         Ok(last)
     }
 
-    fn apply(&mut self, action: Action, scene: &Scene) {
+    fn apply(&mut self, action: Action, scene: &Arc<Scene>) {
         match action {
-            Action::SetMethod(name) => self.rebuild_method(name, MethodOptions::default(), scene),
+            Action::SetMethod(name) => self.start_rebuild(name, MethodOptions::default(), scene),
             Action::SetOption(key, value) => {
-                let mut options = self.options.clone();
+                // Options of the newest request, so quick successive edits accumulate.
+                let (name, mut options) = match self.state.rebuilds.pending() {
+                    Some(p) => (p.method, p.options.clone()),
+                    None => (self.method_name, self.options.clone()),
+                };
                 options.set(key, value);
-                let name = self.method_name;
-                self.rebuild_method(name, options, scene);
+                self.start_rebuild(name, options, scene);
             }
-            Action::ResetCamera => self.fly = None,
+            Action::ResetCamera(selector) => self.state.reset_to(selector),
+            Action::SetDragMode(mode) => {
+                let (current, pivot) = (self.camera_now, self.pivot);
+                self.state.set_drag_mode(mode, &current, pivot);
+            }
+            // Taken in `redraw`, which draws the offscreen copy.
+            Action::Screenshot => {}
         }
     }
 
     /// WASD (and Q/E down/up) at the speed knob, metres per second.
-    fn fly_step(&mut self, dt: f32) {
+    fn walk(&mut self, dt: f32) {
         let mut local = Vec3::ZERO;
         for (key, direction) in [
             (KeyCode::KeyW, Vec3::NEG_Z),
@@ -777,22 +930,31 @@ impl Running {
                 local += direction;
             }
         }
-        if local != Vec3::ZERO && !self.views.is_empty() {
-            let mut fly = self.fly_or_scene_camera();
-            fly.translate_local(local.normalize() * self.knobs.speed * dt);
-            self.fly = Some(fly);
-        }
+        let (current, pivot) = (self.camera_now, self.pivot);
+        self.state.walk(&current, pivot, local, dt);
+    }
+
+    /// Whether the two views are drawn as one anaglyph.
+    fn anaglyph(&self) -> bool {
+        self.state.stereo_display == StereoDisplay::Anaglyph && self.present_targets.len() == 2
     }
 
     fn write_present_params(&self) {
         let encode_srgb = !self.config.format.is_srgb() as u32;
+        let anaglyph = self.anaglyph();
         for target in &self.present_targets {
+            // An anaglyph draws both eyes into the first region.
+            let origin = if anaglyph {
+                self.present_targets[0].origin
+            } else {
+                target.origin
+            };
             let params = PresentParams {
-                exposure_scale: 2f32.powf(self.knobs.exposure),
-                components: self.knobs.components.bits(),
+                exposure_scale: 2f32.powf(self.state.exposure),
+                components: self.state.components.bits(),
                 encode_srgb,
                 pad0: 0,
-                origin: [target.origin.0, target.origin.1],
+                origin: [origin.0, origin.1],
                 size: [target.size.0, target.size.1],
             };
             self.ctx
@@ -827,20 +989,26 @@ impl Running {
         });
         let mut pass = pass.forget_lifetime();
         let (w, h) = (self.config.width, self.config.height);
-        for t in &self.present_targets {
+        let anaglyph = self.anaglyph();
+        for (i, t) in self.present_targets.iter().enumerate() {
+            let (origin, pipeline) = match (anaglyph, i) {
+                (false, _) => (t.origin, &self.present.full),
+                (true, 0) => (t.origin, &self.present.red),
+                (true, _) => (self.present_targets[0].origin, &self.present.cyan),
+            };
             // Regions that the window no longer covers (mid-resize) are skipped.
-            if t.origin.0 + t.size.0 > w || t.origin.1 + t.size.1 > h {
+            if origin.0 + t.size.0 > w || origin.1 + t.size.1 > h {
                 continue;
             }
             pass.set_viewport(
-                t.origin.0 as f32,
-                t.origin.1 as f32,
+                origin.0 as f32,
+                origin.1 as f32,
                 t.size.0 as f32,
                 t.size.1 as f32,
                 0.0,
                 1.0,
             );
-            pass.set_pipeline(&self.present_pipeline);
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &t.group, &[]);
             pass.draw(0..3, 0..1);
         }
@@ -893,15 +1061,16 @@ impl Running {
         })
     }
 
-    /// The JSON report: the last frame's passes, as `valgi render` prints them.
+    /// The JSON report: the last frame's passes and figures, as `valgi render` prints them.
     fn report(&self, scene: &Scene) -> serde_json::Value {
         let merged = self.timings.merged();
-        serde_json::json!({
+        let mut report = serde_json::json!({
             "scene": scene.name,
-            "method": self.method.name(),
+            "method": self.method.as_ref().map(|m| m.name()),
             "options": self.options.to_string(),
             "views": self.views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
             "view_size": self.views.first().map(|v| [v.width, v.height]),
+            "stereo_display": if self.anaglyph() { "anaglyph" } else { "side-by-side" },
             "frames": self.frames_done,
             "surface_format": format!("{:?}", self.config.format),
             "adapter": self.ctx.adapter_label(),
@@ -909,8 +1078,41 @@ impl Running {
             "total_ms": round3(merged.total_ms()),
             "solution_ms": round3(self.timings.solution.total_ms()),
             "view_ms": self.timings.views.iter().map(|t| round3(t.total_ms())).collect::<Vec<_>>(),
+            "gpu_bytes": self.figures.gpu_bytes,
+            // Interval between the starts of successive redraws (the window's frame time):
+            // the mean over the history and the longest.
+            "frame_interval_ms": {
+                "frames": self.state.frame_ms_history.len(),
+                "mean": round3(mean(self.state.frame_ms_history.iter().map(|&v| v as f64))),
+                "max": round3(self.state.frame_ms_history.iter().fold(0.0f32, |a, &b| a.max(b)) as f64),
+            },
+            "pass_total_ms_mean": round3(self.pass_total_sum_ms / self.frames_done.max(1) as f64),
             "screenshot": self.request.screenshot.as_ref().map(|p| p.display().to_string()),
-        })
+        });
+        if let Some(r) = &self.state.rebuilds.last {
+            report["rebuild"] = serde_json::json!({
+                "method": r.method,
+                "ok": r.ok,
+                "ms": round3(r.ms),
+                "ui_frames": r.frames,
+                "longest_ui_frame_ms": round3(r.longest_frame_ms),
+            });
+        }
+        if let (Some(obj), Some(method)) = (report.as_object_mut(), &self.method) {
+            for (key, value) in method.report() {
+                obj.entry(key).or_insert(value);
+            }
+        }
+        report
+    }
+}
+
+fn mean(values: impl Iterator<Item = f64>) -> f64 {
+    let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    if n == 0 {
+        0.0
+    } else {
+        sum / n as f64
     }
 }
 
@@ -919,12 +1121,17 @@ struct PanelData<'a> {
     method_name: &'static str,
     edits: &'a mut BTreeMap<&'static str, String>,
     method_error: Option<&'a str>,
-    knobs: &'a mut Knobs,
+    state: &'a mut ViewerState,
     timings: &'a FrameTimings,
+    figures: &'a Figures,
     frame_ms: f64,
-    has_animation: bool,
-    flying: bool,
+    /// The scene's cameras, "index: name".
+    cameras: Vec<String>,
+    /// The field of view on screen, degrees.
+    yfov_degrees: f32,
+    two_views: bool,
     view_names: Vec<String>,
+    screenshots: &'a [PathBuf],
 }
 
 impl PanelData<'_> {
@@ -938,11 +1145,61 @@ impl PanelData<'_> {
 
     fn contents(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         ui.heading("valgi");
+        self.figures_ui(ui);
+        ui.separator();
+        self.method_ui(ui, actions);
+        ui.separator();
+        ui.add(egui::Slider::new(&mut self.state.exposure, -8.0..=8.0).text("exposure (stops)"));
+        ui.horizontal(|ui| {
+            let c = &mut self.state.components;
+            ui.radio_value(c, Components::Direct, "direct");
+            ui.radio_value(c, Components::Indirect, "indirect");
+            ui.radio_value(c, Components::Both, "both");
+        });
+        if self.two_views {
+            ui.horizontal(|ui| {
+                let d = &mut self.state.stereo_display;
+                ui.radio_value(d, StereoDisplay::SideBySide, "side by side");
+                ui.radio_value(d, StereoDisplay::Anaglyph, "anaglyph");
+            });
+        }
+        ui.separator();
+        self.camera_ui(ui, actions);
+        ui.separator();
+        self.passes_ui(ui);
+    }
+
+    /// Frame time with its history plot and the counts of the render JSON line.
+    fn figures_ui(&self, ui: &mut egui::Ui) {
+        let history = &self.state.frame_ms_history;
         ui.label(format!(
-            "frame {:.1} ms (CPU wall, record + submit)",
+            "frame {:.1} ms (interval), record + submit {:.1} ms",
+            history.back().copied().unwrap_or(0.0),
             self.frame_ms
         ));
-        ui.separator();
+        frame_plot(ui, history);
+        let f = self.figures;
+        ui.label(format!(
+            "GPU bytes {:.1} MiB",
+            f.gpu_bytes as f64 / 1048576.0
+        ));
+        if let Some(vals) = f.vals {
+            ui.label(format!("VALs {vals}"));
+        }
+        if let Some(points) = f.sparse_points {
+            ui.label(format!("sparse points {points}"));
+        }
+        if let Some((d, s)) = f.renormalize_clamped {
+            ui.label(format!("renormalize clamps {d} diffuse, {s} glossy"));
+        }
+        if let Some(last) = self.screenshots.last() {
+            ui.label(format!("F12 wrote {}", last.display()));
+        } else {
+            ui.label("F12: screenshot");
+        }
+    }
+
+    fn method_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         egui::ComboBox::from_label("method")
             .selected_text(self.method_name)
             .show_ui(ui, |ui| {
@@ -956,6 +1213,21 @@ impl PanelData<'_> {
                     }
                 }
             });
+        if let Some(p) = self.state.rebuilds.pending() {
+            ui.horizontal(|ui| {
+                ui.spinner();
+                ui.label(format!(
+                    "building {} … {:.1} s",
+                    p.method,
+                    p.started.elapsed().as_secs_f32()
+                ));
+            });
+        } else if let Some(r) = &self.state.rebuilds.last {
+            ui.label(format!(
+                "last build {:.0} ms, longest UI frame meanwhile {:.0} ms",
+                r.ms, r.longest_frame_ms
+            ));
+        }
         if let Ok(entry) = method::entry(self.method_name) {
             for spec in entry.options {
                 let Some(text) = self.edits.get_mut(spec.name) else {
@@ -1008,36 +1280,68 @@ impl PanelData<'_> {
         if let Some(error) = self.method_error {
             ui.colored_label(egui::Color32::LIGHT_RED, error);
         }
-        ui.separator();
-        ui.add(egui::Slider::new(&mut self.knobs.exposure, -8.0..=8.0).text("exposure (stops)"));
+    }
+
+    fn camera_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
         ui.horizontal(|ui| {
-            ui.radio_value(&mut self.knobs.components, Components::Direct, "direct");
-            ui.radio_value(&mut self.knobs.components, Components::Indirect, "indirect");
-            ui.radio_value(&mut self.knobs.components, Components::Both, "both");
+            let mut mode = self.state.drag_mode;
+            ui.radio_value(&mut mode, DragMode::Fly, "fly");
+            ui.radio_value(&mut mode, DragMode::Orbit, "orbit");
+            if mode != self.state.drag_mode {
+                actions.push(Action::SetDragMode(mode));
+            }
         });
-        ui.separator();
-        ui.label("camera: WASD, Q/E down/up, drag to turn");
+        ui.label(match self.state.drag_mode {
+            DragMode::Fly => "WASD, Q/E down/up, drag to turn, wheel: speed",
+            DragMode::Orbit => "drag to orbit the centre, wheel to zoom, WASD/QE pan",
+        });
         ui.add(
-            egui::Slider::new(&mut self.knobs.speed, 0.01..=100.0)
+            egui::Slider::new(&mut self.state.speed, 0.01..=100.0)
                 .logarithmic(true)
                 .text("speed (m/s)"),
         );
+        let mut fov = self.yfov_degrees;
         if ui
-            .add_enabled(self.flying, egui::Button::new("reset to the scene camera"))
-            .clicked()
+            .add(egui::Slider::new(&mut fov, FOV_RANGE_DEGREES).text("field of view (°)"))
+            .changed()
         {
-            actions.push(Action::ResetCamera);
+            self.state.yfov_degrees = Some(fov);
         }
-        if self.has_animation {
-            ui.horizontal(|ui| {
-                let label = if self.knobs.playing { "pause" } else { "play" };
-                if ui.button(label).clicked() {
-                    self.knobs.playing = !self.knobs.playing;
+        let current = self.state.scene_camera.clone();
+        let selected = match &current {
+            None => "first".to_string(),
+            Some(s) => s.clone(),
+        };
+        egui::ComboBox::from_label("reset to camera")
+            .selected_text(selected)
+            .show_ui(ui, |ui| {
+                if self.cameras.is_empty() && ui.selectable_label(false, "default").clicked() {
+                    actions.push(Action::ResetCamera(None));
                 }
-                ui.label(format!("t = {:.2} s", self.knobs.time));
+                for (i, label) in self.cameras.iter().enumerate() {
+                    if ui.selectable_label(false, label).clicked() {
+                        actions.push(Action::ResetCamera(Some(i.to_string())));
+                    }
+                }
+            });
+        if self.state.duration > 0.0 {
+            ui.horizontal(|ui| {
+                let label = if self.state.playing { "pause" } else { "play" };
+                if ui.button(label).clicked() {
+                    self.state.playing = !self.state.playing;
+                }
+                let mut t = self.state.time.min(self.state.duration);
+                if ui
+                    .add(egui::Slider::new(&mut t, 0.0..=self.state.duration).text("t (s)"))
+                    .changed()
+                {
+                    self.state.scrub(t);
+                }
             });
         }
-        ui.separator();
+    }
+
+    fn passes_ui(&self, ui: &mut egui::Ui) {
         let gpu = if self.timings.solution.gpu_timestamps {
             "GPU timestamps"
         } else {
@@ -1057,10 +1361,42 @@ impl PanelData<'_> {
     }
 }
 
+/// The frame-interval history as a line over a strip of the panel, scaled to its maximum.
+fn frame_plot(ui: &mut egui::Ui, history: &std::collections::VecDeque<f32>) {
+    let size = egui::vec2(ui.available_width(), 48.0);
+    let (rect, _) = ui.allocate_exact_size(size, egui::Sense::hover());
+    let painter = ui.painter_at(rect);
+    painter.rect_filled(rect, 2.0, egui::Color32::from_gray(24));
+    let top = history.iter().fold(1.0f32, |a, &b| a.max(b));
+    let n = state::HISTORY_FRAMES.max(2) as f32;
+    let points: Vec<egui::Pos2> = history
+        .iter()
+        .enumerate()
+        .map(|(i, &ms)| {
+            egui::pos2(
+                rect.left() + rect.width() * i as f32 / (n - 1.0),
+                rect.bottom() - rect.height() * (ms / top).clamp(0.0, 1.0),
+            )
+        })
+        .collect();
+    painter.add(egui::Shape::line(
+        points,
+        egui::Stroke::new(1.0, egui::Color32::LIGHT_GREEN),
+    ));
+    painter.text(
+        rect.left_top() + egui::vec2(3.0, 1.0),
+        egui::Align2::LEFT_TOP,
+        format!("{top:.0} ms"),
+        egui::FontId::monospace(10.0),
+        egui::Color32::GRAY,
+    );
+}
+
 fn present_pipeline(
     ctx: &GpuContext,
     layout: &wgpu::BindGroupLayout,
     format: wgpu::TextureFormat,
+    write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
     let shader = ctx.shader("present.wgsl");
     let pipeline_layout = ctx
@@ -1090,7 +1426,7 @@ fn present_pipeline(
                 targets: &[Some(wgpu::ColorTargetState {
                     format,
                     blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
+                    write_mask,
                 })],
             }),
             multiview_mask: None,
@@ -1117,46 +1453,5 @@ fn dummy_camera() -> CameraView {
         znear: 0.1,
         zfar: 10.0,
         off_axis: None,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fly_camera_round_trips_a_view_direction() {
-        let camera = CameraView {
-            world_from_view: glam::camera::rh::view::look_at_mat4(
-                Vec3::new(1.0, 2.0, 3.0),
-                Vec3::new(0.0, 0.5, 0.0),
-                Vec3::Y,
-            )
-            .inverse(),
-            ..dummy_camera()
-        };
-        let fly = FlyCamera::from_view(&camera);
-        let rebuilt = fly.world_from_view();
-        let forward = |m: Mat4| -m.z_axis.truncate();
-        assert!((forward(rebuilt) - forward(camera.world_from_view)).length() < 1e-5);
-        assert!((rebuilt.w_axis.truncate() - Vec3::new(1.0, 2.0, 3.0)).length() < 1e-6);
-        // Without roll the rebuilt right vector stays horizontal.
-        assert!(rebuilt.x_axis.y.abs() < 1e-6);
-    }
-
-    #[test]
-    fn fly_camera_moves_along_its_view() {
-        let mut fly = FlyCamera {
-            position: Vec3::ZERO,
-            yaw: std::f32::consts::FRAC_PI_2,
-            pitch: 0.0,
-        };
-        // Heading +90° about +y looks down −x.
-        fly.translate_local(Vec3::NEG_Z);
-        assert!(
-            (fly.position - Vec3::NEG_X).length() < 1e-6,
-            "{:?}",
-            fly.position
-        );
     }
 }
