@@ -567,7 +567,9 @@ fn the_measured_cornell_box_renders_from_its_mitsuba_3_file() {
     let output = valgi()
         .args(["render", "--scene"])
         .arg(&scene)
-        .args(["--method", "direct", "--width", "16", "--height", "16"])
+        // 50 mm edges: the file is in millimetres (README, "Mitsuba 3").
+        .args(["--method", "direct", "--max-edge", "50"])
+        .args(["--width", "16", "--height", "16"])
         .args(["--out", &out])
         .output()
         .expect("run valgi");
