@@ -16,7 +16,9 @@ use valgi::reference::{
 };
 use valgi::scene::builtin::procedural::icosphere;
 use valgi::scene::builtin::{self, BuiltinParams};
-use valgi::scene::{Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs};
+use valgi::scene::{
+    Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
+};
 
 const RHO: f32 = 0.5;
 const INTENSITY: f32 = 1.0;
@@ -71,6 +73,7 @@ fn sphere_scene() -> Scene {
         name: "camera".into(),
         node: c,
         yfov: 70f32.to_radians(),
+        fov_axis: FovAxis::Vertical,
         aspect: None,
         znear: 0.01,
         zfar: Some(5.0),

@@ -12,7 +12,9 @@ use valgi::peers::brute::BruteMethod;
 use valgi::raster::FrameOutput;
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::mesh::MeshBuilder;
-use valgi::scene::{Camera, CameraView, Instance, Light, LightKind, Material, Node, Scene, Trs};
+use valgi::scene::{
+    Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
+};
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
 use valgi::vals::sparse::{PointsReadback, SparseOptions};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
@@ -706,6 +708,7 @@ impl Builder {
             name: "camera".into(),
             node,
             yfov: 1.0,
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.01,
             zfar: None,

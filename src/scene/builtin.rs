@@ -10,7 +10,9 @@
 pub mod procedural;
 
 use super::mesh::MeshBuilder;
-use super::{Camera, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs};
+use super::{
+    Camera, FovAxis, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs,
+};
 use glam::{Quat, Vec3};
 
 /// Knobs shared by all built-in scenes.
@@ -377,6 +379,7 @@ fn cornell(name: &str, light: CornellLight, max_edge: f32) -> Scene {
             name: "camera".into(),
             node: 0,
             yfov: 39.3077f32.to_radians(),
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.01,
             zfar: Some(3.0),
@@ -469,6 +472,7 @@ fn plane(name: &str, light: PlaneLight, blocker: bool, max_edge: f32) -> Scene {
             name: "camera".into(),
             node: 0,
             yfov: 60f32.to_radians(),
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.05,
             zfar: Some(10.0),
@@ -528,6 +532,7 @@ fn lpv_diagonal(name: &str, max_edge: f32) -> Scene {
             name: "camera".into(),
             node: 0,
             yfov: 60f32.to_radians(),
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.05,
             zfar: Some(10.0),
@@ -623,6 +628,7 @@ fn closed_box(name: &str, max_edge: f32) -> Scene {
                 name: camera_name.into(),
                 node: 0,
                 yfov: 100f32.to_radians(),
+                fov_axis: FovAxis::Vertical,
                 aspect: None,
                 znear: 0.01,
                 zfar: Some(4.0),
@@ -672,6 +678,7 @@ fn emissive_quad(name: &str, max_edge: f32) -> Scene {
             name: "front".into(),
             node: 0,
             yfov: 50f32.to_radians(),
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.05,
             zfar: Some(10.0),

@@ -15,7 +15,7 @@ use std::str::FromStr;
 
 use glam::{Quat, Vec3};
 
-use super::{Camera, Light, LightKind, Node, Scene, SceneError, Trs};
+use super::{Camera, FovAxis, Light, LightKind, Node, Scene, SceneError, Trs};
 
 /// A light given on the command line.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -302,6 +302,7 @@ impl SceneEdits {
         if let (Some(index), None, None) = (scene_camera, edit.eye, edit.target) {
             if let Some(fov) = edit.yfov_degrees {
                 scene.cameras[index].yfov = fov.to_radians();
+                scene.cameras[index].fov_axis = FovAxis::Vertical;
             }
             return Ok(index.to_string());
         }
@@ -371,6 +372,7 @@ impl SceneEdits {
             name: EDIT_CAMERA_NAME.into(),
             node,
             yfov: view.yfov,
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: view.znear,
             zfar: Some(view.zfar),

@@ -102,6 +102,19 @@ pub fn resolve_reference(
     kind: &str,
     policy: ReadPolicy,
 ) -> Result<PathBuf, String> {
+    resolve_reference_within(base_dir, base_dir, reference, kind, policy)
+}
+
+/// [`resolve_reference`] for a reference written in a file of a sub-folder of the scene (a
+/// Mitsuba include): `reference` is relative to `base_dir`, and must stay inside
+/// `scene_dir`, the scene file's folder.
+pub fn resolve_reference_within(
+    base_dir: &Path,
+    scene_dir: &Path,
+    reference: &str,
+    kind: &str,
+    policy: ReadPolicy,
+) -> Result<PathBuf, String> {
     if reference.is_empty() {
         return Err(format!("{kind} reference is an empty path"));
     }
@@ -129,15 +142,15 @@ pub fn resolve_reference(
         }
     })?;
     if !policy.allow_external_paths {
-        let folder = std::fs::canonicalize(if base_dir.as_os_str().is_empty() {
+        let folder = std::fs::canonicalize(if scene_dir.as_os_str().is_empty() {
             Path::new(".")
         } else {
-            base_dir
+            scene_dir
         })
         .map_err(|e| {
             format!(
                 "cannot resolve the scene folder {}: {e}",
-                base_dir.display()
+                scene_dir.display()
             )
         })?;
         if !canonical.starts_with(&folder) {

@@ -18,8 +18,8 @@ use super::mesh::{
 };
 use super::sanitize;
 use super::{
-    Animation, Camera, Channel, ColorSpace, Instance, Interpolation, Light, LightKind, Material,
-    Mesh, Node, Property, Scene, SceneError, Texture, Trs,
+    Animation, Camera, Channel, ColorSpace, FovAxis, Instance, Interpolation, Light, LightKind,
+    Material, Mesh, Node, Property, Scene, SceneError, Texture, Trs,
 };
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
@@ -1003,6 +1003,7 @@ impl<'a> Importer<'a> {
                     name,
                     node,
                     yfov,
+                    fov_axis: FovAxis::Vertical,
                     aspect: p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0),
                     znear: p.znear(),
                     zfar: p.zfar(),

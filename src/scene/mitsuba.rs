@@ -1,7 +1,11 @@
-//! Mitsuba 0.5 scene files (`scene.xml`), the subset real-asset scenes such as Bitterli's
-//! "Veach, Ajar" use.
+//! Mitsuba scene files (`scene.xml`): the subset of Mitsuba 0.5 and Mitsuba 3 that real-asset
+//! scenes such as Bitterli's "Veach, Ajar" (0.5) and the measured Cornell box of mitsuba-data
+//! (3.0) use. Property names match in either spelling (`toWorld` / `to_world`, `intIOR` /
+//! `int_ior`, `fovAxis` / `fov_axis`).
 //!
 //! Read:
+//! - the file level ([`super::mitsuba_xml`]): `<include>`, `<default>` parameters and `$name`
+//!   substitution, with errors naming the file and line.
 //! - shapes `obj`, `ply`, `rectangle`, `cube` and `sphere` with `toWorld` transforms (`matrix`,
 //!   `translate`, `scale`, `rotate`, `lookat`), baked into world-space vertices (normals by the
 //!   inverse transpose, winding kept outward under mirroring); `faceNormals` gives flat
@@ -17,34 +21,58 @@
 //!   back to a constant (0.5 grey, the checkerboard's mean colour) with a warning.
 //!   `dielectric` has no transmission in valgi: it becomes a black surface with only the
 //!   Fresnel specular lobe, with a warning.
-//! - area emitters on shapes → emissive materials (radiance, W/(m²·sr)); `point`, `spot` and
-//!   `directional` emitters → punctual lights; other emitters are skipped with a warning.
-//! - the `perspective` sensor: `fov` with `fovAxis`, the film's aspect, clip planes, `toWorld`.
+//! - colours as `rgb` (linear), `srgb`, a single number, or a sampled `spectrum` ("λ:v, …",
+//!   nm) converted with the CIE 1931 colour-matching functions ([`super::spectrum`]):
+//!   reflectances (and η, k) white-balanced under D65 so a constant spectrum is its grey,
+//!   emission keeping its own colour with Y the ȳ-weighted mean radiance.
+//! - area emitters → emissive materials (radiance, W/(m²·sr)): nested in a shape, or at the
+//!   top level with an `id` that shapes reference by `<ref id>` (Mitsuba 3); `point`, `spot`
+//!   and `directional` emitters → punctual lights; other emitters are skipped with a warning.
+//! - the `perspective` sensor: `fov` along `fovAxis` (x, y, smaller, larger, diagonal) of the
+//!   rendered image, clip planes, `toWorld`. The film's size is checked, not used: the render's
+//!   `--width`/`--height` set the image, and the angle stays on its axis at any aspect.
+//!   Integrator, sampler, film and reconstruction-filter settings are valgi's command line's
+//!   and are passed over silently.
 //!
 //! Referenced files go through [`super::files`]: inside the scene's folder unless external
 //! paths are allowed.
 
 use super::files::{self, ReadPolicy};
 use super::mesh::{compute_normals, remove_degenerate_triangles};
+use super::mitsuba_xml::{self, Document, Element};
+use super::spectrum::{self, SampledSpectrum};
 use super::{
-    Camera, ColorSpace, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError,
-    Texture, Trs,
+    Camera, ColorSpace, FovAxis, Instance, Light, LightKind, Material, Mesh, Node, Scene,
+    SceneError, Texture, Trs,
 };
 use glam::{Mat3, Mat4, Quat, Vec2, Vec3, Vec4};
-use roxmltree::Node as XmlNode;
 use std::collections::HashMap;
 use std::path::Path;
 
 /// Most triangles the shapes of one scene file may place (each shape bakes its own copy).
 pub const MAX_SCENE_TRIANGLES: usize = 1 << 26;
 
-/// Most XML nodes a scene file may hold.
-const MAX_XML_NODES: u32 = 1_000_000;
-
 /// Loads a Mitsuba scene file; its references resolve relative to its folder under `policy`.
 pub fn load(path: &Path, policy: ReadPolicy) -> Result<Scene, SceneError> {
+    load_with_parameters(path, policy, &[])
+}
+
+/// [`load`] with scene parameters defined ahead of the file's `<default>`s (Mitsuba's
+/// `-D name=value`).
+pub fn load_with_parameters(
+    path: &Path,
+    policy: ReadPolicy,
+    parameters: &[(String, String)],
+) -> Result<Scene, SceneError> {
     let file = files::read_scene_file(path, files::other_error)?;
-    let mut scene = parse(&file.bytes, &file.display, Some(&file.base_dir), policy)?;
+    let mut scene = parse_source(
+        &file.bytes,
+        &file.display,
+        Some(&file.base_dir),
+        std::fs::canonicalize(path).ok(),
+        policy,
+        parameters,
+    )?;
     if let Some(stem) = path.parent().and_then(Path::file_name) {
         // "scene.xml" says little; the folder names the scene (veach-ajar).
         scene.name = stem.to_string_lossy().into_owned();
@@ -52,36 +80,45 @@ pub fn load(path: &Path, policy: ReadPolicy) -> Result<Scene, SceneError> {
     Ok(scene)
 }
 
-/// Builds a scene from Mitsuba XML bytes. `base_dir` resolves mesh and texture file names
-/// (`None`: file-based shapes are skipped with a warning).
+/// Builds a scene from Mitsuba XML bytes. `base_dir` resolves mesh, texture and include file
+/// names (`None`: file-based shapes are skipped with a warning, includes are errors).
 pub fn parse(
     bytes: &[u8],
     display: &str,
     base_dir: Option<&Path>,
     policy: ReadPolicy,
 ) -> Result<Scene, SceneError> {
-    let fail = |message: String| SceneError::Other {
-        path: display.to_string(),
-        message,
-    };
-    let text = std::str::from_utf8(bytes).map_err(|e| fail(format!("not UTF-8 text: {e}")))?;
-    let options = roxmltree::ParsingOptions {
-        allow_dtd: false,
-        nodes_limit: MAX_XML_NODES,
-        ..Default::default()
-    };
-    let document = roxmltree::Document::parse_with_options(text, options)
-        .map_err(|e| fail(format!("malformed XML: {e}")))?;
-    let root = document.root_element();
-    if root.tag_name().name() != "scene" {
-        return Err(fail(format!(
-            "root element is <{}>, not <scene> (not a Mitsuba scene)",
-            root.tag_name().name()
-        )));
-    }
+    parse_source(bytes, display, base_dir, None, policy, &[])
+}
+
+/// [`parse`] with scene parameters defined ahead of the file's `<default>`s.
+pub fn parse_with_parameters(
+    bytes: &[u8],
+    display: &str,
+    base_dir: Option<&Path>,
+    policy: ReadPolicy,
+    parameters: &[(String, String)],
+) -> Result<Scene, SceneError> {
+    parse_source(bytes, display, base_dir, None, policy, parameters)
+}
+
+fn parse_source(
+    bytes: &[u8],
+    display: &str,
+    base_dir: Option<&Path>,
+    top_file: Option<std::path::PathBuf>,
+    policy: ReadPolicy,
+    parameters: &[(String, String)],
+) -> Result<Scene, SceneError> {
+    let document = mitsuba_xml::read(bytes, display, base_dir, top_file, policy, parameters)
+        .map_err(|message| SceneError::Other {
+            path: display.to_string(),
+            message,
+        })?;
     let mut reader = Reader {
         display: display.to_string(),
-        base_dir,
+        document: &document,
+        has_base_dir: base_dir.is_some(),
         policy,
         scene: Scene {
             name: Path::new(display)
@@ -90,6 +127,7 @@ pub fn parse(
             ..Scene::default()
         },
         bsdfs: HashMap::new(),
+        area_emitters: HashMap::new(),
         textures: HashMap::new(),
         mesh_files: HashMap::new(),
         triangles: 0,
@@ -99,18 +137,40 @@ pub fn parse(
         parent: None,
         local: Trs::default(),
     });
-    for child in root.children().filter(XmlNode::is_element) {
-        match child.tag_name().name() {
+    // BSDFs and area emitters first: a shape may reference one written after it (Mitsuba
+    // resolves references once the whole file is read; cbox-rgb.xml defines its emitter last).
+    for child in document.root.children() {
+        match child.tag() {
             "bsdf" => {
                 let material = reader.bsdf(child)?;
                 if let Some(id) = child.attribute("id") {
                     reader.bsdfs.insert(id.to_string(), material);
                 }
             }
+            "emitter" if child.attribute("type") == Some("area") => {
+                let radiance = reader.area_radiance(child)?;
+                match child.attribute("id") {
+                    Some(id) => {
+                        reader.area_emitters.insert(id.to_string(), radiance);
+                    }
+                    None => reader.warn(format!(
+                        "{}: area emitter without an id, so no shape can reference it; ignored",
+                        reader.at(child)
+                    )),
+                }
+            }
+            _ => {}
+        }
+    }
+    for child in document.root.children() {
+        match child.tag() {
+            "bsdf" => {}
+            "emitter" if child.attribute("type") == Some("area") => {}
             "shape" => reader.shape(child)?,
             "sensor" => reader.sensor(child)?,
             "emitter" => reader.emitter(child)?,
-            "integrator" | "default" => {}
+            // Rendering settings valgi takes from its command line.
+            "integrator" | "sampler" | "film" | "rfilter" => {}
             other => reader.warn(format!("<{other}> is not read; ignored")),
         }
     }
@@ -124,10 +184,14 @@ pub fn parse(
 
 struct Reader<'a> {
     display: String,
-    base_dir: Option<&'a Path>,
+    document: &'a Document,
+    /// Whether the scene came with a folder (file references can be resolved).
+    has_base_dir: bool,
     policy: ReadPolicy,
     scene: Scene,
     bsdfs: HashMap<String, Material>,
+    /// Top-level area emitters by id: their radiance, for the shapes that reference them.
+    area_emitters: HashMap<String, Vec3>,
     /// Bitmap file name → texture index (None: could not be loaded).
     textures: HashMap<String, Option<usize>>,
     /// Mesh files already read, by canonical path: a file is parsed once however many shapes
@@ -138,9 +202,33 @@ struct Reader<'a> {
 }
 
 /// The child element `<tag name="name" …>` of `node`.
-fn property<'a, 'i>(node: XmlNode<'a, 'i>, tag: &str, name: &str) -> Option<XmlNode<'a, 'i>> {
+fn property<'a>(node: &'a Element, tag: &str, name: &str) -> Option<&'a Element> {
     node.children()
-        .find(|c| c.is_element() && c.tag_name().name() == tag && c.attribute("name") == Some(name))
+        .find(|c| c.tag() == tag && c.attribute("name").is_some_and(|n| same_name(n, name)))
+}
+
+/// Whether two property names are the same in Mitsuba 0.5's camelCase or Mitsuba 3's
+/// snake_case (`toWorld` = `to_world`, `intIOR` = `int_ior`, `fovAxis` = `fov_axis`).
+fn same_name(a: &str, b: &str) -> bool {
+    let folded = |s: &str| {
+        s.chars()
+            .filter(|c| *c != '_')
+            .map(|c| c.to_ascii_lowercase())
+            .collect::<String>()
+    };
+    folded(a) == folded(b)
+}
+
+/// What a colour property measures, which decides how a sampled spectrum becomes linear sRGB
+/// (see [`super::spectrum`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Quantity {
+    /// A ratio (reflectance, η, k): white-balanced under D65, so a constant spectrum is its
+    /// grey.
+    Ratio,
+    /// Emitted radiance, intensity or irradiance: the spectrum's own colour, with Y its
+    /// ȳ-weighted mean.
+    Emission,
 }
 
 /// Numbers separated by commas and/or whitespace.
@@ -173,7 +261,7 @@ impl Reader<'_> {
     }
 
     /// `<tag name=… value=…>` parsed as one number, with the line for errors.
-    fn float(&self, node: XmlNode, name: &str, default: f32) -> Result<f32, SceneError> {
+    fn float(&self, node: &Element, name: &str, default: f32) -> Result<f32, SceneError> {
         let Some(p) = property(node, "float", name).or_else(|| property(node, "integer", name))
         else {
             return Ok(default);
@@ -188,43 +276,46 @@ impl Reader<'_> {
         }
     }
 
-    fn string<'n>(&self, node: XmlNode<'n, '_>, name: &str) -> Option<&'n str> {
+    fn string<'n>(&self, node: &'n Element, name: &str) -> Option<&'n str> {
         property(node, "string", name).and_then(|p| p.attribute("value"))
     }
 
-    fn at(&self, node: XmlNode) -> String {
-        let pos = node.document().text_pos_at(node.range().start);
-        format!("line {}", pos.row)
+    fn at(&self, node: &Element) -> String {
+        self.document.at(node)
     }
 
     /// A colour property (`rgb`, `srgb`, `spectrum` or a constant `float`); `None` when absent
-    /// or a texture (see [`Self::colour_or_texture`]).
-    fn colour(&mut self, node: XmlNode, name: &str) -> Result<Option<Vec3>, SceneError> {
+    /// or a texture (see [`Self::colour_or_texture`]). A sampled spectrum becomes linear sRGB
+    /// as `quantity` says; a single number is that grey, whatever the tag.
+    fn colour(
+        &mut self,
+        node: &Element,
+        name: &str,
+        quantity: Quantity,
+    ) -> Result<Option<Vec3>, SceneError> {
         let Some(p) = node.children().find(|c| {
-            c.is_element()
-                && c.attribute("name") == Some(name)
-                && matches!(c.tag_name().name(), "rgb" | "srgb" | "spectrum" | "float")
+            c.attribute("name").is_some_and(|n| same_name(n, name))
+                && matches!(c.tag(), "rgb" | "srgb" | "spectrum" | "float")
         }) else {
             return Ok(None);
         };
         let value = p.attribute("value").unwrap_or("");
-        let tag = p.tag_name().name();
+        let tag = p.tag();
         if tag == "spectrum" && value.contains(':') {
-            // Sampled spectrum "λ:v, λ:v": its mean stands in for an RGB conversion.
-            let samples: Vec<f32> = value
-                .split(',')
-                .filter_map(|s| s.split(':').nth(1)?.trim().parse().ok())
-                .collect();
-            if samples.is_empty() {
-                return Err(self.err(format!("{}: unreadable spectrum '{value}'", self.at(p))));
+            let spectrum = SampledSpectrum::parse(value)
+                .map_err(|m| self.err(format!("{}: spectrum '{name}': {m}", self.at(p))))?;
+            let rgb = match quantity {
+                Quantity::Ratio => spectrum::reflectance_to_linear_srgb(&spectrum),
+                Quantity::Emission => spectrum::emission_to_linear_srgb(&spectrum),
+            };
+            if rgb.min_element() < 0.0 {
+                self.warn(format!(
+                    "{}: spectrum '{name}' lies outside the sRGB gamut ({rgb}); negative \
+                     channels clamped to 0",
+                    self.at(p)
+                ));
             }
-            self.warn(format!(
-                "{}: sampled spectrum '{name}' reduced to its mean",
-                self.at(p)
-            ));
-            return Ok(Some(Vec3::splat(
-                samples.iter().sum::<f32>() / samples.len() as f32,
-            )));
+            return Ok(Some(rgb.max(Vec3::ZERO)));
         }
         let v = numbers(value).map_err(|m| self.err(format!("{}: '{name}': {m}", self.at(p))))?;
         let rgb = match v.as_slice() {
@@ -248,11 +339,11 @@ impl Reader<'_> {
     /// there) or `checkerboard` (its mean colour).
     fn colour_or_texture(
         &mut self,
-        node: XmlNode,
+        node: &Element,
         name: &str,
         default: Vec3,
     ) -> Result<(Vec3, Option<usize>), SceneError> {
-        if let Some(c) = self.colour(node, name)? {
+        if let Some(c) = self.colour(node, name, Quantity::Ratio)? {
             return Ok((c, None));
         }
         let Some(texture) = property(node, "texture", name) else {
@@ -261,14 +352,18 @@ impl Reader<'_> {
         match texture.attribute("type") {
             Some("bitmap") => {
                 let file = self.string(texture, "filename").unwrap_or("").to_string();
-                Ok(match self.bitmap(&file) {
+                Ok(match self.bitmap(texture, &file) {
                     Some(index) => (Vec3::ONE, Some(index)),
                     None => (default, None),
                 })
             }
             Some("checkerboard") => {
-                let a = self.colour(texture, "color0")?.unwrap_or(Vec3::splat(0.4));
-                let b = self.colour(texture, "color1")?.unwrap_or(Vec3::splat(0.2));
+                let a = self
+                    .colour(texture, "color0", Quantity::Ratio)?
+                    .unwrap_or(Vec3::splat(0.4));
+                let b = self
+                    .colour(texture, "color1", Quantity::Ratio)?
+                    .unwrap_or(Vec3::splat(0.2));
                 self.warn(format!(
                     "{}: checkerboard '{name}' replaced by its mean colour",
                     self.at(texture)
@@ -285,15 +380,18 @@ impl Reader<'_> {
         }
     }
 
-    fn bitmap(&mut self, file: &str) -> Option<usize> {
+    fn bitmap(&mut self, node: &Element, file: &str) -> Option<usize> {
         if let Some(known) = self.textures.get(file) {
             return *known;
         }
-        let loaded = match self.base_dir {
-            None => Err("no base folder".to_string()),
-            Some(base) => files::read_reference(base, file, "texture", self.policy)
-                .and_then(|bytes| files::decode_rgba8(&bytes)),
-        };
+        let loaded = self
+            .document
+            .resolve(node, file, "texture", self.policy)
+            .and_then(|path| {
+                files::read_regular_file(&path)
+                    .map_err(|m| format!("texture file '{}': {m}", path.display()))
+            })
+            .and_then(|bytes| files::decode_rgba8(&bytes));
         let index = match loaded {
             Ok(rgba) => {
                 self.scene.textures.push(Texture {
@@ -317,7 +415,7 @@ impl Reader<'_> {
     }
 
     /// The material model's reading of a `<bsdf>` element (see the module documentation).
-    fn bsdf(&mut self, node: XmlNode) -> Result<Material, SceneError> {
+    fn bsdf(&mut self, node: &Element) -> Result<Material, SceneError> {
         let kind = node.attribute("type").unwrap_or("");
         let name = node.attribute("id").unwrap_or(kind).to_string();
         // valgi's roughness from Beckmann/GGX alpha (α = roughness²); smooth variants have α = 0.
@@ -335,9 +433,7 @@ impl Reader<'_> {
         };
         let mut m = match kind {
             "twosided" => {
-                let inner = node
-                    .children()
-                    .find(|c| c.is_element() && c.tag_name().name() == "bsdf");
+                let inner = node.children().find(|c| c.tag() == "bsdf");
                 let mut m = match inner {
                     Some(inner) => self.bsdf(inner)?,
                     None => {
@@ -360,7 +456,7 @@ impl Reader<'_> {
                 let (rho, texture) =
                     self.colour_or_texture(node, "diffuseReflectance", Vec3::splat(0.5))?;
                 let specular = self
-                    .colour(node, "specularReflectance")?
+                    .colour(node, "specularReflectance", Quantity::Ratio)?
                     .unwrap_or(Vec3::ONE);
                 let eta = self.ior(node, "intIOR", 1.49)? / self.ior(node, "extIOR", 1.000277)?;
                 let f0 = ((eta - 1.0) / (eta + 1.0)).powi(2);
@@ -377,7 +473,10 @@ impl Reader<'_> {
             "conductor" | "roughconductor" => {
                 let (specular, _) =
                     self.colour_or_texture(node, "specularReflectance", Vec3::ONE)?;
-                let f0 = match (self.colour(node, "eta")?, self.colour(node, "k")?) {
+                let f0 = match (
+                    self.colour(node, "eta", Quantity::Ratio)?,
+                    self.colour(node, "k", Quantity::Ratio)?,
+                ) {
                     (Some(eta), Some(k)) => fresnel_conductor(eta, k),
                     _ => {
                         let named = self.string(node, "material").unwrap_or("Cu").to_string();
@@ -432,7 +531,7 @@ impl Reader<'_> {
     }
 
     /// An index of refraction given as a number or a Mitsuba material name.
-    fn ior(&mut self, node: XmlNode, name: &str, default: f32) -> Result<f32, SceneError> {
+    fn ior(&mut self, node: &Element, name: &str, default: f32) -> Result<f32, SceneError> {
         if let Some(text) = self.string(node, name) {
             let known = match text.to_ascii_lowercase().as_str() {
                 "vacuum" => Some(1.0),
@@ -454,16 +553,14 @@ impl Reader<'_> {
         Ok(if v.is_finite() && v > 0.0 { v } else { default })
     }
 
-    fn transform(&self, node: XmlNode, name: &str) -> Result<Mat4, SceneError> {
+    fn transform(&self, node: &Element, name: &str) -> Result<Mat4, SceneError> {
         let Some(t) = node.children().find(|c| {
-            c.is_element()
-                && c.tag_name().name() == "transform"
-                && c.attribute("name") == Some(name)
+            c.tag() == "transform" && c.attribute("name").is_some_and(|n| same_name(n, name))
         }) else {
             return Ok(Mat4::IDENTITY);
         };
         let mut m = Mat4::IDENTITY;
-        for op in t.children().filter(XmlNode::is_element) {
+        for op in t.children() {
             let bad = |message: String| self.err(format!("{}: {message}", self.at(op)));
             let xyz = |default: f32| -> Result<Vec3, SceneError> {
                 if let Some(value) = op.attribute("value") {
@@ -490,7 +587,7 @@ impl Reader<'_> {
                     _ => Err(bad(format!("{key}='{text}' needs 3 numbers"))),
                 }
             };
-            let step = match op.tag_name().name() {
+            let step = match op.tag() {
                 "matrix" => {
                     let value = op.attribute("value").unwrap_or("");
                     let v = numbers(value).map_err(&bad)?;
@@ -555,43 +652,53 @@ impl Reader<'_> {
         Ok(m)
     }
 
-    fn shape(&mut self, node: XmlNode) -> Result<(), SceneError> {
+    fn shape(&mut self, node: &Element) -> Result<(), SceneError> {
         let kind = node.attribute("type").unwrap_or("");
         let at = self.at(node);
         let world_from_model = self.transform(node, "toWorld")?;
-        let mut material = match node
-            .children()
-            .filter(XmlNode::is_element)
-            .find(|c| matches!(c.tag_name().name(), "ref" | "bsdf"))
-        {
-            Some(c) if c.tag_name().name() == "bsdf" => self.bsdf(c)?,
-            Some(c) => {
-                let id = c.attribute("id").unwrap_or("");
-                match self.bsdfs.get(id) {
-                    Some(m) => m.clone(),
-                    None => {
+        // A shape names its BSDF and, in Mitsuba 3, its area emitter by `<ref id>` (either
+        // order) or nests them.
+        let mut material = None;
+        let mut radiance = None;
+        for child in node.children() {
+            match child.tag() {
+                "bsdf" if material.is_none() => material = Some(self.bsdf(child)?),
+                "emitter" => {
+                    if child.attribute("type") == Some("area") {
+                        radiance = Some(self.area_radiance(child)?);
+                    } else {
                         self.warn(format!(
-                            "{at}: bsdf '{id}' is not defined; grey diffuse used"
+                            "{at}: shape emitter type {:?} not supported; ignored",
+                            child.attribute("type")
                         ));
-                        Material::lambert(id, Vec3::splat(0.5))
                     }
                 }
+                "ref" => {
+                    let id = child.attribute("id").unwrap_or("");
+                    if let Some(r) = self.area_emitters.get(id) {
+                        radiance = Some(*r);
+                    } else if material.is_none() {
+                        material = Some(match self.bsdfs.get(id) {
+                            Some(m) => m.clone(),
+                            None => {
+                                self.warn(format!(
+                                    "{}: '{id}' is not a bsdf or area emitter of the scene; \
+                                     grey diffuse used",
+                                    self.at(child)
+                                ));
+                                Material::lambert(id, Vec3::splat(0.5))
+                            }
+                        });
+                    }
+                }
+                _ => {}
             }
-            None => Material::lambert("default diffuse", Vec3::splat(0.5)),
-        };
-        if let Some(emitter) = node
-            .children()
-            .find(|c| c.is_element() && c.tag_name().name() == "emitter")
-        {
-            if emitter.attribute("type") == Some("area") {
-                material.emissive = self.colour(emitter, "radiance")?.unwrap_or(Vec3::ONE);
-                material.name = format!("{} (emitter)", material.name);
-            } else {
-                self.warn(format!(
-                    "{at}: shape emitter type {:?} not supported; ignored",
-                    emitter.attribute("type")
-                ));
-            }
+        }
+        let mut material =
+            material.unwrap_or_else(|| Material::lambert("default diffuse", Vec3::splat(0.5)));
+        if let Some(radiance) = radiance {
+            material.emissive = radiance;
+            material.name = format!("{} (emitter)", material.name);
         }
         let face_normals = property(node, "boolean", "faceNormals")
             .and_then(|p| p.attribute("value"))
@@ -599,11 +706,11 @@ impl Reader<'_> {
         let mut meshes: Vec<Mesh> = match kind {
             "obj" | "ply" => {
                 let file = self.string(node, "filename").unwrap_or("").to_string();
-                let Some(base) = self.base_dir else {
+                if !self.has_base_dir {
                     self.warn(format!("{at}: mesh '{file}' skipped (no base folder)"));
                     return Ok(());
-                };
-                let path = match files::resolve_reference(base, &file, "mesh", self.policy) {
+                }
+                let path = match self.document.resolve(node, &file, "mesh", self.policy) {
                     Ok(p) => p,
                     Err(m) if m.starts_with("missing") => {
                         self.warn(format!("{at}: {m}; shape skipped"));
@@ -696,7 +803,7 @@ impl Reader<'_> {
         Ok(())
     }
 
-    fn sensor(&mut self, node: XmlNode) -> Result<(), SceneError> {
+    fn sensor(&mut self, node: &Element) -> Result<(), SceneError> {
         let at = self.at(node);
         if node.attribute("type") != Some("perspective") {
             self.warn(format!(
@@ -706,22 +813,32 @@ impl Reader<'_> {
             return Ok(());
         }
         let world_from_camera = self.transform(node, "toWorld")?;
-        let film = node
-            .children()
-            .find(|c| c.is_element() && c.tag_name().name() == "film");
-        let (width, height) = match film {
-            Some(f) => (
-                self.float(f, "width", 768.0)?,
-                self.float(f, "height", 576.0)?,
-            ),
-            None => (768.0, 576.0),
-        };
-        if !(width >= 1.0 && height >= 1.0 && width.is_finite() && height.is_finite()) {
-            return Err(self.err(format!("{at}: film size {width} × {height} is not valid")));
+        // The film's size is checked but does not size the render: `--width`/`--height` do,
+        // as for every scene format, and the field of view keeps its angle along `fov_axis`
+        // of that image (at the film's aspect this is Mitsuba's framing exactly).
+        if let Some(film) = node.children().find(|c| c.tag() == "film") {
+            let width = self.float(film, "width", 768.0)?;
+            let height = self.float(film, "height", 576.0)?;
+            if !(width >= 1.0 && height >= 1.0 && width.is_finite() && height.is_finite()) {
+                return Err(self.err(format!("{at}: film size {width} × {height} is not valid")));
+            }
         }
         let fov = self.float(node, "fov", f32::NAN)?;
-        let fov = if fov.is_finite() {
-            fov
+        let (fov_degrees, fov_axis) = if fov.is_finite() {
+            let axis = self.string(node, "fovAxis").unwrap_or("x");
+            let fov_axis = match axis {
+                "x" => FovAxis::Horizontal,
+                "y" => FovAxis::Vertical,
+                "smaller" => FovAxis::Smaller,
+                "larger" => FovAxis::Larger,
+                "diagonal" => FovAxis::Diagonal,
+                other => {
+                    return Err(self.err(format!(
+                        "{at}: fov_axis '{other}' unknown (x, y, smaller, larger, diagonal)"
+                    )))
+                }
+            };
+            (fov, fov_axis)
         } else {
             // Mitsuba also accepts a 35 mm-equivalent focal length.
             let focal = self
@@ -732,33 +849,13 @@ impl Reader<'_> {
             self.warn(format!(
                 "{at}: focal length {focal} mm read as a {diagonal:.1}° diagonal fov"
             ));
-            return self.add_camera(world_from_camera, diagonal, "diagonal", width, height, node);
+            (diagonal, FovAxis::Diagonal)
         };
-        let axis = self.string(node, "fovAxis").unwrap_or("x").to_string();
-        self.add_camera(world_from_camera, fov, &axis, width, height, node)
-    }
-
-    fn add_camera(
-        &mut self,
-        world_from_camera: Mat4,
-        fov_degrees: f32,
-        axis: &str,
-        width: f32,
-        height: f32,
-        node: XmlNode,
-    ) -> Result<(), SceneError> {
-        let half = (fov_degrees.to_radians() * 0.5).tan();
-        let tan_half_y = match axis {
-            "x" => half * height / width,
-            "y" => half,
-            "diagonal" => half * height / (width * width + height * height).sqrt(),
-            "smaller" if width < height => half * height / width,
-            "smaller" => half,
-            "larger" if width > height => half * height / width,
-            "larger" => half,
-            other => return Err(self.err(format!("{}: fovAxis '{other}' unknown", self.at(node)))),
-        };
-        let yfov = 2.0 * tan_half_y.atan();
+        if !(fov_degrees > 0.0 && fov_degrees < 180.0) {
+            return Err(self.err(format!(
+                "{at}: fov {fov_degrees}° is outside (0, 180) degrees"
+            )));
+        }
         let znear = self.float(node, "nearClip", 1e-2)?;
         let zfar = self.float(node, "farClip", 1e4)?;
         // Mitsuba's camera looks down +z with +x to the left; valgi's looks down −z with +x to
@@ -779,9 +876,8 @@ impl Reader<'_> {
         self.scene.cameras.push(Camera {
             name,
             node: node_index,
-            yfov,
-            // The film's aspect shapes the field of view; the output image's aspect is used
-            // for the projection (render at the film's aspect to match Mitsuba's framing).
+            yfov: fov_degrees.to_radians(),
+            fov_axis,
             aspect: None,
             znear,
             zfar: Some(zfar),
@@ -789,7 +885,14 @@ impl Reader<'_> {
         Ok(())
     }
 
-    fn emitter(&mut self, node: XmlNode) -> Result<(), SceneError> {
+    /// The radiance of an `area` emitter, W/(m²·sr) (1 when absent, Mitsuba's default).
+    fn area_radiance(&mut self, node: &Element) -> Result<Vec3, SceneError> {
+        Ok(self
+            .colour(node, "radiance", Quantity::Emission)?
+            .unwrap_or(Vec3::ONE))
+    }
+
+    fn emitter(&mut self, node: &Element) -> Result<(), SceneError> {
         let at = self.at(node);
         let kind = node.attribute("type").unwrap_or("").to_string();
         let world_from_light = self.transform(node, "toWorld")?;
@@ -804,7 +907,8 @@ impl Reader<'_> {
         let (light_kind, power, forward) = match kind.as_str() {
             "point" => (
                 LightKind::Point,
-                self.colour(node, "intensity")?.unwrap_or(Vec3::ONE),
+                self.colour(node, "intensity", Quantity::Emission)?
+                    .unwrap_or(Vec3::ONE),
                 Vec3::NEG_Z,
             ),
             "spot" => {
@@ -815,7 +919,8 @@ impl Reader<'_> {
                         inner_cone_angle: beam.to_radians(),
                         outer_cone_angle: cutoff.to_radians(),
                     },
-                    self.colour(node, "intensity")?.unwrap_or(Vec3::ONE),
+                    self.colour(node, "intensity", Quantity::Emission)?
+                        .unwrap_or(Vec3::ONE),
                     world_from_light.transform_vector3(Vec3::Z),
                 )
             }
@@ -832,7 +937,8 @@ impl Reader<'_> {
                     .unwrap_or_else(|| world_from_light.transform_vector3(Vec3::Z));
                 (
                     LightKind::Directional,
-                    self.colour(node, "irradiance")?.unwrap_or(Vec3::ONE),
+                    self.colour(node, "irradiance", Quantity::Emission)?
+                        .unwrap_or(Vec3::ONE),
                     direction,
                 )
             }
@@ -1045,6 +1151,143 @@ mod tests {
         assert_eq!(m.emissive, Vec3::new(2.0, 3.0, 4.0));
         // The rectangle faces +z (toward the camera) and spans [−1, 1]².
         assert!(scene.meshes[0].normals.iter().all(|n| *n == Vec3::Z));
+    }
+
+    #[test]
+    fn fov_axis_keeps_its_angle_on_its_axis_at_any_aspect() {
+        for (axis, expected) in [
+            ("x", FovAxis::Horizontal),
+            ("y", FovAxis::Vertical),
+            ("smaller", FovAxis::Smaller),
+            ("larger", FovAxis::Larger),
+            ("diagonal", FovAxis::Diagonal),
+        ] {
+            let xml = format!(
+                r#"<scene version="3.0.0"><sensor type="perspective">
+                    <float name="fov" value="40"/><string name="fov_axis" value="{axis}"/>
+                    <film type="hdrfilm"><integer name="width" value="64"/></film>
+                </sensor></scene>"#
+            );
+            let scene = parse(xml.as_bytes(), "s.xml", None, ReadPolicy::default()).unwrap();
+            let camera = &scene.cameras[0];
+            assert_eq!(camera.fov_axis, expected);
+            let tan_fov = 20f32.to_radians().tan();
+            for aspect in [0.5f32, 1.0, 16.0 / 9.0] {
+                let tan_y = (camera.vertical_fov(aspect) * 0.5).tan();
+                let tan_x = tan_y * aspect;
+                let along = match expected {
+                    FovAxis::Horizontal => tan_x,
+                    FovAxis::Vertical => tan_y,
+                    FovAxis::Smaller => tan_x.min(tan_y),
+                    FovAxis::Larger => tan_x.max(tan_y),
+                    FovAxis::Diagonal => (tan_x * tan_x + tan_y * tan_y).sqrt(),
+                };
+                assert!(
+                    (along - tan_fov).abs() < 1e-5,
+                    "{axis} at {aspect}: {along}"
+                );
+            }
+        }
+        let bad = br#"<scene><sensor type="perspective"><float name="fov" value="40"/>
+            <string name="fov_axis" value="z"/></sensor></scene>"#;
+        let err = parse(bad, "s.xml", None, ReadPolicy::default()).unwrap_err();
+        assert!(err.to_string().contains("fov_axis 'z' unknown"), "{err}");
+    }
+
+    #[test]
+    fn top_level_area_emitters_light_the_shapes_that_reference_them() {
+        let xml = br#"<scene version="3.0.0">
+            <bsdf type="diffuse" id="grey"><spectrum name="reflectance" value="0.3"/></bsdf>
+            <emitter type="area"><rgb name="radiance" value="9"/></emitter>
+            <shape type="rectangle"><ref id="lamp"/><ref id="grey"/></shape>
+            <shape type="rectangle"><ref id="grey"/></shape>
+            <shape type="rectangle"><ref id="nothing"/>
+                <emitter type="area"><spectrum name="radiance" value="2"/></emitter></shape>
+            <emitter type="area" id="lamp"><rgb name="radiance" value="1, 2, 3"/></emitter>
+        </scene>"#;
+        let scene = parse(xml, "s.xml", None, ReadPolicy::default()).unwrap();
+        let material = |i: usize| &scene.materials[scene.meshes[i].material];
+        // Either order of the references, the emitter defined after the shape; a single-number
+        // spectrum is that grey.
+        assert_eq!(material(0).emissive, Vec3::new(1.0, 2.0, 3.0));
+        assert_eq!(material(0).base_color.truncate(), Vec3::splat(0.3));
+        assert_eq!(material(1).emissive, Vec3::ZERO);
+        assert_eq!(material(2).emissive, Vec3::splat(2.0));
+        let warnings = scene.warnings.join("\n");
+        assert!(warnings.contains("without an id"), "{warnings}");
+        assert!(
+            warnings.contains("'nothing' is not a bsdf or area emitter"),
+            "{warnings}"
+        );
+    }
+
+    #[test]
+    fn sampled_spectra_become_linear_srgb_by_what_they_measure() {
+        // A flat reflectance is its grey; the same flat spectrum as radiance is equal-energy
+        // white, reddish in sRGB, with luminance equal to its value.
+        let xml = br#"<scene version="3.0.0">
+            <shape type="rectangle">
+                <bsdf type="diffuse"><spectrum name="reflectance" value="400:0.5, 700:0.5"/></bsdf>
+                <emitter type="area"><spectrum name="radiance" value="360:4, 830:4"/></emitter>
+            </shape>
+            <shape type="rectangle">
+                <bsdf type="diffuse"><spectrum name="reflectance" value="400:0.5, 700:x"/></bsdf>
+            </shape>
+        </scene>"#;
+        let err = parse(xml, "s.xml", None, ReadPolicy::default()).unwrap_err();
+        assert!(
+            err.to_string().contains("line 7: spectrum 'reflectance'"),
+            "{err}"
+        );
+        let xml = String::from_utf8_lossy(xml).replace("700:x", "700:0.5");
+        let scene = parse(xml.as_bytes(), "s.xml", None, ReadPolicy::default()).unwrap();
+        let m = &scene.materials[scene.meshes[0].material];
+        assert!(
+            (m.base_color.truncate() - Vec3::splat(0.5))
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert!(
+            (spectrum::luminance(m.emissive) - 4.0).abs() < 0.01,
+            "{}",
+            m.emissive
+        );
+        assert!(m.emissive.x > m.emissive.y && m.emissive.y > m.emissive.z);
+    }
+
+    #[test]
+    fn mitsuba_3_snake_case_names_read_like_mitsuba_0_5_ones() {
+        let xml = br#"<scene version="3.0.0">
+            <default name="dx" value="2"/>
+            <shape type="rectangle">
+                <transform name="to_world"><translate x="$dx" y="0" z="0"/></transform>
+                <bsdf type="plastic"><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/>
+                    <float name="int_ior" value="1.5"/></bsdf>
+            </shape>
+        </scene>"#;
+        let scene = parse(xml, "s.xml", None, ReadPolicy::default()).unwrap();
+        let xs: Vec<f32> = scene.meshes[0].positions.iter().map(|p| p.x).collect();
+        assert_eq!(xs, vec![1.0, 3.0, 3.0, 1.0]);
+        let m = &scene.materials[0];
+        assert_eq!(m.base_color.truncate(), Vec3::new(0.1, 0.2, 0.3));
+        // F0 of η = 1.5 / 1.000277.
+        let f0 = ((1.5f32 / 1.000277 - 1.0) / (1.5 / 1.000277 + 1.0)).powi(2);
+        assert!(
+            (m.specular_factor - f0 / 0.04).abs() < 1e-4,
+            "{}",
+            m.specular_factor
+        );
+        // An override wins over the file's default.
+        let scene = parse_with_parameters(
+            xml,
+            "s.xml",
+            None,
+            ReadPolicy::default(),
+            &[("dx".into(), "10".into())],
+        )
+        .unwrap();
+        assert_eq!(scene.meshes[0].positions[0].x, 9.0);
     }
 
     #[test]

@@ -14,9 +14,11 @@ pub mod gltf_import;
 pub mod merge;
 pub mod mesh;
 pub mod mitsuba;
+mod mitsuba_xml;
 pub mod obj;
 pub mod ply;
 pub mod sanitize;
+pub mod spectrum;
 
 use glam::{Mat4, Quat, Vec2, Vec3, Vec4};
 
@@ -309,12 +311,54 @@ impl Light {
 pub struct Camera {
     pub name: String,
     pub node: usize,
-    /// Vertical field of view, radians.
+    /// Field of view, radians: vertical, or across the image axis `fov_axis` names.
     pub yfov: f32,
+    /// The image axis `yfov` spans; the others follow from the aspect (Mitsuba's `fov_axis`).
+    pub fov_axis: FovAxis,
     /// Width / height; `None` takes the output image's aspect.
     pub aspect: Option<f32>,
     pub znear: f32,
     pub zfar: Option<f32>,
+}
+
+/// The image axis a camera's field of view spans.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FovAxis {
+    /// Top to bottom (glTF's `yfov`, the built-in cameras).
+    #[default]
+    Vertical,
+    /// Left to right.
+    Horizontal,
+    /// The shorter of the two sides.
+    Smaller,
+    /// The longer of the two sides.
+    Larger,
+    /// Corner to corner.
+    Diagonal,
+}
+
+impl Camera {
+    /// The vertical field of view, radians, of an image of `aspect` (width / height): the
+    /// angle along [`Self::fov_axis`] is kept and the vertical one follows (the tangents of the
+    /// half-angles scale with the sides).
+    pub fn vertical_fov(&self, aspect: f32) -> f32 {
+        let aspect = if aspect.is_finite() && aspect > 0.0 {
+            aspect
+        } else {
+            1.0
+        };
+        let tan_half = (self.yfov * 0.5).tan();
+        let tan_half_vertical = match self.fov_axis {
+            FovAxis::Vertical => return self.yfov,
+            FovAxis::Horizontal => tan_half / aspect,
+            FovAxis::Smaller if aspect < 1.0 => tan_half / aspect,
+            FovAxis::Smaller => tan_half,
+            FovAxis::Larger if aspect > 1.0 => tan_half / aspect,
+            FovAxis::Larger => tan_half,
+            FovAxis::Diagonal => tan_half / (1.0 + aspect * aspect).sqrt(),
+        };
+        2.0 * tan_half_vertical.atan()
+    }
 }
 
 /// A mesh placed in the world by a node.
@@ -599,7 +643,7 @@ impl Scene {
                 };
                 CameraView {
                     world_from_view: orthonormalize(world_from_view),
-                    yfov: c.yfov,
+                    yfov: c.vertical_fov(c.aspect.unwrap_or(output_aspect)),
                     aspect: c.aspect.unwrap_or(output_aspect),
                     znear: c.znear.max(1e-4),
                     zfar: c.zfar.unwrap_or(far_needed * 1.5).max(c.znear * 2.0),
@@ -674,7 +718,7 @@ pub fn framing_camera(bounds: &Aabb, radius: f32, aspect: f32, yfov: f32) -> Cam
 /// Scene file formats [`load`] reads, by extension (any case), as listed in its errors.
 pub const SUPPORTED_FORMATS: &str =
     ".gltf, .glb (glTF 2.0), .obj (Wavefront with its MTL), .ply (ASCII or binary), \
-     .xml (Mitsuba 0.5 scene subset)";
+     .xml (Mitsuba 0.5 and 3 scene subset)";
 
 /// What [`load`] needs besides the spec.
 #[derive(Clone, Copy, Debug, PartialEq)]

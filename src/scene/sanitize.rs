@@ -283,7 +283,7 @@ fn radiometric(value: Vec3, what: &str, field: &str, warn: &mut impl FnMut(Strin
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Camera, Light, Material};
+    use crate::scene::{Camera, FovAxis, Light, Material};
 
     #[test]
     fn hostile_factors_are_repaired_with_named_warnings() {
@@ -327,6 +327,7 @@ mod tests {
             name: "c".into(),
             node: 0,
             yfov: 1.0,
+            fov_axis: FovAxis::Vertical,
             aspect: Some(f32::NAN),
             znear: -1.0,
             zfar: Some(f32::INFINITY),

@@ -27,7 +27,7 @@ use glam::{Mat3, Quat, Vec2, Vec3, Vec4};
 
 use super::super::mesh::{compute_normals, tessellate, MeshBuilder};
 use super::super::{
-    Animation, Camera, Channel, Interpolation, LightKind, Material, Mesh, Property, Scene,
+    Animation, Camera, Channel, FovAxis, Interpolation, LightKind, Material, Mesh, Property, Scene,
     SceneError, Trs,
 };
 use super::{cornell, CornellLight, SceneBuilder};
@@ -168,6 +168,7 @@ fn camera(b: &mut SceneBuilder, eye: Vec3, target: Vec3, yfov_degrees: f32) {
             name: "camera".into(),
             node: 0,
             yfov: yfov_degrees.to_radians(),
+            fov_axis: FovAxis::Vertical,
             aspect: None,
             znear: 0.02,
             zfar: Some(20.0),
