@@ -801,6 +801,9 @@ impl AtlasLayer {
 pub struct AtlasMethod {
     raster: Rasterizer,
     layer: AtlasLayer,
+    /// Milliseconds of the set-up's parts (reading the atlas and its layout file, the
+    /// rasterizer, the lookup with its layout), for the report.
+    setup_ms: Vec<(&'static str, f64)>,
 }
 
 /// The `atlas` option every atlas method takes.
@@ -840,7 +843,10 @@ impl AtlasMethod {
                 "method 'atlas' needs --atlas FILE.exr (from `valgi bake`)".into(),
             ));
         }
+        let ms = |since: std::time::Instant| since.elapsed().as_secs_f64() * 1000.0;
+        let started = std::time::Instant::now();
         let atlas = load_atlas(Path::new(&path))?;
+        let read_ms = ms(started);
         if let Some(bounces) = atlas.bounces.as_ref().filter(|b| *b.start() > 1) {
             log::warn!(
                 "--atlas {path} holds bounces {}..={} only (baked with --from-bounce {}): \
@@ -852,9 +858,21 @@ impl AtlasMethod {
                 bounces.start()
             );
         }
+        let started = std::time::Instant::now();
         let raster = Rasterizer::new(ctx, scene, settings)?;
+        let raster_ms = ms(started);
+        let started = std::time::Instant::now();
         let layer = AtlasLayer::from_loaded(ctx, scene, &atlas)?;
-        Ok(Self { raster, layer })
+        let setup_ms = vec![
+            ("read", read_ms),
+            ("rasterizer", raster_ms),
+            ("lookup", ms(started)),
+        ];
+        Ok(Self {
+            raster,
+            layer,
+            setup_ms,
+        })
     }
 
     /// The atlas layer (for tests and composed methods).
@@ -906,6 +924,14 @@ impl Method for AtlasMethod {
         map.insert(
             "atlas_missing_texels".into(),
             serde_json::json!(self.layer.missing_texels),
+        );
+        map.insert(
+            "atlas_setup_ms".into(),
+            self.setup_ms
+                .iter()
+                .map(|&(part, ms)| (part.to_string(), serde_json::json!(ms.round())))
+                .collect::<serde_json::Map<_, _>>()
+                .into(),
         );
         map.insert(
             "atlas_layout".into(),
