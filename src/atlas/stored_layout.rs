@@ -491,7 +491,7 @@ pub fn decode(bytes: &[u8]) -> Result<(StoredLayout, u32), String> {
         };
         let vertex_count = r.u32("vertex count")? as u64;
         let index_count = r.u32("index count")? as u64;
-        if index_count % 3 != 0 {
+        if !index_count.is_multiple_of(3) {
             return Err(format!(
                 "damaged: mesh {mi} has {index_count} indices (not whole triangles)"
             ));
