@@ -75,7 +75,7 @@ pub fn sparse_atlas(
         ),
     }
     let mut sparse = SparseMethod::new(ctx, scene, render, settings)?;
-    let layer = AtlasLayer::new(ctx, scene, &atlas.image)?;
+    let layer = AtlasLayer::from_loaded(ctx, scene, &atlas)?;
     sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
     Ok(sparse)
 }

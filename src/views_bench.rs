@@ -73,10 +73,16 @@ fn atlas_file(scene: &Scene, out: &Path) -> Result<PathBuf, AppError> {
         &AtomicBool::new(false),
     )
     .map_err(|e| RenderError::Settings(format!("atlas for the views bench: {e}")))?;
-    crate::atlas::bake::write_atlas_exr(
+    crate::atlas::write_atlas_with_layout(
         &bake.atlas(1, bake_settings.bounces),
         &path,
         1..=bake_settings.bounces,
+        &crate::atlas::stored_layout::StoredLayout::of_bake(
+            &bake,
+            scene,
+            &scene.world_from_node(),
+            None,
+        ),
     )?;
     Ok(path)
 }

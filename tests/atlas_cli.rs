@@ -65,11 +65,16 @@ fn bake_writes_an_atlas_and_render_uses_it() {
     assert!(report["energy"]["relative_residual"].as_f64().unwrap() < 1e-6);
     assert_eq!(report["from_bounce"], 2);
     assert!(atlas.is_file());
-    let names: Vec<_> = std::fs::read_dir(&dir)
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .map(|e| e.unwrap().file_name())
         .collect();
-    assert_eq!(names.len(), 1, "only the atlas: {names:?}");
+    names.sort();
+    assert_eq!(
+        names,
+        ["box.exr", "box.exr.layout"],
+        "only the atlas and its light-map layout"
+    );
 
     if common::gpu().is_none() {
         return;
@@ -89,6 +94,7 @@ fn bake_writes_an_atlas_and_render_uses_it() {
     let report = json_line(&output.stdout);
     assert_eq!(report["method"], "atlas");
     assert_eq!(report["atlas_missing_texels"], 0);
+    assert_eq!(report["atlas_layout"], "stored", "{report}");
     let indirect = valgi::image_io::Image::read_exr(&image).unwrap();
     assert!(indirect.mean_rgb()[1] > 0.0);
 }

@@ -312,7 +312,11 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             };
             let raster = Rasterizer::new(&ctx, &scene, render)?;
             let layer = AtlasLayer::new(&ctx, &scene, &atlas)?;
-            let mut method = AtlasMethod { raster, layer };
+            let mut method = AtlasMethod {
+                raster,
+                layer,
+                setup_ms: Vec::new(),
+            };
             let frame = method.render(&ctx, &scene, &world, &camera)?;
             let mut indirect: Image = frame.indirect;
             indirect.sanitize();

@@ -117,7 +117,8 @@ pub fn layout(
     Ok(built)
 }
 
-fn build_layout(
+/// The atlas layout built afresh (no cache): what [`layout`] builds the first time.
+pub fn build_layout(
     scene: &Scene,
     world_from_node: &[Mat4],
     resolution: u32,
@@ -233,6 +234,11 @@ fn build_layout(
 
 /// Largest atlas side.
 pub const MAX_RESOLUTION: u32 = 4096;
+
+/// Version of the layout this code builds, stored with every baked atlas's layout
+/// (`stored_layout`): raise it whenever a change moves any chart, UV, sheet face, contact cut
+/// or texel, so a layout file written before is recognised as another version's.
+pub const LAYOUT_VERSION: u32 = 1;
 
 /// Empty texels around every chart (charts are twice this apart).
 const CHART_PADDING: u32 = 2;

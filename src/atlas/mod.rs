@@ -10,6 +10,7 @@ pub mod depth;
 pub mod layout;
 pub mod patches;
 pub mod polygon;
+pub mod stored_layout;
 
 use std::path::Path;
 
@@ -121,10 +122,17 @@ pub fn bake_to_file(
         return Err(BakeError::Cancelled);
     }
     let write_started = std::time::Instant::now();
-    bake::write_atlas_exr(
+    let stored = stored_layout::StoredLayout::of_bake(
+        &result,
+        &scene,
+        &world_from_node,
+        Some(request.max_edge),
+    );
+    write_atlas_with_layout(
         &image,
         &request.out,
         request.from_bounce..=request.settings.bounces,
+        &stored,
     )?;
     let mut summary = result.summary();
     if let Some(obj) = summary.as_object_mut() {
@@ -213,29 +221,118 @@ struct LayerMesh {
 pub const FIRST_BOUNCE_ATTRIBUTE: &str = "valgiFirstBounce";
 pub const LAST_BOUNCE_ATTRIBUTE: &str = "valgiLastBounce";
 
+/// Writes a baked atlas: its light-map layout file (`FILE.exr.layout`, [`stored_layout`])
+/// first, then the EXR with the bounce range and the layout file's checksum in its header.
+/// Both go through temporary files renamed into place; when the EXR cannot be written, the
+/// layout file is removed again.
+pub fn write_atlas_with_layout(
+    image: &Image,
+    path: &Path,
+    bounces: std::ops::RangeInclusive<u32>,
+    layout: &stored_layout::StoredLayout,
+) -> Result<(), crate::image_io::ImageError> {
+    let checksum = stored_layout::write(path, layout)?;
+    let written = image.write_exr_with(
+        path,
+        &[
+            (FIRST_BOUNCE_ATTRIBUTE, *bounces.start() as i32),
+            (LAST_BOUNCE_ATTRIBUTE, *bounces.end() as i32),
+            (
+                stored_layout::LAYOUT_CHECKSUM_ATTRIBUTE,
+                i32::from_le_bytes(checksum.to_le_bytes()),
+            ),
+        ],
+    );
+    if written.is_err() {
+        // Without its atlas the layout file would only ever be refused as another bake's.
+        let _ = std::fs::remove_file(stored_layout::layout_path(path));
+    }
+    written
+}
+
+/// Where an atlas's light-map layout comes from.
+#[derive(Debug)]
+pub enum AtlasLayoutFile {
+    /// Read from the layout file beside the atlas (its checksum is the one the atlas's header
+    /// names).
+    Stored {
+        path: std::path::PathBuf,
+        layout: Box<stored_layout::StoredLayout>,
+    },
+    /// None stored (why, for the warning): the layout is rebuilt from the scene.
+    Absent(String),
+}
+
 /// An atlas read from disk.
 pub struct LoadedAtlas {
+    pub path: std::path::PathBuf,
     pub image: Image,
     /// The bounces it holds, from its header; `None` for a file without them (written before
     /// the range was stored, or by another tool).
     pub bounces: Option<std::ops::RangeInclusive<u32>>,
+    pub layout: AtlasLayoutFile,
 }
 
-/// Reads an atlas EXR written by `valgi bake`, with its bounce range.
+/// Reads an atlas EXR written by `valgi bake`, with its bounce range and its stored layout. A
+/// layout file that is damaged, or that belongs to another bake than the EXR's header names,
+/// is an error; a missing one (an atlas baked before layouts were stored) is not.
 pub fn load_atlas(path: &Path) -> Result<LoadedAtlas, RenderError> {
     let fail = |e: crate::image_io::ImageError| RenderError::Settings(format!("--atlas: {e}"));
     let image = Image::read_exr(path).map_err(fail)?;
-    let first =
-        crate::image_io::read_exr_int_attribute(path, FIRST_BOUNCE_ATTRIBUTE).map_err(fail)?;
-    let last =
-        crate::image_io::read_exr_int_attribute(path, LAST_BOUNCE_ATTRIBUTE).map_err(fail)?;
+    let attribute = |name: &str| crate::image_io::read_exr_int_attribute(path, name).map_err(fail);
+    let first = attribute(FIRST_BOUNCE_ATTRIBUTE)?;
+    let last = attribute(LAST_BOUNCE_ATTRIBUTE)?;
     let bounces = match (first, last) {
         (Some(first), Some(last)) if 1 <= first && first <= last => {
             Some(first as u32..=last as u32)
         }
         _ => None,
     };
-    Ok(LoadedAtlas { image, bounces })
+    let layout_path = stored_layout::layout_path(path);
+    let layout = match attribute(stored_layout::LAYOUT_CHECKSUM_ATTRIBUTE)? {
+        None => AtlasLayoutFile::Absent(format!(
+            "its header has no {} attribute: baked before layouts were stored, or written by \
+             another tool",
+            stored_layout::LAYOUT_CHECKSUM_ATTRIBUTE
+        )),
+        Some(_) if !layout_path.exists() => {
+            AtlasLayoutFile::Absent(format!("{} is missing", layout_path.display()))
+        }
+        Some(named) => {
+            let named = u32::from_le_bytes(named.to_le_bytes());
+            let (layout, checksum) = stored_layout::read(&layout_path)
+                .map_err(|e| RenderError::Settings(format!("--atlas {}: {e}", path.display())))?;
+            if checksum != named {
+                return Err(RenderError::Settings(format!(
+                    "--atlas {}: {} belongs to another bake (checksum {checksum:08x}, the \
+                     atlas's header names {named:08x}): bake the atlas again, or delete the \
+                     layout file to rebuild the layout from the scene",
+                    path.display(),
+                    layout_path.display()
+                )));
+            }
+            AtlasLayoutFile::Stored {
+                path: layout_path,
+                layout: Box::new(layout),
+            }
+        }
+    };
+    Ok(LoadedAtlas {
+        path: path.to_path_buf(),
+        image,
+        bounces,
+        layout,
+    })
+}
+
+fn check_square(atlas: &Image) -> Result<(), RenderError> {
+    if atlas.width != atlas.height {
+        return Err(RenderError::Settings(format!(
+            "the atlas is {}×{}; a baked atlas is square",
+            atlas.width, atlas.height
+        )));
+    }
+    Ok(())
 }
 
 /// GPU lookup of a baked atlas: rasterizes the light-map meshes from a view's camera into an
@@ -261,6 +358,9 @@ pub struct AtlasLayer {
     pub bytes: GpuBytes,
     /// Layout texels missing from the atlas file (0 when it matches the scene).
     pub missing_texels: usize,
+    /// Whether the light-map layout came from the atlas's layout file (else it was built
+    /// from the scene).
+    pub layout_from_file: bool,
 }
 
 /// One view's share of the lookup: camera uniform, irradiance target and depth.
@@ -277,21 +377,87 @@ pub struct AtlasView {
 }
 
 impl AtlasLayer {
+    /// The lookup of `atlas`, with the scene's light-map layout built (or taken from this
+    /// process's cache) for it.
     pub fn new(ctx: &GpuContext, scene: &Scene, atlas: &Image) -> Result<Self, RenderError> {
-        let device = &ctx.device;
-        if atlas.width != atlas.height {
+        check_square(atlas)?;
+        let layout = layout::layout(scene, &scene.world_from_node(), atlas.width)
+            .map_err(|e| RenderError::Settings(format!("atlas layout: {e}")))?;
+        Self::with_layout(
+            ctx,
+            scene,
+            atlas,
+            &stored_layout::LookupLayout::of(&layout),
+            false,
+        )
+    }
+
+    /// The lookup of an atlas read by [`load_atlas`]: its stored layout when it has one made
+    /// for this scene's geometry and resolution (refused when made for other geometry), the
+    /// layout rebuilt from the scene when it has none.
+    pub fn from_loaded(
+        ctx: &GpuContext,
+        scene: &Scene,
+        atlas: &LoadedAtlas,
+    ) -> Result<Self, RenderError> {
+        check_square(&atlas.image)?;
+        let (layout_path, stored) = match &atlas.layout {
+            AtlasLayoutFile::Stored { path, layout } => (path, layout),
+            AtlasLayoutFile::Absent(why) => {
+                log::warn!(
+                    "--atlas {}: no stored light-map layout ({why}); rebuilding it from the \
+                     scene (minutes on large scenes: bake the atlas again to store it)",
+                    atlas.path.display()
+                );
+                return Self::new(ctx, scene, &atlas.image);
+            }
+        };
+        let scene_key =
+            stored_layout::LayoutKey::of(scene, &scene.world_from_node(), atlas.image.width);
+        if !stored.key.same_geometry(&scene_key) || stored.lookup.resolution != atlas.image.width {
             return Err(RenderError::Settings(format!(
-                "the atlas is {}×{}; a baked atlas is square",
-                atlas.width, atlas.height
+                "--atlas {}: the atlas does not match this scene's light-map layout: {} was \
+                 made for {} ({}); bake it for the same scene and --max-edge",
+                atlas.path.display(),
+                layout_path.display(),
+                stored.describe(),
+                stored.key.differences(&scene_key).join("; ")
             )));
         }
+        if stored.key.layout_version != scene_key.layout_version {
+            // The stored layout is the one the atlas was baked with, so it stays right for
+            // the atlas; a layout rebuilt by this build would not.
+            log::info!(
+                "--atlas {}: its layout was made by layout version {}, this build makes \
+                 version {}; using the stored one, which the atlas was baked with",
+                atlas.path.display(),
+                stored.key.layout_version,
+                scene_key.layout_version
+            );
+        }
+        Self::with_layout(ctx, scene, &atlas.image, &stored.lookup, true)
+    }
+
+    fn with_layout(
+        ctx: &GpuContext,
+        scene: &Scene,
+        atlas: &Image,
+        layout: &stored_layout::LookupLayout,
+        layout_from_file: bool,
+    ) -> Result<Self, RenderError> {
+        let device = &ctx.device;
+        check_square(atlas)?;
         let res = atlas.width;
-        let layout = layout::layout(scene, &scene.world_from_node(), res)
-            .map_err(|e| RenderError::Settings(format!("atlas layout: {e}")))?;
+        if layout.resolution != res {
+            return Err(RenderError::Settings(format!(
+                "the atlas is {res}², its light-map layout {}²",
+                layout.resolution
+            )));
+        }
         let missing_texels = layout
             .texels
             .iter()
-            .filter(|t| atlas.pixels[t.index as usize][3] <= 0.0)
+            .filter(|&&t| atlas.pixels[t as usize][3] <= 0.0)
             .count();
         if missing_texels * 100 > layout.texels.len() {
             return Err(RenderError::Settings(format!(
@@ -303,6 +469,17 @@ impl AtlasLayer {
         let vertex_usage = wgpu::BufferUsages::VERTEX;
         let mut meshes = Vec::new();
         for m in &layout.meshes {
+            let node = scene
+                .instances
+                .get(m.instance as usize)
+                .ok_or_else(|| {
+                    RenderError::Settings(format!(
+                        "the atlas's light-map layout places instance {} of {}",
+                        m.instance,
+                        scene.instances.len()
+                    ))
+                })?
+                .node;
             let vertices: Vec<AtlasVertex> = m
                 .model_positions
                 .iter()
@@ -326,7 +503,7 @@ impl AtlasLayer {
                     wgpu::BufferUsages::INDEX,
                 ),
                 index_count: m.indices.len() as u32,
-                node: scene.instances[m.instance].node,
+                node,
                 sheet_face: m.sheet_face,
             });
         }
@@ -364,7 +541,7 @@ impl AtlasLayer {
         let cuts_view = upload(
             "atlas contact cuts",
             wgpu::TextureFormat::Rg32Uint,
-            bytemuck::cast_slice(&layout.cuts.dense(res)),
+            bytemuck::cast_slice(&layout.dense_cuts()),
             8,
         );
         let render_module = ctx.shader("atlas_render.wgsl");
@@ -448,6 +625,7 @@ impl AtlasLayer {
             last_view: None,
             bytes,
             missing_texels,
+            layout_from_file,
         })
     }
 
@@ -623,6 +801,9 @@ impl AtlasLayer {
 pub struct AtlasMethod {
     raster: Rasterizer,
     layer: AtlasLayer,
+    /// Milliseconds of the set-up's parts (reading the atlas and its layout file, the
+    /// rasterizer, the lookup with its layout), for the report.
+    setup_ms: Vec<(&'static str, f64)>,
 }
 
 /// The `atlas` option every atlas method takes.
@@ -662,7 +843,10 @@ impl AtlasMethod {
                 "method 'atlas' needs --atlas FILE.exr (from `valgi bake`)".into(),
             ));
         }
+        let ms = |since: std::time::Instant| since.elapsed().as_secs_f64() * 1000.0;
+        let started = std::time::Instant::now();
         let atlas = load_atlas(Path::new(&path))?;
+        let read_ms = ms(started);
         if let Some(bounces) = atlas.bounces.as_ref().filter(|b| *b.start() > 1) {
             log::warn!(
                 "--atlas {path} holds bounces {}..={} only (baked with --from-bounce {}): \
@@ -674,9 +858,21 @@ impl AtlasMethod {
                 bounces.start()
             );
         }
+        let started = std::time::Instant::now();
         let raster = Rasterizer::new(ctx, scene, settings)?;
-        let layer = AtlasLayer::new(ctx, scene, &atlas.image)?;
-        Ok(Self { raster, layer })
+        let raster_ms = ms(started);
+        let started = std::time::Instant::now();
+        let layer = AtlasLayer::from_loaded(ctx, scene, &atlas)?;
+        let setup_ms = vec![
+            ("read", read_ms),
+            ("rasterizer", raster_ms),
+            ("lookup", ms(started)),
+        ];
+        Ok(Self {
+            raster,
+            layer,
+            setup_ms,
+        })
     }
 
     /// The atlas layer (for tests and composed methods).
@@ -728,6 +924,22 @@ impl Method for AtlasMethod {
         map.insert(
             "atlas_missing_texels".into(),
             serde_json::json!(self.layer.missing_texels),
+        );
+        map.insert(
+            "atlas_setup_ms".into(),
+            self.setup_ms
+                .iter()
+                .map(|&(part, ms)| (part.to_string(), serde_json::json!(ms.round())))
+                .collect::<serde_json::Map<_, _>>()
+                .into(),
+        );
+        map.insert(
+            "atlas_layout".into(),
+            serde_json::json!(if self.layer.layout_from_file {
+                "stored"
+            } else {
+                "rebuilt"
+            }),
         );
         map
     }

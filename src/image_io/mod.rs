@@ -196,7 +196,7 @@ impl Image {
 
 /// Writes through `<path>.partial` renamed into place, so an interrupted or failed write (a
 /// full disk, Ctrl-C, a crash) never leaves a truncated image under the real name.
-fn write_whole(
+pub(crate) fn write_whole(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), String>,
 ) -> Result<(), ImageError> {
