@@ -14,6 +14,7 @@ pub mod light;
 pub mod method;
 pub mod mixed_reality;
 pub mod negative;
+pub mod preview;
 pub mod peers;
 pub mod progress;
 pub mod raster;
