@@ -4,7 +4,7 @@
 //! `cargo run --release --example glossy_preview [-- SIZE]` (default 128 pixels per ball).
 
 use valgi::method::MethodOptions;
-use valgi::preview::{render_grid, select_materials, PreviewRequest};
+use valgi::preview::{preview_options, render_grid, select_materials, PreviewRequest};
 use valgi::raster::RenderSettings;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -19,7 +19,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         materials,
         columns,
         method: "sparse".into(),
-        options: MethodOptions::default(),
+        options: preview_options("sparse", &MethodOptions::default()),
         settings: RenderSettings {
             width: size,
             height: size,

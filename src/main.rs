@@ -543,10 +543,11 @@ struct PreviewArgs {
     #[arg(long)]
     material: Vec<String>,
     /// Parameter grid, e.g. roughness=0..1:5,metallic=0,1 (ranges a..b:n and lists; roughness,
-    /// metallic, specular, base=R/G/B). The first parameter runs along the rows.
+    /// metallic, specular, base=R/G/B). The first parameter varies along each row.
     #[arg(long)]
     sweep: Option<String>,
-    /// Method spec: name[:key=value,...], e.g. sparse, brute:glossy=off, reference:spp=64.
+    /// Method spec: name[:key=value,...], e.g. sparse, brute:glossy=off, reference:spp=64
+    /// (methods taking rsm get rsm=32 unless given: one point light makes six RSM faces).
     #[arg(long, default_value = "sparse")]
     method: String,
     /// The shape the material is shown on: sphere, or bunny (the shared data's Stanford bunny).
@@ -577,7 +578,10 @@ fn preview(args: PreviewArgs) -> Result<serde_json::Value, valgi::preview::Previ
             args.max_edge
         )));
     }
-    if let Some(e) = args.exposure.filter(|e| !e.is_finite() || e.abs() > app::MAX_EXPOSURE_STOPS) {
+    if let Some(e) = args
+        .exposure
+        .filter(|e| !e.is_finite() || e.abs() > app::MAX_EXPOSURE_STOPS)
+    {
         return Err(PreviewError::Spec(format!(
             "--exposure {e}: must be within ±{}",
             app::MAX_EXPOSURE_STOPS
@@ -590,8 +594,8 @@ fn preview(args: PreviewArgs) -> Result<serde_json::Value, valgi::preview::Previ
         materials,
         columns: args.columns.unwrap_or(columns),
         ball: args.ball,
+        options: valgi::preview::preview_options(&method, &options),
         method,
-        options,
         settings: RenderSettings {
             width: args.size,
             height: args.size,

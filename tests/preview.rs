@@ -50,7 +50,9 @@ fn request(materials: Vec<PreviewMaterial>, size: u32, method: &str) -> PreviewR
 
 /// The camera of the preview scene for a square image.
 fn camera() -> valgi::scene::CameraView {
-    let scene = valgi::preview::scene::builtin("preview", 0.5).unwrap().unwrap();
+    let scene = valgi::preview::scene::builtin("preview", 0.5)
+        .unwrap()
+        .unwrap();
     scene
         .camera_view(None, 1.0, &scene.world_from_node())
         .unwrap()
@@ -224,7 +226,10 @@ fn sparse_glossy_indirect_matches_brute_force() {
         worst = worst.max(ball_flip);
         broken_best = broken_best.min(broken);
     }
-    assert!(worst < MAX_SPARSE_BRUTE_FLIP, "sparse vs brute FLIP {worst}");
+    assert!(
+        worst < MAX_SPARSE_BRUTE_FLIP,
+        "sparse vs brute FLIP {worst}"
+    );
     assert!(
         broken_best > MAX_SPARSE_BRUTE_FLIP,
         "the threshold does not catch sparse without glossy ({broken_best})"
@@ -256,11 +261,24 @@ fn materials_from_a_gltf_file_by_name_and_index() {
     );
     let by_index = load_materials(&format!("{file}#97")).unwrap();
     assert_eq!(by_index[0].material.name, "mat_97");
-    assert_eq!(by_index[0].material.base_color, by_name[0].material.base_color);
-    let e = load_materials(&format!("{file}#98")).unwrap_err().to_string();
-    assert!(e.contains("index 98 is out of range") && e.contains("98 material(s)"), "{e}");
-    let e = load_materials(&format!("{file}#chrome")).unwrap_err().to_string();
-    assert!(e.contains("no material named 'chrome'") && e.contains("mat_0"), "{e}");
+    assert_eq!(
+        by_index[0].material.base_color,
+        by_name[0].material.base_color
+    );
+    let e = load_materials(&format!("{file}#98"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("index 98 is out of range") && e.contains("98 material(s)"),
+        "{e}"
+    );
+    let e = load_materials(&format!("{file}#chrome"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("no material named 'chrome'") && e.contains("mat_0"),
+        "{e}"
+    );
 
     // A textured material brings its textures along, renumbered.
     let specular = format!("{SAMPLES}/SpecularTest/SpecularTest.glb");
@@ -269,4 +287,37 @@ fn materials_from_a_gltf_file_by_name_and_index() {
         assert_eq!(label[0].material.base_color_texture, Some(0));
         assert_eq!(label[0].textures.len(), 1);
     }
+}
+
+/// Bad input on the command line: a clear error naming the problem, no panic, no output file.
+#[test]
+fn cli_rejects_bad_specs_clearly() {
+    let dir = common::temp_dir("preview-cli");
+    let out = dir.join("grid.png");
+    let run = |args: &[&str]| {
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
+            .arg("preview")
+            .args(args)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("run valgi");
+        assert!(!output.status.success(), "{args:?} succeeded");
+        let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        stderr
+    };
+    let e = run(&["--sweep", "roughness=0..1:5,shininess=3"]);
+    assert!(e.contains("unknown parameter 'shininess'"), "{e}");
+    let e = run(&["--sweep", "roughness=0..1"]);
+    assert!(e.contains("a range needs a count"), "{e}");
+    let e = run(&[]);
+    assert!(e.contains("nothing to preview"), "{e}");
+    let e = run(&["--material", "no/such/file.glb#0"]);
+    assert!(e.contains("no/such/file.glb: file not found"), "{e}");
+    let e = run(&["--sweep", "roughness=0.5", "--method", "sparse:points=3"]);
+    assert!(e.contains("has no option(s) points"), "{e}");
+    let e = run(&["--sweep", "roughness=0.5", "--ball", "cube"]);
+    assert!(e.contains("unknown ball 'cube'"), "{e}");
+    assert!(!out.exists() && !out.with_extension("exr").exists());
 }

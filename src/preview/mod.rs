@@ -144,7 +144,10 @@ pub struct PreviewGrid {
 /// is not shared: the ball's material enters the reflective shadow map (its diffuse albedo
 /// makes the VALs on the ball) and the glossy gather at its points, so each ball gets its own
 /// frame; the cost of that is each ball's `setup_ms` and `frame_ms`.
-pub fn render_grid(ctx: &GpuContext, request: &PreviewRequest) -> Result<PreviewGrid, PreviewError> {
+pub fn render_grid(
+    ctx: &GpuContext,
+    request: &PreviewRequest,
+) -> Result<PreviewGrid, PreviewError> {
     if request.materials.is_empty() {
         return Err(PreviewError::Spec(
             "nothing to preview: give --material FILE.glb[#NAME|#INDEX] and/or --sweep".into(),
@@ -245,10 +248,9 @@ impl PreviewGrid {
             for (i, label) in self.labels.iter().enumerate() {
                 let (x0, y0) = l.ball_origin(i);
                 // Clipped to its own cell, so a long name cannot run into the next one.
-                let cell = root.clone().shrink(
-                    (x0, y0 + l.ball_height),
-                    (l.ball_width, LABEL_HEIGHT),
-                );
+                let cell = root
+                    .clone()
+                    .shrink((x0, y0 + l.ball_height), (l.ball_width, LABEL_HEIGHT));
                 cell.draw(&Text::new(label.clone(), (2, 1), font.clone()))
                     .map_err(|e| PreviewError::Output {
                         path: "label".into(),
@@ -260,7 +262,10 @@ impl PreviewGrid {
                 message: e.to_string(),
             })?;
         }
-        Ok(buffer.chunks_exact(3).map(|p| p[0].max(p[1]).max(p[2])).collect())
+        Ok(buffer
+            .chunks_exact(3)
+            .map(|p| p[0].max(p[1]).max(p[2]))
+            .collect())
     }
 
     /// Exposure (stops) that maps the balls' log-average luminance to middle grey: one for the
@@ -333,12 +338,50 @@ pub fn select_materials(
     }
 }
 
+/// RSM side the preview gives methods that take `rsm` when none is asked for. The room's one
+/// point light makes six RSM faces, so the methods' default of 128 gathers 98 304 VALs at
+/// every point (4096 points: 4·10⁸ pairs, the whole frame's cost at 2 minutes on a shared
+/// lavapipe); 32 makes 6144, ample for a 2.4 m room.
+pub const PREVIEW_RSM: u32 = 32;
+
+/// `options` with the preview's defaults filled in where the method takes them and they are
+/// not given (see [`PREVIEW_RSM`]).
+pub fn preview_options(method: &str, options: &MethodOptions) -> MethodOptions {
+    let mut options = options.clone();
+    let takes_rsm = method::entry(method).is_ok_and(|e| e.options.iter().any(|o| o.name == "rsm"));
+    if takes_rsm && !options.entries().any(|(k, _)| k == "rsm") {
+        options.set("rsm", PREVIEW_RSM);
+    }
+    options
+}
+
+/// The method exists and takes these options, checked before any GPU work.
+pub fn check_method(name: &str, options: &MethodOptions) -> Result<(), PreviewError> {
+    let entry = method::entry(name)?;
+    for (key, value) in options.entries() {
+        let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
+            return Err(PreviewError::Spec(format!(
+                "method '{name}' has no option(s) {key} (it takes: {})",
+                entry
+                    .options
+                    .iter()
+                    .map(|o| o.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        };
+        spec.check(name, value)?;
+    }
+    Ok(())
+}
+
 /// `valgi preview` as a library call: select, render, write; returns the JSON report.
 pub fn run(
     request: &PreviewRequest,
     out: &Path,
     exposure: Option<f32>,
 ) -> Result<serde_json::Value, PreviewError> {
+    check_method(&request.method, &request.options)?;
     let ctx = GpuContext::new()?;
     let grid = render_grid(&ctx, request)?;
     let exposure = exposure.unwrap_or_else(|| grid.auto_exposure());
@@ -385,9 +428,7 @@ mod tests {
     fn compose_places_balls_and_labels() {
         let l = GridLayout::new(3, 2, 40, 30);
         let balls: Vec<Image> = (0..3)
-            .map(|i| {
-                Image::from_rgba(40, 30, vec![[0.1 * (i + 1) as f32, 0.0, 0.0, 1.0]; 40 * 30])
-            })
+            .map(|i| Image::from_rgba(40, 30, vec![[0.1 * (i + 1) as f32, 0.0, 0.0, 1.0]; 40 * 30]))
             .collect();
         let grid = PreviewGrid {
             layout: l,
@@ -437,7 +478,8 @@ mod tests {
     fn selection_without_anything_is_an_error() {
         let e = select_materials(&[], None).unwrap_err().to_string();
         assert!(e.contains("nothing to preview"), "{e}");
-        let (cells, columns) = select_materials(&[], Some("roughness=0..1:5,metallic=0,1")).unwrap();
+        let (cells, columns) =
+            select_materials(&[], Some("roughness=0..1:5,metallic=0,1")).unwrap();
         assert_eq!((cells.len(), columns), (10, 5));
     }
 }

@@ -62,48 +62,50 @@ pub fn ball_mesh(shape: BallShape, max_edge: f32) -> Result<Mesh, SceneError> {
             }
             Ok(mesh)
         }
-        BallShape::Bunny => {
-            let candidates = bunny_candidates();
-            let Some(path) = candidates.iter().find(|p| p.is_file()) else {
-                return Err(SceneError::Other {
-                    path: candidates
-                        .first()
-                        .map(PathBuf::as_path)
-                        .unwrap_or(std::path::Path::new("bun_zipper_res2.ply"))
-                        .display()
-                        .to_string(),
-                    message: format!(
-                        "--ball bunny needs the Stanford bunny; not found (looked for {}); \
-                         use --ball sphere",
-                        candidates
-                            .iter()
-                            .map(|p| p.display().to_string())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                });
-            };
-            let mut mesh = load_ply(path)?;
-            mesh.name = "ball (bunny)".into();
-            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-            for p in &mesh.positions {
-                lo = lo.min(*p);
-                hi = hi.max(*p);
-            }
-            let scale = 2.0 * BALL_RADIUS / (hi.y - lo.y).max(1e-6);
-            let foot = Vec3::new((lo.x + hi.x) * 0.5, lo.y, (lo.z + hi.z) * 0.5);
-            for p in &mut mesh.positions {
-                *p = (*p - foot) * scale;
-            }
-            mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
-            if mesh.uv0.len() != mesh.positions.len() {
-                mesh.uv0 = vec![Vec2::ZERO; mesh.positions.len()];
-            }
-            mesh.material = 0;
-            crate::scene::mesh::tessellate(&mut mesh, max_edge);
-            Ok(mesh)
-        }
+        BallShape::Bunny => bunny_ball(&bunny_candidates(), max_edge),
     }
+}
+
+/// The bunny from the first of `candidates` that exists, scaled to the sphere's height.
+fn bunny_ball(candidates: &[PathBuf], max_edge: f32) -> Result<Mesh, SceneError> {
+    let Some(path) = candidates.iter().find(|p| p.is_file()) else {
+        return Err(SceneError::Other {
+            path: candidates
+                .first()
+                .map(PathBuf::as_path)
+                .unwrap_or(std::path::Path::new("bun_zipper_res2.ply"))
+                .display()
+                .to_string(),
+            message: format!(
+                "--ball bunny needs the Stanford bunny; not found (looked for {}); \
+                 use --ball sphere",
+                candidates
+                    .iter()
+                    .map(|p| p.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        });
+    };
+    let mut mesh = load_ply(path)?;
+    mesh.name = "ball (bunny)".into();
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for p in &mesh.positions {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    let scale = 2.0 * BALL_RADIUS / (hi.y - lo.y).max(1e-6);
+    let foot = Vec3::new((lo.x + hi.x) * 0.5, lo.y, (lo.z + hi.z) * 0.5);
+    for p in &mut mesh.positions {
+        *p = (*p - foot) * scale;
+    }
+    mesh.normals = compute_normals(&mesh.positions, &mesh.indices);
+    if mesh.uv0.len() != mesh.positions.len() {
+        mesh.uv0 = vec![Vec2::ZERO; mesh.positions.len()];
+    }
+    mesh.material = 0;
+    crate::scene::mesh::tessellate(&mut mesh, max_edge);
+    Ok(mesh)
 }
 
 /// The preview scene of one material on `ball` (from [`ball_mesh`]); walls tessellated to
@@ -122,7 +124,10 @@ pub fn preview_scene(name: &str, material: &PreviewMaterial, ball: &Mesh, max_ed
         &mut scene,
         Material::lambert("white", Vec3::new(0.75, 0.75, 0.75)),
     );
-    let red = add_material(&mut scene, Material::lambert("red", Vec3::new(0.63, 0.06, 0.05)));
+    let red = add_material(
+        &mut scene,
+        Material::lambert("red", Vec3::new(0.63, 0.06, 0.05)),
+    );
     let green = add_material(
         &mut scene,
         Material::lambert("green", Vec3::new(0.12, 0.45, 0.09)),
@@ -254,10 +259,11 @@ fn box_face(min: Vec3, max: Vec3, axis: usize, high: bool) -> [Vec3; 4] {
 }
 
 /// Built-in names: `preview` (the sweep's default material, roughness 0.5), and
-/// `preview-r<R>[-m<M>]` for roughness R and metallic M (0..=1) on the grey base.
+/// `preview-r<R>[-m<M>]` for roughness R % and metallic M % (whole numbers 0..=100) on the grey
+/// base: scene names cannot hold a '.', which would make them file names.
 pub const BUILTIN_NAMES: &[(&str, &str)] = &[(
     "preview",
-    "material preview room: grey sphere (roughness 0.5, dielectric), red/green walls, one point light; preview-r<R>[-m<M>] sets roughness and metallic (e.g. preview-r0.2-m1)",
+    "material preview room: grey sphere (roughness 0.5, dielectric), red/green walls, one point light; preview-r<R>[-m<M>] sets roughness and metallic in percent (e.g. preview-r20, preview-r30-m100)",
 )];
 
 /// The built-in preview scene `name` when it is one (`None` otherwise).
@@ -279,15 +285,15 @@ pub fn builtin(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
                 _ => {
                     return Some(Err(bad(format!(
                         "'{part}': preview scenes take -r<roughness> and -m<metallic>, e.g. \
-                         preview-r0.2-m0"
+                         preview-r20-m0"
                     ))))
                 }
             };
-            match value.parse::<f32>() {
-                Ok(v) if (0.0..=1.0).contains(&v) => *field = v,
+            match value.parse::<u32>() {
+                Ok(percent) if percent <= 100 => *field = percent as f32 / 100.0,
                 _ => {
                     return Some(Err(bad(format!(
-                        "'{part}': '{value}' must be a number in 0..=1"
+                        "'{part}': '{value}' must be a whole percentage 0..=100"
                     ))))
                 }
             }
@@ -313,23 +319,60 @@ mod tests {
         let to_light = (LIGHT_POSITION - p).normalize();
         let to_eye = (CAMERA_EYE - p).normalize();
         let reflected = 2.0 * n.dot(to_eye) * n - to_eye;
-        assert!(reflected.dot(to_light) > 1.0 - 1e-5, "{reflected} vs {to_light}");
+        assert!(
+            reflected.dot(to_light) > 1.0 - 1e-5,
+            "{reflected} vs {to_light}"
+        );
         // Visible from the camera and lit: the highlight can be seen.
         assert!(n.dot(to_eye) > 0.3 && n.dot(to_light) > 0.3);
     }
 
     #[test]
     fn builtin_names_parse() {
-        let scene = builtin("preview-r0.2-m1", 0.2).unwrap().unwrap();
+        let scene = builtin("preview-r20-m100", 0.2).unwrap().unwrap();
         let ball = scene.materials.last().unwrap();
         assert_eq!((ball.roughness, ball.metallic), (0.2, 1.0));
         assert_eq!(scene.lights.len(), 1);
         assert_eq!(scene.meshes.len(), 7);
         assert!(builtin("cornell", 0.2).is_none());
-        let e = builtin("preview-r2", 0.2).unwrap().unwrap_err().to_string();
-        assert!(e.contains("'2' must be a number in 0..=1"), "{e}");
-        let e = builtin("preview-x0.1", 0.2).unwrap().unwrap_err().to_string();
+        let e = builtin("preview-r0.2", 0.2)
+            .unwrap()
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("'0.2' must be a whole percentage 0..=100"),
+            "{e}"
+        );
+        let e = builtin("preview-x0.1", 0.2)
+            .unwrap()
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("-r<roughness>"), "{e}");
+    }
+
+    #[test]
+    fn bunny_ball_is_as_tall_as_the_sphere_or_a_clear_error() {
+        let missing = [PathBuf::from("no/such/bunny.ply")];
+        let e = bunny_ball(&missing, 0.1).unwrap_err().to_string();
+        assert!(
+            e.contains("--ball bunny needs the Stanford bunny") && e.contains("no/such/bunny.ply"),
+            "{e}"
+        );
+        let candidates = bunny_candidates();
+        if !candidates.iter().any(|p| p.is_file()) {
+            eprintln!("SKIPPED: no bunny in the shared data");
+            return;
+        }
+        let mesh = bunny_ball(&candidates, 0.1).unwrap();
+        let (lo, hi) = mesh.positions.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+        );
+        assert!(
+            lo.y.abs() < 1e-5 && (hi.y - 2.0 * BALL_RADIUS).abs() < 1e-4,
+            "{lo} {hi}"
+        );
+        assert!(((lo.x + hi.x) * 0.5).abs() < 1e-4);
     }
 
     #[test]

@@ -109,7 +109,9 @@ impl Sweep {
         let mut params: Vec<(SweepParam, Vec<Vec3>)> = vec![];
         for token in spec.split(',').map(str::trim) {
             if token.is_empty() {
-                return Err(bad("empty item (two commas in a row, or a trailing comma)".into()));
+                return Err(bad(
+                    "empty item (two commas in a row, or a trailing comma)".into()
+                ));
             }
             let (param, value) = match token.split_once('=') {
                 Some((name, value)) => {
@@ -282,7 +284,9 @@ pub fn load_materials(spec: &str) -> Result<Vec<PreviewMaterial>, PreviewError> 
         )));
     }
     if !path.is_file() {
-        return Err(PreviewError::Spec(format!("--material {file}: file not found")));
+        return Err(PreviewError::Spec(format!(
+            "--material {file}: file not found"
+        )));
     }
     // The document's own materials come first in the imported list; the importer appends a
     // default material after them only for primitives that name none.
@@ -408,7 +412,10 @@ mod tests {
         ] {
             let e = Sweep::parse(spec).unwrap_err().to_string();
             assert!(e.contains(expected), "{spec}: {e}");
-            assert!(e.contains(&format!("'{spec}'")), "{spec}: names the spec: {e}");
+            assert!(
+                e.contains(&format!("'{spec}'")),
+                "{spec}: names the spec: {e}"
+            );
         }
     }
 
@@ -416,7 +423,9 @@ mod tests {
     fn bad_material_specs() {
         let e = load_materials("model.obj").unwrap_err().to_string();
         assert!(e.contains("expected FILE.glb"), "{e}");
-        let e = load_materials("missing/none.glb#0").unwrap_err().to_string();
+        let e = load_materials("missing/none.glb#0")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing/none.glb: file not found"), "{e}");
     }
 }

@@ -29,15 +29,14 @@ impl Default for BuiltinParams {
 /// Name and one-line description of every built-in scene, in the order `valgi scenes` lists
 /// them.
 pub fn names() -> &'static [(&'static str, &'static str)] {
-    static ALL: std::sync::LazyLock<Vec<(&str, &str)>> =
-        std::sync::LazyLock::new(|| {
-            BASIC
-                .iter()
-                .chain(procedural::NAMES)
-                .chain(crate::preview::scene::BUILTIN_NAMES)
-                .copied()
-                .collect()
-        });
+    static ALL: std::sync::LazyLock<Vec<(&str, &str)>> = std::sync::LazyLock::new(|| {
+        BASIC
+            .iter()
+            .chain(procedural::NAMES)
+            .chain(crate::preview::scene::BUILTIN_NAMES)
+            .copied()
+            .collect()
+    });
     &ALL
 }
 
