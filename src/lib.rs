@@ -15,6 +15,7 @@ pub mod method;
 pub mod mixed_reality;
 pub mod negative;
 pub mod peers;
+pub mod preview;
 pub mod progress;
 pub mod raster;
 pub mod reference;

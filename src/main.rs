@@ -47,6 +47,9 @@ enum Command {
     /// frames' pixels as virtual area lights, and composite it into the photos; writes
     /// composite, object (RGBA) and indirect images per frame and prints a JSON report.
     Mr(MrArgs),
+    /// Material preview: each material on a shader ball in a small lit room (red/green walls),
+    /// direct + diffuse + glossy indirect, as one labelled grid (EXR + PNG); prints a JSON line.
+    Preview(PreviewArgs),
     /// List the built-in scenes.
     Scenes,
     /// List the rendering methods.
@@ -547,6 +550,76 @@ fn negative_bench(args: NegativeBenchArgs) -> ExitCode {
 }
 
 #[derive(clap::Args)]
+struct PreviewArgs {
+    /// Materials of a glTF file: FILE.glb (all of them), FILE.glb#NAME or FILE.glb#INDEX;
+    /// repeatable.
+    #[arg(long)]
+    material: Vec<String>,
+    /// Parameter grid, e.g. roughness=0..1:5,metallic=0,1 (ranges a..b:n and lists; roughness,
+    /// metallic, specular, base=R/G/B). The first parameter varies along each row.
+    #[arg(long)]
+    sweep: Option<String>,
+    /// Method spec: name[:key=value,...], e.g. sparse, brute:glossy=off, reference:spp=64
+    /// (methods taking rsm get rsm=32 unless given: one point light makes six RSM faces).
+    #[arg(long, default_value = "sparse")]
+    method: String,
+    /// The shape the material is shown on: sphere, or bunny (the shared data's Stanford bunny).
+    #[arg(long, default_value = "sphere")]
+    ball: valgi::preview::BallShape,
+    /// Pixels per ball (square).
+    #[arg(long, default_value_t = 256)]
+    size: u32,
+    /// Balls per row (default: the sweep's first parameter's count, or up to 5 materials).
+    #[arg(long)]
+    columns: Option<usize>,
+    /// The grid: FILE.png or FILE.exr; both are written.
+    #[arg(long, default_value = "out/preview.png")]
+    out: PathBuf,
+    /// PNG exposure in stops (default: the grid's key exposure).
+    #[arg(long)]
+    exposure: Option<f32>,
+    /// Longest triangle edge of the room and ball, metres.
+    #[arg(long, default_value_t = 0.05)]
+    max_edge: f32,
+}
+
+fn preview(args: PreviewArgs) -> Result<serde_json::Value, valgi::preview::PreviewError> {
+    use valgi::preview::PreviewError;
+    if !(args.max_edge.is_finite() && args.max_edge >= 0.005) {
+        return Err(PreviewError::Spec(format!(
+            "--max-edge {}: must be at least 0.005 m",
+            args.max_edge
+        )));
+    }
+    if let Some(e) = args
+        .exposure
+        .filter(|e| !e.is_finite() || e.abs() > app::MAX_EXPOSURE_STOPS)
+    {
+        return Err(PreviewError::Spec(format!(
+            "--exposure {e}: must be within ±{}",
+            app::MAX_EXPOSURE_STOPS
+        )));
+    }
+    let (materials, columns) =
+        valgi::preview::select_materials(&args.material, args.sweep.as_deref())?;
+    let (method, options) = valgi::method::MethodOptions::parse_spec(&args.method)?;
+    let request = valgi::preview::PreviewRequest {
+        materials,
+        columns: args.columns.unwrap_or(columns),
+        ball: args.ball,
+        options: valgi::preview::preview_options(&method, &options),
+        method,
+        settings: RenderSettings {
+            width: args.size,
+            height: args.size,
+            ..RenderSettings::default()
+        },
+        max_edge: args.max_edge,
+    };
+    valgi::preview::run(&request, &args.out, args.exposure)
+}
+
+#[derive(clap::Args)]
 struct BakeBenchArgs {
     /// Comma-separated built-in scene names or glTF files.
     #[arg(long, default_value = "cornell,corridor")]
@@ -894,6 +967,19 @@ fn main() -> ExitCode {
         Command::NegativeBench(args) => negative_bench(args),
         Command::Mr(args) => {
             match mr_request(args).and_then(|r| valgi::mixed_reality::run::run(&r)) {
+                Ok(report) => {
+                    println!("{report}");
+                    ExitCode::SUCCESS
+                }
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    ExitCode::FAILURE
+                }
+            }
+        }
+        Command::Preview(args) => {
+            valgi::progress::install_ctrl_c();
+            match preview(args) {
                 Ok(report) => {
                     println!("{report}");
                     ExitCode::SUCCESS

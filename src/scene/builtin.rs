@@ -31,8 +31,14 @@ impl Default for BuiltinParams {
 /// Name and one-line description of every built-in scene, in the order `valgi scenes` lists
 /// them.
 pub fn names() -> &'static [(&'static str, &'static str)] {
-    static ALL: std::sync::LazyLock<Vec<(&str, &str)>> =
-        std::sync::LazyLock::new(|| BASIC.iter().chain(procedural::NAMES).copied().collect());
+    static ALL: std::sync::LazyLock<Vec<(&str, &str)>> = std::sync::LazyLock::new(|| {
+        BASIC
+            .iter()
+            .chain(procedural::NAMES)
+            .chain(crate::preview::scene::BUILTIN_NAMES)
+            .copied()
+            .collect()
+    });
     &ALL
 }
 
@@ -158,6 +164,7 @@ fn build(name: &str, max_edge: f32) -> Result<Scene, SceneError> {
         "lpv-diagonal" => Ok(lpv_diagonal(name, max_edge)),
         "emissive-quad" => Ok(emissive_quad(name, max_edge)),
         _ => procedural::load(name, max_edge)
+            .or_else(|| crate::preview::scene::builtin(name, max_edge))
             .unwrap_or_else(|| Err(SceneError::UnknownBuiltin { name: name.into() })),
     }
 }
