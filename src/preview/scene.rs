@@ -10,7 +10,7 @@ use glam::{Mat3, Quat, Vec2, Vec3};
 use crate::scene::builtin::procedural::{bunny_candidates, icosphere, load_ply};
 use crate::scene::mesh::{compute_normals, MeshBuilder};
 use crate::scene::{
-    Camera, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs,
+    Camera, FovAxis, Instance, Light, LightKind, Material, Mesh, Node, Scene, SceneError, Trs,
 };
 
 use super::spec::PreviewMaterial;
@@ -208,6 +208,7 @@ pub fn preview_scene(name: &str, material: &PreviewMaterial, ball: &Mesh, max_ed
         name: "camera".into(),
         node: camera,
         yfov: CAMERA_YFOV_DEGREES.to_radians(),
+        fov_axis: FovAxis::Vertical,
         aspect: None,
         znear: 0.02,
         zfar: Some(20.0),
