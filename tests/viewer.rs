@@ -431,3 +431,23 @@ fn debug_views_draw_splats_at_the_points_and_vals() {
         changed.len()
     );
 }
+
+/// A scripted run whose method cannot be built exits with the build's error instead of
+/// waiting for a method that never comes.
+#[test]
+fn a_scripted_run_whose_method_fails_to_build_exits_with_its_error() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let args = [
+        "view", "--scene", "cornell", "--method", "direct", "--width", "32", "--height", "32",
+        "--opt", "rsm=16", "--frames", "1",
+    ];
+    let Some(mut command) = windowed(&args) else {
+        return;
+    };
+    let output = command.output().expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "the run succeeded: {stderr}");
+    assert!(stderr.contains("has no option(s) rsm"), "stderr: {stderr}");
+}

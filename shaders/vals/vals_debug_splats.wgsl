@@ -8,7 +8,9 @@
 // - a point: the irradiance E = I·max(0, n·ω)/d² its renormalized diffuse light (intensity I
 //   at its averaged position) gives it, over π: the radiance a white diffuse surface there
 //   reflects from the first bounce;
-// - a VAL: its disc's radiance Φ/(π·A), flux Φ over the disc's area A.
+// - a VAL: its disc's radiance Φ/(π·A), flux Φ over the disc's area A, as the gather models
+//   it. A is the footprint the RSM texel's surface would have facing the light, so this is
+//   the surface's own radiance divided by the cosine at the light (equal where it faces it).
 #include "vals_common.wgsl"
 
 struct DebugSplatParams {

@@ -457,11 +457,7 @@ impl Method for SparseMethod {
     }
 
     fn debug_vals(&self) -> Option<crate::frame::DebugValSource<'_>> {
-        Some(crate::frame::DebugValSource {
-            vals: &self.rsm.vals_buffer,
-            val_count: &self.rsm.val_count_buffer,
-            capacity: self.rsm.capacity.saturating_add(self.rsm.external_capacity),
-        })
+        Some(self.rsm.debug_vals())
     }
 
     fn gpu_bytes(&self) -> u64 {

@@ -759,6 +759,14 @@ impl Running {
         // through while it ran. The first build counts too (the panel is drawn meanwhile).
         self.state.rebuilds.note_frame(previous, now);
         self.poll_rebuild();
+        // A scripted run whose method never built has nothing to draw: it would wait forever.
+        if scripted && self.method.is_none() && self.state.rebuilds.pending().is_none() {
+            if let Some(e) = &self.method_error {
+                return Err(
+                    RenderError::Settings(format!("method {}: {e}", self.method_name)).into(),
+                );
+            }
+        }
         self.walk(dt);
         if self.frames_done > 0 {
             self.state.advance(dt, !scripted);
