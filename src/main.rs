@@ -350,6 +350,10 @@ struct ViewArgs {
     /// frames meanwhile).
     #[arg(long, value_name = "KEY=VALUE", requires = "frames")]
     change_option: Option<String>,
+    /// Debug views on from the start (switchable in the panel): `points` (the sparse points
+    /// as splats coloured by their diffuse light), `vals` (the VALs coloured by radiance).
+    #[arg(long, value_name = "VIEW", value_delimiter = ',')]
+    debug: Vec<String>,
     #[arg(long)]
     allow_external_paths: bool,
     /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
@@ -880,6 +884,15 @@ fn main() -> ExitCode {
                     frames: args.frames,
                     screenshot: args.screenshot,
                     anaglyph: args.anaglyph,
+                    debug: {
+                        let mut debug = valgi::viewer::DebugViews::default();
+                        for name in &args.debug {
+                            debug
+                                .enable(name)
+                                .map_err(valgi::raster::RenderError::Settings)?;
+                        }
+                        debug
+                    },
                     change_option: match args.change_option {
                         None => None,
                         Some(kv) => match kv.split_once('=') {

@@ -69,6 +69,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/vals/vals_apply.wgsl"),
     ),
     (
+        "vals_debug_splats.wgsl",
+        include_str!("../shaders/vals/vals_debug_splats.wgsl"),
+    ),
+    (
         "negative_common.wgsl",
         include_str!("../shaders/negative/negative_common.wgsl"),
     ),

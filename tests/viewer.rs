@@ -275,3 +275,179 @@ fn an_option_change_rebuilds_off_the_ui_thread_and_reports_its_figures() {
     assert!(report["gpu_bytes"].as_u64().unwrap() > 0);
     assert!(report["frame_interval_ms"]["frames"].as_u64().unwrap() >= 2);
 }
+
+/// Runs `valgi view` of the sparse method on the Cornell box with `debug` views on (none when
+/// empty) and returns the screenshot and the JSON report.
+fn sparse_view(
+    dir: &Path,
+    name: &str,
+    debug: &[&str],
+) -> Option<(image::RgbImage, serde_json::Value)> {
+    let shot = dir.join(format!("{name}.png"));
+    let mut args = vec![
+        "view",
+        "--scene",
+        "cornell",
+        "--method",
+        "sparse",
+        "--width",
+        DEBUG_SIZE,
+        "--height",
+        DEBUG_SIZE,
+        "--shadow-res",
+        "128",
+        "--opt",
+        "rsm=16",
+        "--opt",
+        "sparse-points=200",
+        "--frames",
+        "1",
+        "--screenshot",
+        shot.to_str().unwrap(),
+    ];
+    for view in debug {
+        args.extend(["--debug", view]);
+    }
+    let stdout = run(windowed(&args)?);
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
+    Some((
+        load(&shot),
+        serde_json::from_str(line).expect("JSON report"),
+    ))
+}
+
+const DEBUG_SIZE: &str = "96";
+
+/// Pixels of the view's region (the window's top-left `size`²) that differ between two shots.
+fn changed_in_view(plain: &image::RgbImage, debug: &image::RgbImage, size: u32) -> Vec<(u32, u32)> {
+    let mut changed = vec![];
+    for y in 0..size {
+        for x in 0..size {
+            if plain.get_pixel(x, y) != debug.get_pixel(x, y) {
+                changed.push((x, y));
+            }
+        }
+    }
+    changed
+}
+
+/// With `--debug points` the view differs from the plain one only in squares around the
+/// sparse points' projections, computed here on the CPU from the same point set
+/// (`vals::points::scene_points`) and camera; with `--debug vals`, in at most one 4×4 splat
+/// per VAL.
+#[test]
+fn debug_views_draw_splats_at_the_points_and_vals() {
+    use valgi::scene::{builtin::BuiltinParams, LoadParams};
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_debug");
+    let Some((plain, plain_report)) = sparse_view(&dir, "plain", &[]) else {
+        return;
+    };
+    assert_eq!(plain_report["debug"]["draws"], 0, "{plain_report}");
+    let (points_shot, points_report) = sparse_view(&dir, "points", &["points"]).unwrap();
+    assert_eq!(points_report["debug"]["draws"], 1, "{points_report}");
+    let size: u32 = DEBUG_SIZE.parse().unwrap();
+
+    // The points' projections through the viewer's camera (the scene's first, frame 0).
+    let scene = valgi::scene::load_with(
+        "cornell",
+        &LoadParams {
+            max_edge: BuiltinParams::default().max_edge,
+            allow_external_paths: false,
+            emitter_lights: valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS,
+        },
+    )
+    .unwrap();
+    let world_from_node = scene.world_from_node_at(0.0);
+    let camera = scene.camera_view(None, 1.0, &world_from_node).unwrap();
+    let clip_from_world = camera.clip_from_world();
+    let (points, _) = valgi::vals::points::scene_points(&scene, 200, 1);
+    let mut projected = vec![];
+    for instance in &scene.instances {
+        let world_from_model = world_from_node[instance.node];
+        for p in &points[instance.mesh].positions {
+            let clip = clip_from_world * world_from_model.transform_point3(*p).extend(1.0);
+            if clip.w <= 0.0 {
+                continue;
+            }
+            let ndc = clip.truncate() / clip.w;
+            if ndc.x.abs() <= 1.0 && ndc.y.abs() <= 1.0 {
+                let s = size as f32;
+                projected.push(((ndc.x * 0.5 + 0.5) * s, (0.5 - ndc.y * 0.5) * s));
+            }
+        }
+    }
+    let changed = changed_in_view(&plain, &points_shot, size);
+    eprintln!(
+        "points: {} projected into the view, {} pixels changed",
+        projected.len(),
+        changed.len()
+    );
+    // A 4-pixel splat covers the pixel centres within 2 px of its own; one more pixel for
+    // rounding at the square's edges.
+    let near = |&(x, y): &(u32, u32), &(px, py): &(f32, f32)| {
+        (x as f32 + 0.5 - px).abs() <= 3.0 && (y as f32 + 0.5 - py).abs() <= 3.0
+    };
+    let stray: Vec<_> = changed
+        .iter()
+        .filter(|c| !projected.iter().any(|p| near(c, p)))
+        .collect();
+    assert!(
+        stray.is_empty(),
+        "{} changed pixels lie away from every point's projection, e.g. {:?}",
+        stray.len(),
+        &stray[..stray.len().min(5)]
+    );
+    // Most points are in front (the depth test hides those behind the boxes).
+    let shown = projected
+        .iter()
+        .filter(|p| changed.iter().any(|c| near(c, p)))
+        .count();
+    eprintln!(
+        "points: {shown} of {} projections have a splat",
+        projected.len()
+    );
+    assert!(
+        shown * 2 > projected.len(),
+        "only {shown} of {} points are drawn",
+        projected.len()
+    );
+
+    let (vals_shot, vals_report) = sparse_view(&dir, "vals", &["vals"]).unwrap();
+    assert_eq!(vals_report["debug"]["draws"], 1, "{vals_report}");
+    let vals = vals_report["vals"].as_u64().unwrap() as usize;
+    let changed = changed_in_view(&plain, &vals_shot, size);
+    eprintln!("vals: {vals} VALs, {} pixels changed", changed.len());
+    assert!(!changed.is_empty(), "no VAL splat drawn");
+    assert!(
+        changed.len() <= 16 * vals,
+        "{} pixels changed by {vals} VAL splats of 4×4",
+        changed.len()
+    );
+}
+
+/// A scripted run whose method cannot be built exits with the build's error instead of
+/// waiting for a method that never comes.
+#[test]
+fn a_scripted_run_whose_method_fails_to_build_exits_with_its_error() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let args = [
+        "view", "--scene", "cornell", "--method", "direct", "--width", "32", "--height", "32",
+        "--opt", "rsm=16", "--frames", "1",
+    ];
+    let Some(mut command) = windowed(&args) else {
+        return;
+    };
+    let output = command.output().expect("run valgi");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!output.status.success(), "the run succeeded: {stderr}");
+    assert!(stderr.contains("has no option(s) rsm"), "stderr: {stderr}");
+}

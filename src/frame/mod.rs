@@ -427,6 +427,18 @@ pub trait Method: Send {
         serde_json::Map::new()
     }
 
+    /// The method's sparse points, for a viewer's debug view that draws them as splats on
+    /// the GPU (`vals_debug_splats.wgsl`); `None` for methods without sparse points.
+    fn debug_points(&self) -> Option<DebugPointSource<'_>> {
+        None
+    }
+
+    /// The method's VALs, for a viewer's debug view that draws them as splats; `None` for
+    /// methods without VALs.
+    fn debug_vals(&self) -> Option<DebugValSource<'_>> {
+        None
+    }
+
     /// Estimated variance of each pixel of the last frame (full or indirect image), for
     /// Monte Carlo methods; `None` for deterministic ones.
     fn variance(&self, _indirect_only: bool) -> Option<Image> {
@@ -460,6 +472,32 @@ pub trait Method: Send {
             gpu_bytes: self.gpu_bytes() + result.view_bytes(&view),
         })
     }
+}
+
+/// The GPU buffers of a method's sparse points, in the layouts of `vals_common.wgsl`, for a
+/// debug overlay to draw them without a CPU readback: a point's world position is its
+/// model-space record placed by its instance's matrix, which only the GPU holds per frame.
+pub struct DebugPointSource<'a> {
+    /// `array<InstanceData>`: this frame's matrices.
+    pub instances: &'a wgpu::Buffer,
+    /// `array<vec4<u32>>`: model position (f32 bits) and octahedral normal.
+    pub points_model: &'a wgpu::Buffer,
+    /// `array<vec2<u32>>`: lobe exponent and disc radius (f16 pair), instance index.
+    pub points_meta: &'a wgpu::Buffer,
+    /// `array<vec4<u32>>`: the diffuse light's intensity (f32 bits) and position offset.
+    pub point_diffuse: &'a wgpu::Buffer,
+    /// `array<vec2<u32>>`: the rest of the lights' position offsets and the spheres.
+    pub point_extra: &'a wgpu::Buffer,
+    pub count: u32,
+}
+
+/// The GPU buffers of a method's VALs (`array<Val>` of `vals_common.wgsl` and the count the
+/// frame's passes wrote, `array<u32>` element 0), for a debug overlay: the count stays on the
+/// GPU, so a drawer covers `capacity` slots and skips those past it.
+pub struct DebugValSource<'a> {
+    pub vals: &'a wgpu::Buffer,
+    pub val_count: &'a wgpu::Buffer,
+    pub capacity: u32,
 }
 
 /// Indirect light a composed method adds on top of another method's (`sparse+atlas`: the

@@ -480,6 +480,16 @@ pub struct AppendSize {
 }
 
 impl Rsm {
+    /// The VAL buffer and its GPU-side count, for a viewer's debug view: every slot, the
+    /// external ones included (the drawer skips those past the count).
+    pub fn debug_vals(&self) -> crate::frame::DebugValSource<'_> {
+        crate::frame::DebugValSource {
+            vals: &self.vals_buffer,
+            val_count: &self.val_count_buffer,
+            capacity: self.capacity.saturating_add(self.external_capacity),
+        }
+    }
+
     /// The RSMs of `scene`'s lights at `resolution` per view, drawn from `raster`'s scene
     /// upload and within its `max_vals`.
     pub fn new(

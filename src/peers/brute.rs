@@ -183,6 +183,10 @@ impl Method for BruteMethod {
         Ok(())
     }
 
+    fn debug_vals(&self) -> Option<crate::frame::DebugValSource<'_>> {
+        Some(self.rsm.debug_vals())
+    }
+
     fn gpu_bytes(&self) -> u64 {
         self.raster.gpu_bytes() + self.rsm.bytes.0
     }

@@ -452,6 +452,14 @@ impl Method for SparseMethod {
         Ok(())
     }
 
+    fn debug_points(&self) -> Option<crate::frame::DebugPointSource<'_>> {
+        Some(self.sparse.debug_points(&self.raster.scene_gpu))
+    }
+
+    fn debug_vals(&self) -> Option<crate::frame::DebugValSource<'_>> {
+        Some(self.rsm.debug_vals())
+    }
+
     fn gpu_bytes(&self) -> u64 {
         let layer = self.layer.as_ref().map_or(0, |l| l.gpu_bytes())
             + self.val_source.as_ref().map_or(0, |s| s.gpu_bytes());

@@ -154,6 +154,10 @@ pub struct SparseGpu {
     points_model: Vec<[u32; 4]>,
     points_meta: Vec<[u32; 2]>,
     point_instances: Vec<usize>,
+    /// The GPU copies of `points_model` and `points_meta` (the kernels' bind groups hold
+    /// them too; kept for the debug view's draw).
+    points_model_buffer: wgpu::Buffer,
+    points_meta_buffer: wgpu::Buffer,
     point_diffuse: wgpu::Buffer,
     point_glossy: wgpu::Buffer,
     point_extra: wgpu::Buffer,
@@ -619,6 +623,8 @@ impl SparseGpu {
             points_model,
             points_meta,
             point_instances,
+            points_model_buffer,
+            points_meta_buffer,
             point_diffuse,
             point_glossy,
             point_extra,
@@ -640,6 +646,21 @@ impl SparseGpu {
             visibility_group,
             rsm_tiles: rsm.tile_count(),
         })
+    }
+
+    /// The point buffers a debug view draws (with the scene's instance matrices).
+    pub fn debug_points<'a>(
+        &'a self,
+        scene_gpu: &'a crate::raster::scene_gpu::SceneGpu,
+    ) -> crate::frame::DebugPointSource<'a> {
+        crate::frame::DebugPointSource {
+            instances: &scene_gpu.instance_buffer,
+            points_model: &self.points_model_buffer,
+            points_meta: &self.points_meta_buffer,
+            point_diffuse: &self.point_diffuse,
+            point_extra: &self.point_extra,
+            count: self.point_count,
+        }
     }
 
     /// Places the BVH's instances for this frame (rays of `--occlusion rays`).

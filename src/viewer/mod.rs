@@ -7,6 +7,7 @@
 //! running method keeps drawing; the state the panel and input change lives in
 //! [`state::ViewerState`], testable without a window.
 
+pub mod debug;
 pub mod state;
 
 use std::collections::{BTreeMap, HashSet};
@@ -32,7 +33,9 @@ use crate::raster::types::{shared_layout, SharedLayout};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::{self, CameraView, Scene};
 
-pub use state::{CameraControl, Components, DragMode, FlyCamera, OrbitCamera, StereoDisplay};
+pub use state::{
+    CameraControl, Components, DebugViews, DragMode, FlyCamera, OrbitCamera, StereoDisplay,
+};
 use state::{ViewerState, FOV_RANGE_DEGREES};
 
 /// `present.wgsl` (fragment): the tone map's parameters and the view's direct and indirect
@@ -95,6 +98,8 @@ pub struct ViewerRequest {
     /// `method` switches the method) as the panel would, and run on until the rebuild is in
     /// (the report gives its figures).
     pub change_option: Option<(String, String)>,
+    /// Debug views on from the start (`--debug`).
+    pub debug: DebugViews,
 }
 
 #[repr(C)]
@@ -110,12 +115,27 @@ pub struct PresentParams {
 
 /// The viewer's structs shared with WGSL.
 pub fn shared_layouts() -> Vec<SharedLayout> {
-    vec![shared_layout!(
-        "PresentParams",
-        "present.wgsl",
-        PresentParams,
-        [exposure_scale, components, encode_srgb, pad0, origin, size]
-    )]
+    vec![
+        shared_layout!(
+            "PresentParams",
+            "present.wgsl",
+            PresentParams,
+            [exposure_scale, components, encode_srgb, pad0, origin, size]
+        ),
+        shared_layout!(
+            "DebugSplatParams",
+            "vals_debug_splats.wgsl",
+            debug::DebugSplatParams,
+            [
+                exposure_scale,
+                encode_srgb,
+                splat_pixels,
+                instance_count,
+                size,
+                pad0
+            ]
+        ),
+    ]
 }
 
 /// What the panel changes; applied after the UI pass.
@@ -377,6 +397,9 @@ struct Running {
     present_layout: GroupLayout,
     present: PresentPipelines,
     present_targets: Vec<PresentTarget>,
+    debug_overlay: debug::DebugOverlay,
+    /// This frame's debug splat draws, per view.
+    debug_draws: Vec<Vec<debug::SplatDraw>>,
     egui_ctx: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
@@ -485,6 +508,7 @@ impl Running {
                 wgpu::ColorWrites::GREEN | wgpu::ColorWrites::BLUE,
             ),
         };
+        let debug_overlay = debug::DebugOverlay::new(&ctx, format);
         let method_entry = method::entry(&request.method)?;
 
         let egui_ctx = egui::Context::default();
@@ -507,6 +531,7 @@ impl Running {
         if request.anaglyph {
             state.stereo_display = StereoDisplay::Anaglyph;
         }
+        state.debug = request.debug;
         let mut running = Self {
             request: request.clone(),
             window,
@@ -524,6 +549,8 @@ impl Running {
             present_layout,
             present,
             present_targets: vec![],
+            debug_overlay,
+            debug_draws: vec![],
             egui_ctx,
             egui_state,
             egui_renderer,
@@ -732,6 +759,14 @@ impl Running {
         // through while it ran. The first build counts too (the panel is drawn meanwhile).
         self.state.rebuilds.note_frame(previous, now);
         self.poll_rebuild();
+        // A scripted run whose method never built has nothing to draw: it would wait forever.
+        if scripted && self.method.is_none() && self.state.rebuilds.pending().is_none() {
+            if let Some(e) = &self.method_error {
+                return Err(
+                    RenderError::Settings(format!("method {}: {e}", self.method_name)).into(),
+                );
+            }
+        }
         self.walk(dt);
         if self.frames_done > 0 {
             self.state.advance(dt, !scripted);
@@ -783,6 +818,12 @@ impl Running {
                 two_views: self.views.len() == 2,
                 view_names: self.views.iter().map(|v| v.name.clone()).collect(),
                 screenshots: &self.screenshots_written,
+                debug_available: self.method.as_ref().map_or_else(DebugViews::default, |m| {
+                    DebugViews {
+                        points: m.debug_points().is_some(),
+                        vals: m.debug_vals().is_some(),
+                    }
+                }),
             };
             self.egui_ctx
                 .run_ui(raw_input, |ui| panel.show(ui, &mut actions))
@@ -803,6 +844,23 @@ impl Running {
             pixels_per_point,
         };
         self.write_present_params();
+        self.debug_draws = match &self.method {
+            Some(method) if self.state.debug.any() && !self.anaglyph() => self
+                .views
+                .iter()
+                .map(|view| {
+                    self.debug_overlay.prepare(
+                        &self.ctx,
+                        method.as_ref(),
+                        view,
+                        self.state.debug,
+                        2f32.powf(self.state.exposure),
+                        !self.config.format.is_srgb(),
+                    )
+                })
+                .collect(),
+            _ => vec![],
+        };
 
         let output = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t)
@@ -1011,6 +1069,10 @@ impl Running {
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &t.group, &[]);
             pass.draw(0..3, 0..1);
+            // Debug splats over the view, clipped to its region by the viewport.
+            if let Some(draws) = self.debug_draws.get(i) {
+                self.debug_overlay.draw(&mut pass, draws);
+            }
         }
         pass.set_viewport(0.0, 0.0, w as f32, h as f32, 0.0, 1.0);
         self.egui_renderer.render(&mut pass, jobs, screen);
@@ -1071,6 +1133,12 @@ impl Running {
             "views": self.views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
             "view_size": self.views.first().map(|v| [v.width, v.height]),
             "stereo_display": if self.anaglyph() { "anaglyph" } else { "side-by-side" },
+            // Debug views on, and the splat draws the last frame recorded (over all views).
+            "debug": {
+                "points": self.state.debug.points,
+                "vals": self.state.debug.vals,
+                "draws": self.debug_draws.iter().map(Vec::len).sum::<usize>(),
+            },
             "frames": self.frames_done,
             "surface_format": format!("{:?}", self.config.format),
             "adapter": self.ctx.adapter_label(),
@@ -1132,6 +1200,8 @@ struct PanelData<'a> {
     two_views: bool,
     view_names: Vec<String>,
     screenshots: &'a [PathBuf],
+    /// The debug views the running method can draw.
+    debug_available: DebugViews,
 }
 
 impl PanelData<'_> {
@@ -1156,6 +1226,7 @@ impl PanelData<'_> {
             ui.radio_value(c, Components::Indirect, "indirect");
             ui.radio_value(c, Components::Both, "both");
         });
+        self.debug_ui(ui);
         if self.two_views {
             ui.horizontal(|ui| {
                 let d = &mut self.state.stereo_display;
@@ -1167,6 +1238,26 @@ impl PanelData<'_> {
         self.camera_ui(ui, actions);
         ui.separator();
         self.passes_ui(ui);
+    }
+
+    /// The debug views' toggles; a method without points or VALs greys its box out.
+    fn debug_ui(&mut self, ui: &mut egui::Ui) {
+        ui.horizontal(|ui| {
+            ui.label("debug:");
+            let debug = &mut self.state.debug;
+            ui.add_enabled(
+                self.debug_available.points,
+                egui::Checkbox::new(&mut debug.points, "sparse points"),
+            )
+            .on_hover_text(
+                "splats coloured by the first-bounce radiance E/π of the point's diffuse light",
+            );
+            ui.add_enabled(
+                self.debug_available.vals,
+                egui::Checkbox::new(&mut debug.vals, "VALs"),
+            )
+            .on_hover_text("splats coloured by the disc radiance Φ/(π·A)");
+        });
     }
 
     /// Frame time with its history plot and the counts of the render JSON line.

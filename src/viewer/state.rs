@@ -261,6 +261,35 @@ impl Rebuilds {
     }
 }
 
+/// Which debug views are on (the panel's checkboxes, `--debug`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DebugViews {
+    /// Sparse points, coloured by the first-bounce radiance of their diffuse light.
+    pub points: bool,
+    /// VALs, coloured by their disc radiance Φ/(π·A).
+    pub vals: bool,
+}
+
+impl DebugViews {
+    /// Turns on the view `name` (`points` or `vals`), as `--debug` names it.
+    pub fn enable(&mut self, name: &str) -> Result<(), String> {
+        match name {
+            "points" => self.points = true,
+            "vals" => self.vals = true,
+            other => {
+                return Err(format!(
+                    "--debug {other}: unknown debug view (expected points or vals)"
+                ))
+            }
+        }
+        Ok(())
+    }
+
+    pub fn any(self) -> bool {
+        self.points || self.vals
+    }
+}
+
 /// Everything the panel and the input change that needs no GPU object.
 #[derive(Debug)]
 pub struct ViewerState {
@@ -284,6 +313,8 @@ pub struct ViewerState {
     pub frame_ms_history: VecDeque<f32>,
     screenshots: u32,
     pub rebuilds: Rebuilds,
+    /// Splat overlays drawn over the views.
+    pub debug: DebugViews,
 }
 
 impl ViewerState {
@@ -303,6 +334,7 @@ impl ViewerState {
             frame_ms_history: VecDeque::with_capacity(HISTORY_FRAMES),
             screenshots: 0,
             rebuilds: Rebuilds::default(),
+            debug: DebugViews::default(),
         }
     }
 
@@ -661,5 +693,23 @@ mod tests {
         // Frames after it are not charged to it.
         rebuilds.note_frame(t1, t1 + ms(500));
         assert!((rebuilds.last.unwrap().longest_frame_ms - 5.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn debug_views_are_named_points_and_vals() {
+        let mut debug = DebugViews::default();
+        assert!(!debug.any());
+        debug.enable("vals").unwrap();
+        assert_eq!(
+            debug,
+            DebugViews {
+                points: false,
+                vals: true
+            }
+        );
+        debug.enable("points").unwrap();
+        assert!(debug.points && debug.vals);
+        let error = DebugViews::default().enable("links").unwrap_err();
+        assert!(error.contains("--debug links"), "{error}");
     }
 }

@@ -625,6 +625,10 @@ impl Method for LpvMethod {
         Ok(())
     }
 
+    fn debug_vals(&self) -> Option<crate::frame::DebugValSource<'_>> {
+        Some(self.rsm.debug_vals())
+    }
+
     fn gpu_bytes(&self) -> u64 {
         self.raster.gpu_bytes() + self.rsm.bytes.0 + self.bytes.0
     }
