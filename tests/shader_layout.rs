@@ -189,6 +189,13 @@ fn shared_constants_match() {
                 ("MAX_RAY_TILES", valgi::vals::visibility::MAX_RAY_TILES),
             ],
         ),
+        (
+            "vals_gather.wgsl",
+            &[(
+                "POINTS_PER_INVOCATION",
+                valgi::vals::sparse::GATHER_POINTS_PER_INVOCATION,
+            )],
+        ),
         ("vals_occlusion.wgsl", &occlusion),
         ("vals_occluder_bounds.wgsl", &occlusion),
         (

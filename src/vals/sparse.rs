@@ -54,6 +54,10 @@ pub fn occlusion_tiles(point_count: u32, tile: u32) -> (u32, u32) {
 /// `tests/shader_layout.rs`).
 pub const POINT_GROUP: u32 = 64;
 
+/// Sparse points each gather invocation takes (`POINTS_PER_INVOCATION` in
+/// `shaders/vals/vals_gather.wgsl`): a gather workgroup covers `POINT_GROUP` times this many.
+pub const GATHER_POINTS_PER_INVOCATION: u32 = 4;
+
 /// `InstanceRange` in `shaders/vals/vals_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -838,7 +842,12 @@ impl SparseGpu {
                 pass.dispatch_workgroups(x, y, 1);
             })
         };
-        compute(&self.gather, gather, points)?;
+        compute(
+            &self.gather,
+            gather,
+            self.point_count
+                .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
+        )?;
         if last >= Stage::Renormalize {
             compute(&self.renormalize, renormalize, points)?;
         }
