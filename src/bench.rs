@@ -14,6 +14,7 @@ use crate::method::Method;
 use crate::raster::{compute_pipeline, RenderError, RenderSettings};
 use crate::scene::Scene;
 use crate::vals::math::OcclusionMode;
+use crate::vals::sparse::GatherForm;
 use crate::vals::{SparseMethod, SparseSettings};
 
 /// Arithmetic per point-VAL pair in the diffuse + glossy gather, in FMA-equivalents (an FMA, a
@@ -265,11 +266,19 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     for &target in &request.vals {
         let rsm = rsm_for(&ctx, &scene, target)?;
         for &points in &request.points {
-            for (config, glossy, occlusion) in [
-                ("diffuse", false, OcclusionMode::Off),
-                ("+glossy", true, OcclusionMode::Off),
-                ("+occlusion", true, OcclusionMode::Sum),
-                ("+rays", true, OcclusionMode::Rays),
+            // The last row is the default configuration with the gather drawn as the paper
+            // draws it (fragments over a point target), beside the compute form above it.
+            for (config, glossy, occlusion, gather) in [
+                ("diffuse", false, OcclusionMode::Off, GatherForm::Compute),
+                ("+glossy", true, OcclusionMode::Off, GatherForm::Compute),
+                ("+occlusion", true, OcclusionMode::Sum, GatherForm::Compute),
+                ("+rays", true, OcclusionMode::Rays, GatherForm::Compute),
+                (
+                    "+rays raster",
+                    true,
+                    OcclusionMode::Rays,
+                    GatherForm::Raster,
+                ),
             ] {
                 let mut settings = SparseSettings {
                     rsm,
@@ -278,6 +287,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                 };
                 settings.options.glossy = glossy;
                 settings.options.occlusion = occlusion;
+                settings.options.gather = gather;
                 let (report, timings) = render(settings, request.width, request.height)?;
                 let row = Row::new(config, &report, &timings, request.width, request.height);
                 print_row(&row, peak);
@@ -417,7 +427,7 @@ fn print_row(r: &Row, peak: f64) {
         .map(|(name, ms)| format!("{name} {ms:.2}"))
         .collect();
     println!(
-        "{:<11} vals {:>7} points {:>6} {:>4}×{:<4} {} ms | {:.3e} pairs/s = {:.1}% of FMA peak",
+        "{:<12} vals {:>7} points {:>6} {:>4}×{:<4} {} ms | {:.3e} pairs/s = {:.1}% of FMA peak",
         r.config,
         r.vals,
         r.points,

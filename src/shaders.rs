@@ -49,6 +49,14 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/vals/vals_gather.wgsl"),
     ),
     (
+        "vals_gather_common.wgsl",
+        include_str!("../shaders/vals/vals_gather_common.wgsl"),
+    ),
+    (
+        "vals_gather_raster.wgsl",
+        include_str!("../shaders/vals/vals_gather_raster.wgsl"),
+    ),
+    (
         "vals_renormalize.wgsl",
         include_str!("../shaders/vals/vals_renormalize.wgsl"),
     ),
@@ -123,7 +131,12 @@ pub const FILES: &[(&str, &str)] = &[
 ];
 
 /// Files that are only included by others (no entry points of their own).
-pub const INCLUDES: &[&str] = &["common.wgsl", "vals_common.wgsl", "lpv_common.wgsl"];
+pub const INCLUDES: &[&str] = &[
+    "common.wgsl",
+    "vals_common.wgsl",
+    "vals_gather_common.wgsl",
+    "lpv_common.wgsl",
+];
 
 fn raw(name: &str) -> &'static str {
     FILES

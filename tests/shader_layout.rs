@@ -196,6 +196,10 @@ fn shared_constants_match() {
                 valgi::vals::sparse::GATHER_POINTS_PER_INVOCATION,
             )],
         ),
+        (
+            "vals_gather_raster.wgsl",
+            &[("RASTER_WIDTH", valgi::vals::sparse::RASTER_GATHER_WIDTH)],
+        ),
         ("vals_occlusion.wgsl", &occlusion),
         ("vals_occluder_bounds.wgsl", &occlusion),
         (

@@ -16,7 +16,7 @@ use valgi::scene::{
     Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
 };
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
-use valgi::vals::sparse::{PointsReadback, SparseOptions};
+use valgi::vals::sparse::{GatherForm, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
 
 use common::small_render_settings as settings;
@@ -33,6 +33,7 @@ fn sparse_settings(
         seed: 3,
         options: SparseOptions {
             tile: 64,
+            gather: Default::default(),
             glossy,
             occlusion,
             weights: Weights::Geometric,
@@ -569,19 +570,84 @@ fn brute_force_matches_the_cpu_sum_over_every_val() {
     brute_force_against_cpu(&ctx, 340, 32);
 }
 
+/// The raster gather (fragments over a point target, `--gather raster`) writes what the
+/// compute gather writes: the same sums, positions and spheres at every point, with the
+/// cluster visibility on and the points filling one and a half rows of the target.
+#[test]
+fn raster_gather_writes_what_the_compute_gather_writes() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let points = 3 * RASTER_GATHER_WIDTH as usize / 2;
+    let run = |gather: GatherForm| {
+        let mut s = sparse_settings(32, points, OcclusionMode::Rays, true);
+        s.options.gather = gather;
+        run_sparse(&ctx, &scene, 16, s, Stage::Gather).2
+    };
+    let compute = run(GatherForm::Compute);
+    let raster = run(GatherForm::Raster);
+    // Placement keeps about the count asked for: more than one row of the target either way.
+    let placed = compute.points.len();
+    assert!(
+        placed > RASTER_GATHER_WIDTH as usize && placed < 2 * RASTER_GATHER_WIDTH as usize,
+        "{placed} points"
+    );
+    assert_eq!(raster.points.len(), placed);
+    let lit = compute
+        .lights
+        .iter()
+        .filter(|l| l.diffuse.max_element() > 0.0)
+        .count();
+    assert!(lit > placed / 2, "{lit} of {placed} points gathered light");
+    for (i, (c, r)) in compute.lights.iter().zip(&raster.lights).enumerate() {
+        assert!(
+            close(c.diffuse, r.diffuse, 1e-5, 1e-12),
+            "point {i}: diffuse {} vs {}",
+            c.diffuse,
+            r.diffuse
+        );
+        assert!(
+            close(c.glossy, r.glossy, 1e-5, 1e-12),
+            "point {i}: glossy {} vs {}",
+            c.glossy,
+            r.glossy
+        );
+        assert!(
+            close(c.diffuse_position, r.diffuse_position, 1e-3, 1e-6),
+            "point {i}: diffuse position"
+        );
+        assert!(
+            close(c.glossy_position, r.glossy_position, 1e-3, 1e-6),
+            "point {i}: glossy position"
+        );
+    }
+    for (i, (c, r)) in compute.spheres.iter().zip(&raster.spheres).enumerate() {
+        assert!(
+            (c.0 - r.0).abs() <= 1e-3 * c.0.abs() + 1e-6,
+            "point {i}: diffuse sphere"
+        );
+        assert!(
+            (c.1 - r.1).abs() <= 1e-3 * c.1.abs() + 1e-6,
+            "point {i}: glossy sphere"
+        );
+    }
+}
+
 #[test]
 fn gather_sums_more_than_65535_vals() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell_coarse();
     let eye = camera(&scene, 16).position();
-    let (method, _, gathered) = run_sparse(
-        &ctx,
-        &scene,
-        16,
-        sparse_settings(340, 64, OcclusionMode::Off, true),
-        Stage::Gather,
-    );
-    let vals = method.rsm.read_vals(&ctx).unwrap();
+    for gather in [GatherForm::Compute, GatherForm::Raster] {
+        let mut s = sparse_settings(340, 64, OcclusionMode::Off, true);
+        s.options.gather = gather;
+        gather_sums_against_cpu(&ctx, &scene, eye, s);
+    }
+}
+
+fn gather_sums_against_cpu(ctx: &GpuContext, scene: &Scene, eye: Vec3, s: SparseSettings) {
+    let gather = s.options.gather;
+    let (method, _, gathered) = run_sparse(ctx, scene, 16, s, Stage::Gather);
+    let vals = method.rsm.read_vals(ctx).unwrap();
     assert!(vals.len() > 65535, "{} VALs", vals.len());
     for (i, p) in gathered.points.iter().enumerate() {
         let r = Receiver {
@@ -592,13 +658,13 @@ fn gather_sums_more_than_65535_vals() {
         let cpu = math::gather(&r, eye, &vals, Weights::Geometric, true);
         assert!(
             close(gathered.lights[i].diffuse, cpu.diffuse, 1e-3, 1e-9),
-            "point {i}: {} vs {}",
+            "{gather:?} point {i}: {} vs {}",
             gathered.lights[i].diffuse,
             cpu.diffuse
         );
         assert!(
             close(gathered.lights[i].glossy, cpu.glossy, 1e-3, 1e-9),
-            "point {i}: glossy"
+            "{gather:?} point {i}: glossy"
         );
     }
 }

@@ -19,6 +19,7 @@ fn settings(points: usize) -> SparseSettings {
         seed: 5,
         options: SparseOptions {
             tile: 64,
+            gather: Default::default(),
             glossy: true,
             occlusion: OcclusionMode::Rays,
             weights: Weights::Geometric,

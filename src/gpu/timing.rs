@@ -237,6 +237,11 @@ impl<'a> Passes<'a> {
         self.time_wall_clock(label, started)
     }
 
+    /// The device the passes are recorded for (kernels built on first use need it).
+    pub fn ctx(&self) -> &'a GpuContext {
+        self.ctx
+    }
+
     /// Records one compute pass named `label`.
     pub fn compute(
         &mut self,

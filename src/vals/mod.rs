@@ -24,7 +24,7 @@ use crate::scene::Scene;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
 pub use sparse::Stage;
-use sparse::{KernelGroups, SparseGpu, SparseOptions};
+use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions};
 
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,6 +47,7 @@ impl Default for SparseSettings {
             seed: 1,
             options: SparseOptions {
                 tile: 128,
+                gather: GatherForm::Compute,
                 glossy: true,
                 occlusion: OcclusionMode::Rays,
                 weights: Weights::Geometric,
@@ -58,7 +59,7 @@ impl Default for SparseSettings {
 }
 
 impl SparseSettings {
-    /// Reads the options `rsm`, `sparse-points`, `seed`, `tile`, `glossy`, `occlusion` and
+    /// Reads the options `rsm`, `sparse-points`, `seed`, `tile`, `gather`, `glossy`, `occlusion` and
     /// `weights` (those not given keep their defaults).
     pub fn from_options(options: &MethodOptions) -> Result<Self, RenderError> {
         let d = Self::default();
@@ -80,6 +81,10 @@ impl SparseSettings {
             seed: options.get("seed", d.seed)?,
             options: SparseOptions {
                 tile,
+                gather: match options.choice("gather", &["compute", "raster"])? {
+                    "raster" => GatherForm::Raster,
+                    _ => GatherForm::Compute,
+                },
                 glossy: options.choice("glossy", &["on", "off"])? == "on",
                 occlusion: match options.choice("occlusion", &["rays", "sum", "union", "off"])? {
                     "off" => OcclusionMode::Off,
@@ -211,6 +216,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Int { min: 1, max: 256 },
         default: "128",
         help: "VALs per workgroup-memory tile in the gather",
+    },
+    OptionSpec {
+        name: "gather",
+        kind: OptionKind::Choice(&["compute", "raster"]),
+        default: "compute",
+        help: "the gather as a compute pass (VALs through workgroup memory, 4 points per invocation) or as a fragment pass over a point target (the paper's form); same sums",
     },
     OptionSpec {
         name: "glossy",
@@ -428,6 +439,7 @@ impl Method for SparseMethod {
             "sparse_points": self.sparse.point_count,
             "instance_vertices": self.sparse.vertex_count,
             "tile": opts.tile,
+            "gather": format!("{:?}", opts.gather).to_lowercase(),
             "glossy": if opts.glossy { "on" } else { "off" },
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),

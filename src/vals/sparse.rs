@@ -76,11 +76,35 @@ pub struct InstanceRange {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SparseOptions {
     pub tile: u32,
+    /// How the gather runs: a compute pass, or a fragment pass over a point target.
+    pub gather: GatherForm,
     pub glossy: bool,
     pub occlusion: OcclusionMode,
     pub weights: Weights,
     /// `--occlusion rays`: percent of last frame's visibility blended into this frame's.
     pub visibility_history: u32,
+}
+
+/// The two forms of the gather (`--gather`), which compute the same sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GatherForm {
+    /// `vals_gather.wgsl`: workgroups of 64 invocations × [`GATHER_POINTS_PER_INVOCATION`]
+    /// points, the VALs streamed through workgroup memory.
+    #[default]
+    Compute,
+    /// `vals_gather_raster.wgsl`: one fragment per point on a [`RASTER_GATHER_WIDTH`]-wide
+    /// target, each reading every VAL from the buffer (the paper's pixel-shader form).
+    Raster,
+}
+
+/// Width of the raster gather's point target (`RASTER_WIDTH` in `vals_gather_raster.wgsl`):
+/// point i is texel (i mod W, i div W).
+pub const RASTER_GATHER_WIDTH: u32 = 256;
+
+/// The raster gather's pipeline and its (never stored) colour target, built on first use.
+struct RasterGather {
+    pipeline: wgpu::RenderPipeline,
+    target: wgpu::TextureView,
 }
 
 /// Octahedral encoding of a unit vector in two snorm16 (`oct_decode` in the shader).
@@ -169,6 +193,8 @@ pub struct SparseGpu {
     vertex_lights: wgpu::Buffer,
     ranges_buffer: wgpu::Buffer,
     gather: Kernel,
+    /// The gather as a fragment pass (`--gather raster`), sharing `gather`'s bind groups.
+    raster_gather: std::cell::OnceCell<RasterGather>,
     renormalize: Kernel,
     occlusion: Kernel,
     /// The bounds of the occlusion pass's disc tiles (view-free, its own parameter block).
@@ -418,12 +444,15 @@ impl SparseGpu {
         // shader's binding order; binding 0 is always the parameter block (read-only
         // storage, see `GpuBytes::params`), so a per-view parameter block needs only new
         // bind groups.
-        let make = |name: &'static str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
+        let make_for = |stages: wgpu::ShaderStages,
+                        name: &'static str,
+                        shader: &str,
+                        list: &[(&wgpu::Buffer, bool)]| {
             let entries: Vec<wgpu::BindGroupLayoutEntry> = list
                 .iter()
                 .enumerate()
                 .map(|(i, (_, rw))| {
-                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, cs)
+                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, stages)
                 })
                 .collect();
             let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -448,8 +477,13 @@ impl SparseGpu {
             kernel.group = Some(kernel.bind(device, list[0].0));
             Ok::<_, GpuError>(kernel)
         };
+        let make = |name: &'static str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
+            make_for(cs, name, shader, list)
+        };
         let instances = &scene_gpu.instance_buffer;
-        let gather = make(
+        // The raster gather binds the same group in a fragment shader.
+        let gather = make_for(
+            cs | wgpu::ShaderStages::FRAGMENT,
             "gather",
             "vals_gather.wgsl",
             &[
@@ -636,6 +670,7 @@ impl SparseGpu {
             vertex_lights,
             ranges_buffer,
             gather,
+            raster_gather: std::cell::OnceCell::new(),
             renormalize,
             occlusion,
             occluder_bounds: occluder_bounds_kernel,
@@ -650,6 +685,83 @@ impl SparseGpu {
             visibility_group,
             rsm_tiles: rsm.tile_count(),
         })
+    }
+
+    /// The raster gather, built the first time a frame asks for it: a full-target triangle
+    /// over `RASTER_GATHER_WIDTH × ⌈points / width⌉` texels.
+    fn raster_gather(&self, ctx: &GpuContext) -> Result<&RasterGather, GpuError> {
+        if let Some(raster) = self.raster_gather.get() {
+            return Ok(raster);
+        }
+        let device = &ctx.device;
+        let width = RASTER_GATHER_WIDTH.min(self.point_count.max(1));
+        let height = self.point_count.div_ceil(RASTER_GATHER_WIDTH).max(1);
+        const FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R8Unorm;
+        let target = ctx.scoped(
+            "the raster gather's point target",
+            Some(u64::from(width) * u64::from(height)),
+            "use the compute gather (--gather compute) or fewer --sparse-points",
+            || {
+                device.create_texture(&wgpu::TextureDescriptor {
+                    label: Some("raster gather target"),
+                    size: wgpu::Extent3d {
+                        width,
+                        height,
+                        depth_or_array_layers: 1,
+                    },
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format: FORMAT,
+                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+                    view_formats: &[],
+                })
+            },
+        )?;
+        let module = ctx.shader("vals_gather_raster.wgsl");
+        let pipeline = ctx.scoped(
+            "the raster gather pipeline",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                    label: Some("raster gather"),
+                    bind_group_layouts: &[Some(&self.gather.layout)],
+                    immediate_size: 0,
+                });
+                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                    label: Some("raster gather"),
+                    layout: Some(&layout),
+                    vertex: wgpu::VertexState {
+                        module: &module,
+                        entry_point: Some("vs_main"),
+                        compilation_options: Default::default(),
+                        buffers: &[],
+                    },
+                    primitive: wgpu::PrimitiveState::default(),
+                    depth_stencil: None,
+                    multisample: wgpu::MultisampleState::default(),
+                    fragment: Some(wgpu::FragmentState {
+                        module: &module,
+                        entry_point: Some("fs_main"),
+                        compilation_options: Default::default(),
+                        // The sums go to the storage buffers; the colour is not kept.
+                        targets: &[Some(wgpu::ColorTargetState {
+                            format: FORMAT,
+                            blend: None,
+                            write_mask: wgpu::ColorWrites::empty(),
+                        })],
+                    }),
+                    multiview_mask: None,
+                    cache: None,
+                })
+            },
+        )?;
+        let raster = RasterGather {
+            pipeline,
+            target: target.create_view(&Default::default()),
+        };
+        Ok(self.raster_gather.get_or_init(|| raster))
     }
 
     /// The point buffers a debug view draws (with the scene's instance matrices).
@@ -829,7 +941,7 @@ impl SparseGpu {
     ) -> Result<(), GpuError> {
         let points = self.point_count.div_ceil(POINT_GROUP);
         let max_groups = self.max_groups_per_dimension;
-        let mut compute = |kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
+        let compute = |passes: &mut Passes, kernel: &Kernel, group: &wgpu::BindGroup, n: u32| {
             if n == 0 {
                 // No points or no vertices (a scene without faces): nothing to do, and the
                 // placeholder buffers bound in their place are smaller than one element.
@@ -842,14 +954,39 @@ impl SparseGpu {
                 pass.dispatch_workgroups(x, y, 1);
             })
         };
-        compute(
-            &self.gather,
-            gather,
-            self.point_count
-                .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
-        )?;
+        match options.gather {
+            GatherForm::Compute => compute(
+                passes,
+                &self.gather,
+                gather,
+                self.point_count
+                    .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
+            )?,
+            GatherForm::Raster if self.point_count > 0 => {
+                let raster = self.raster_gather(passes.ctx())?;
+                passes.render(
+                    self.gather.label,
+                    &[Some(wgpu::RenderPassColorAttachment {
+                        view: &raster.target,
+                        depth_slice: None,
+                        resolve_target: None,
+                        ops: wgpu::Operations {
+                            load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                            store: wgpu::StoreOp::Discard,
+                        },
+                    })],
+                    None,
+                    |pass| {
+                        pass.set_pipeline(&raster.pipeline);
+                        pass.set_bind_group(0, gather, &[]);
+                        pass.draw(0..3, 0..1);
+                    },
+                )?
+            }
+            GatherForm::Raster => {}
+        }
         if last >= Stage::Renormalize {
-            compute(&self.renormalize, renormalize, points)?;
+            compute(passes, &self.renormalize, renormalize, points)?;
         }
         let disc_occlusion = matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union);
         if last >= Stage::Occlusion && disc_occlusion {
@@ -860,14 +997,16 @@ impl SparseGpu {
                 .as_ref()
                 .expect("bound at creation");
             compute(
+                passes,
                 &self.occluder_bounds,
                 own,
                 (tiles + supers).div_ceil(POINT_GROUP),
             )?;
-            compute(&self.occlusion, occlusion, points)?;
+            compute(passes, &self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {
             compute(
+                passes,
                 &self.interpolate,
                 interpolate,
                 self.vertex_count.div_ceil(POINT_GROUP),
