@@ -38,6 +38,7 @@ fn sparse_settings(
             occlusion,
             weights: Weights::Geometric,
             visibility_history: 0,
+            adaptive_rays: false,
         },
         ..Default::default()
     }

@@ -24,6 +24,7 @@ fn settings(points: usize) -> SparseSettings {
             occlusion: OcclusionMode::Rays,
             weights: Weights::Geometric,
             visibility_history: 0,
+            adaptive_rays: false,
         },
         ..Default::default()
     }
@@ -35,15 +36,18 @@ fn gathered_at_rest(
     scene: &valgi::scene::Scene,
     points: usize,
 ) -> SparseMethod {
+    gathered_at_rest_with(ctx, scene, settings(points))
+}
+
+fn gathered_at_rest_with(
+    ctx: &valgi::gpu::GpuContext,
+    scene: &valgi::scene::Scene,
+    settings: SparseSettings,
+) -> SparseMethod {
     let world = scene.world_from_node();
     let camera = scene.camera_view(None, 1.0, &world).unwrap();
-    let mut method = SparseMethod::new(
-        ctx,
-        scene,
-        common::small_render_settings(16),
-        settings(points),
-    )
-    .unwrap();
+    let mut method =
+        SparseMethod::new(ctx, scene, common::small_render_settings(16), settings).unwrap();
     method.last_stage = Stage::Gather;
     method.render(ctx, scene, &world, &camera).unwrap();
     method
@@ -68,7 +72,14 @@ fn assert_visibility_matches_the_cpu_twin(
     for (i, p) in gathered.points.iter().enumerate() {
         for c in 0..clusters {
             let cpu = visibility::cluster_visibility(
-                bvh, p.position, p.normal, c as u32, tiles, samples, &gpu_vals,
+                bvh,
+                p.position,
+                p.normal,
+                c as u32,
+                tiles,
+                samples,
+                &gpu_vals,
+                method.settings.options.adaptive_rays,
             );
             let gpu = gpu_visibility[i * per_point + c];
             let cpu = visibility::quantize(cpu);
@@ -122,6 +133,64 @@ fn visibility_twins_agree_when_clusters_hold_more_tiles_than_they_shoot_at() {
         partial > 100,
         "only {partial} partly visible pairs: the rays were not exercised"
     );
+}
+
+/// Adaptive rays (a tile's 2×2 coarse strata first, the rest only where those disagree)
+/// match their CPU twin, and differ from a ray to every stratum only where that sees a tile
+/// partly hidden: a pair all 16 rays call fully seen or fully hidden has the coarse rays agree,
+/// so it must come out the same to the bit. On the corridor (door, partition) the mean
+/// difference stays below 1/50.
+#[test]
+fn adaptive_rays_differ_from_all_rays_only_where_a_tile_is_partly_hidden() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).unwrap();
+    let world = scene.world_from_node();
+    let run = |adaptive: bool| {
+        let mut s = settings(600);
+        s.options.adaptive_rays = adaptive;
+        let method = gathered_at_rest_with(&ctx, &scene, s);
+        let samples = method.rsm.read_cluster_samples(&ctx).unwrap();
+        let gathered = method.sparse.read_points(&ctx, &scene, &world).unwrap();
+        let partial = assert_visibility_matches_the_cpu_twin(&ctx, &method, &gathered, &samples);
+        let clusters = method.rsm.tile_count().min(MAX_CLUSTERS) as usize;
+        let bytes: Vec<u8> = method
+            .sparse
+            .read_visibility(&ctx)
+            .unwrap()
+            .chunks(MAX_CLUSTERS as usize)
+            .take(gathered.points.len())
+            .flat_map(|v| v[..clusters].to_vec())
+            .collect();
+        (bytes, partial)
+    };
+    let (all, partial_all) = run(false);
+    let (adaptive, partial_adaptive) = run(true);
+    assert_eq!(all.len(), adaptive.len());
+    assert!(partial_all > 100, "{partial_all} partly visible pairs");
+    let unanimous_changed = all
+        .iter()
+        .zip(&adaptive)
+        .filter(|(a, b)| (**a == 0 || **a == 255) && a != b)
+        .count();
+    let mean_difference = all
+        .iter()
+        .zip(&adaptive)
+        .map(|(a, b)| a.abs_diff(*b) as f64 / 255.0)
+        .sum::<f64>()
+        / all.len() as f64;
+    eprintln!(
+        "{} pairs: mean |V_adaptive - V_all| {mean_difference:.4}; partly visible {partial_adaptive} (adaptive) vs {partial_all} (all)",
+        all.len()
+    );
+    assert_eq!(
+        unanimous_changed, 0,
+        "pairs all rays call unanimous changed"
+    );
+    assert!(
+        all.iter().zip(&adaptive).any(|(a, b)| a != b),
+        "adaptive rays changed nothing: the coarse pass was not used"
+    );
+    assert!(mean_difference < 0.02, "mean difference {mean_difference}");
 }
 
 #[test]
@@ -404,6 +473,7 @@ fn visibility_history_blends_last_frames_bytes_like_the_cpu_twin() {
                 tiles,
                 &samples,
                 &gpu_vals,
+                method.settings.options.adaptive_rays,
             );
             let k = i * per_point + c;
             let blended = visibility::quantize(visibility::blend_history(v, previous[k], 50));

@@ -49,6 +49,8 @@ const FLAG_FLUX_WEIGHTS: u32 = 2u;
 const FLAG_GLOSSY_ONLY: u32 = 4u;
 // `--occlusion rays`: scale each VAL by its cluster's visibility at the point.
 const FLAG_VISIBILITY: u32 = 8u;
+// `--visibility-rays adaptive`: a tile's coarse strata first, the rest only where they disagree.
+const FLAG_ADAPTIVE_RAYS: u32 = 16u;
 const POSITION_EPSILON: f32 = 1e-12;
 const COS_MIN: f32 = 1e-2;
 const WEIGHT_EPSILON: f32 = 1e-6;

@@ -27,6 +27,41 @@ const MAX_RAY_TILES: u32 = 4u;
 // Last frame's bytes, blended in by params.visibility_history percent.
 @group(0) @binding(7) var<storage, read> visibility_history: array<u32>;
 
+// Strata on even rows and columns of a tile's CLUSTER_SAMPLE_SIDE² grid: a 2×2 grid spread
+// over the tile.
+fn is_coarse_stratum(s: u32) -> bool {
+    return ((s % CLUSTER_SAMPLE_SIDE) & 1u) == 0u && ((s / CLUSTER_SAMPLE_SIDE) & 1u) == 0u;
+}
+
+// The sample VAL of one stratum slot as a shadow ray's target.
+struct StratumSample {
+    // Φ·g at the point (0: no VAL in the stratum, or it does not reach the point).
+    weight: f32,
+    // Both ray ends are pulled off their surfaces by this (RAY_OFFSET · distance).
+    offset: f32,
+    // The ray's far end, pulled off the VAL's surface along its normal.
+    end: vec3<f32>,
+}
+
+fn stratum_sample(point: WorldPoint, slot_index: u32) -> StratumSample {
+    var out: StratumSample;
+    let slot = cluster_samples[slot_index];
+    if (slot == 0u) {
+        return out;
+    }
+    let val = vals[slot - 1u];
+    let g = disc_geometry(point.position, point.normal, val).x;
+    let l = val.position_area.xyz;
+    out.weight = max(g * (val.flux.r + val.flux.g + val.flux.b), 0.0);
+    out.offset = RAY_OFFSET * length(l - point.position);
+    out.end = l + val.normal.xyz * out.offset;
+    return out;
+}
+
+fn sample_visible(point: WorldPoint, sample: StratumSample) -> bool {
+    return !segment_occluded(point.position + point.normal * sample.offset, sample.end);
+}
+
 fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     var seen = 0.0;
@@ -36,25 +71,46 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
         tiles_in_cluster = (params.rsm_tiles - cluster + MAX_CLUSTERS - 1u) / MAX_CLUSTERS;
     }
     let stride = max(1u, (tiles_in_cluster + MAX_RAY_TILES - 1u) / MAX_RAY_TILES) * MAX_CLUSTERS;
+    let adaptive = (params.flags & FLAG_ADAPTIVE_RAYS) != 0u;
     for (var tile = cluster; tile < params.rsm_tiles; tile += stride) {
+        // Adaptive: the 2×2 coarse strata (even row and column) first; when every one of them
+        // that reaches the point gives the same answer, the other strata are taken to give it
+        // too (their weights still count), else they get their own rays.
+        var coarse_seen = false;
+        var coarse_hidden = false;
         for (var s = 0u; s < per_tile; s++) {
-            let slot = cluster_samples[tile * per_tile + s];
-            if (slot == 0u) {
+            if (adaptive && !is_coarse_stratum(s)) {
                 continue;
             }
-            let val = vals[slot - 1u];
-            let g = disc_geometry(point.position, point.normal, val).x;
-            let weight = g * (val.flux.r + val.flux.g + val.flux.b);
-            if (weight <= 0.0) {
+            let sample = stratum_sample(point, tile * per_tile + s);
+            if (sample.weight <= 0.0) {
                 continue;
             }
-            let l = val.position_area.xyz;
-            let offset = RAY_OFFSET * length(l - point.position);
-            let start = point.position + point.normal * offset;
-            let end = l + val.normal.xyz * offset;
-            total += weight;
-            if (!segment_occluded(start, end)) {
-                seen += weight;
+            total += sample.weight;
+            if (sample_visible(point, sample)) {
+                seen += sample.weight;
+                coarse_seen = true;
+            } else {
+                coarse_hidden = true;
+            }
+        }
+        if (!adaptive) {
+            continue;
+        }
+        let unanimous = coarse_seen != coarse_hidden;
+        for (var s = 0u; s < per_tile; s++) {
+            if (is_coarse_stratum(s)) {
+                continue;
+            }
+            let sample = stratum_sample(point, tile * per_tile + s);
+            if (sample.weight <= 0.0) {
+                continue;
+            }
+            total += sample.weight;
+            if (unanimous) {
+                seen += select(0.0, sample.weight, coarse_seen);
+            } else if (sample_visible(point, sample)) {
+                seen += sample.weight;
             }
         }
     }

@@ -97,6 +97,9 @@ pub const FLAG_FLUX_WEIGHTS: u32 = 2;
 pub const FLAG_GLOSSY_ONLY: u32 = 4;
 /// Scale each VAL by its cluster's visibility at the point (`--occlusion rays`).
 pub const FLAG_VISIBILITY: u32 = 8;
+/// Visibility rays go to a tile's 2×2 coarse strata first, and to its other strata only when
+/// those disagree (`visibility-rays adaptive`).
+pub const FLAG_ADAPTIVE_RAYS: u32 = 16;
 
 /// The light module's structs shared with WGSL, for the layout test.
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {

@@ -52,6 +52,7 @@ impl Default for SparseSettings {
                 occlusion: OcclusionMode::Rays,
                 weights: Weights::Geometric,
                 visibility_history: 50,
+                adaptive_rays: false,
             },
             glossy_eye: GlossyEye::Mid,
         }
@@ -98,6 +99,8 @@ impl SparseSettings {
                 },
                 visibility_history: options
                     .get("visibility-history", d.options.visibility_history)?,
+                adaptive_rays: options.choice("visibility-rays", &["all", "adaptive"])?
+                    == "adaptive",
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -246,6 +249,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Int { min: 0, max: 90 },
         default: "50",
         help: "percent of the last frame's cluster visibility kept in this frame's (--occlusion rays): steadies indirect shadows under moving lights, lags them by about a frame",
+    },
+    OptionSpec {
+        name: "visibility-rays",
+        kind: OptionKind::Choice(&["all", "adaptive"]),
+        default: "all",
+        help: "--occlusion rays: shoot at all 16 sample strata of each RSM tile, or at its 2×2 coarse strata first and at the other 12 only where those disagree (adaptive: fewer rays, partly hidden tiles come out all seen or all hidden)",
     },
     OptionSpec {
         name: "weights",
@@ -444,6 +453,7 @@ impl Method for SparseMethod {
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),
+            "visibility_rays": if opts.adaptive_rays { "adaptive" } else { "all" },
             "preprocess_ms": crate::gpu::timing::round3(self.preprocess_ms),
             "preprocess_meshes_computed": self.meshes_computed,
             "renormalize_clamped": [clamped_d, clamped_s],

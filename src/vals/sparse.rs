@@ -29,7 +29,8 @@ use crate::raster::{
 use crate::scene::{Material, Scene};
 
 pub use crate::light::{
-    ValParams as SparseParams, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY, FLAG_GLOSSY_ONLY, FLAG_VISIBILITY,
+    ValParams as SparseParams, FLAG_ADAPTIVE_RAYS, FLAG_FLUX_WEIGHTS, FLAG_GLOSSY,
+    FLAG_GLOSSY_ONLY, FLAG_VISIBILITY,
 };
 
 /// Most discs a workgroup of the occlusion pass holds at once (`TILE_MAX` in
@@ -83,6 +84,9 @@ pub struct SparseOptions {
     pub weights: Weights,
     /// `--occlusion rays`: percent of last frame's visibility blended into this frame's.
     pub visibility_history: u32,
+    /// `--occlusion rays`: each tile's coarse strata first, the rest only where they disagree
+    /// (`visibility-rays adaptive`; [`crate::vals::visibility::cluster_visibility`]).
+    pub adaptive_rays: bool,
 }
 
 /// The two forms of the gather (`--gather`), which compute the same sums.
@@ -830,6 +834,9 @@ impl SparseGpu {
         }
         if options.occlusion == OcclusionMode::Rays {
             flags |= FLAG_VISIBILITY;
+        }
+        if options.adaptive_rays {
+            flags |= FLAG_ADAPTIVE_RAYS;
         }
         if options.weights == Weights::Flux {
             flags |= FLAG_FLUX_WEIGHTS;

@@ -39,10 +39,23 @@ pub fn ray_tile_stride(cluster: u32, rsm_tiles: u32) -> u32 {
     tiles_in_cluster.div_ceil(MAX_RAY_TILES).max(1) * MAX_CLUSTERS
 }
 
+/// Whether stratum `s` of a tile's `CLUSTER_SAMPLE_SIDE²` grid is on an even row and column:
+/// the 2×2 coarse grid that adaptive rays try first.
+pub fn is_coarse_stratum(s: u32) -> bool {
+    (s % CLUSTER_SAMPLE_SIDE) % 2 == 0 && (s / CLUSTER_SAMPLE_SIDE) % 2 == 0
+}
+
 /// `V_c(x)` for cluster `cluster` at the point (x, n), from the rays to the sampled VALs of
-/// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles over all layers,
-/// `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals` as the GPU
-/// holds them.
+/// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles
+/// over all layers, `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals`
+/// as the GPU holds them.
+///
+/// `adaptive` (`--visibility-rays adaptive`): per tile, rays go to the coarse strata
+/// ([`is_coarse_stratum`]) first; when all of those that reach x agree (all seen or all
+/// hidden), the other strata are given the same answer without rays (their weights still
+/// count), else each gets its own ray. A blocker that slips between the coarse strata of a
+/// tile that is otherwise unanimous is missed: the price of a quarter of the rays there.
+#[allow(clippy::too_many_arguments)]
 pub fn cluster_visibility(
     bvh: &SceneBvh,
     x: Vec3,
@@ -51,33 +64,60 @@ pub fn cluster_visibility(
     rsm_tiles: u32,
     samples: &[u32],
     vals: &[GpuVal],
+    adaptive: bool,
 ) -> f32 {
-    let per_tile = (CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as usize;
+    let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+    // (Φ·g at x, ray start, ray end) of a stratum's sample, None when it does not reach x.
+    let sample = |tile: u32, s: u32| {
+        let slot = samples
+            .get((tile * per_tile + s) as usize)
+            .copied()
+            .unwrap_or(0);
+        let val = slot
+            .checked_sub(1)
+            .and_then(|i| vals.get(i as usize))?
+            .to_val();
+        let (g, _) = disc_geometry(x, n, &val);
+        let weight = g * (val.flux.x + val.flux.y + val.flux.z);
+        if weight.is_nan() || weight <= 0.0 {
+            return None;
+        }
+        let offset = RAY_OFFSET * (val.position - x).length();
+        Some((weight, x + n * offset, val.position + val.normal * offset))
+    };
     let mut seen = 0.0f32;
     let mut total = 0.0f32;
     let mut tile = cluster;
     let stride = ray_tile_stride(cluster, rsm_tiles);
     while tile < rsm_tiles {
-        for s in 0..per_tile {
-            let slot = samples
-                .get(tile as usize * per_tile + s)
-                .copied()
-                .unwrap_or(0);
-            let Some(gpu_val) = slot.checked_sub(1).and_then(|i| vals.get(i as usize)) else {
+        let (mut coarse_seen, mut coarse_hidden) = (false, false);
+        for s in (0..per_tile).filter(|&s| !adaptive || is_coarse_stratum(s)) {
+            let Some((weight, from, to)) = sample(tile, s) else {
                 continue;
             };
-            let val = gpu_val.to_val();
-            let (g, _) = disc_geometry(x, n, &val);
-            let weight = g * (val.flux.x + val.flux.y + val.flux.z);
-            if weight <= 0.0 {
-                continue;
-            }
-            let offset = RAY_OFFSET * (val.position - x).length();
-            let from = x + n * offset;
-            let to = val.position + val.normal * offset;
             total += weight;
-            if !bvh.occluded(from, to) {
+            if bvh.occluded(from, to) {
+                coarse_hidden = true;
+            } else {
                 seen += weight;
+                coarse_seen = true;
+            }
+        }
+        if adaptive {
+            let unanimous = coarse_seen != coarse_hidden;
+            for s in (0..per_tile).filter(|&s| !is_coarse_stratum(s)) {
+                let Some((weight, from, to)) = sample(tile, s) else {
+                    continue;
+                };
+                total += weight;
+                let visible = if unanimous {
+                    coarse_seen
+                } else {
+                    !bvh.occluded(from, to)
+                };
+                if visible {
+                    seen += weight;
+                }
             }
         }
         tile += stride;
