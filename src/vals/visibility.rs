@@ -42,7 +42,7 @@ pub fn ray_tile_stride(cluster: u32, rsm_tiles: u32) -> u32 {
 /// Whether stratum `s` of a tile's `CLUSTER_SAMPLE_SIDE²` grid is on an even row and column:
 /// the 2×2 coarse grid that adaptive rays try first.
 pub fn is_coarse_stratum(s: u32) -> bool {
-    (s % CLUSTER_SAMPLE_SIDE) % 2 == 0 && (s / CLUSTER_SAMPLE_SIDE) % 2 == 0
+    (s % CLUSTER_SAMPLE_SIDE).is_multiple_of(2) && (s / CLUSTER_SAMPLE_SIDE).is_multiple_of(2)
 }
 
 /// `V_c(x)` for cluster `cluster` at the point (x, n), from the rays to the sampled VALs of
