@@ -783,6 +783,48 @@ pub fn compute_pipeline(
     compute_pipeline_at(device, label, module, layout, "cs_main")
 }
 
+/// A render pipeline that draws one full-target triangle: `vs_main` (no vertex buffers) and
+/// `fs_main` of `module` into one colour target of `format`, no depth, no blending.
+pub fn fullscreen_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::BindGroupLayout,
+    format: wgpu::TextureFormat,
+    write_mask: wgpu::ColorWrites,
+) -> wgpu::RenderPipeline {
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: Some(label),
+        bind_group_layouts: &[Some(layout)],
+        immediate_size: 0,
+    });
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(&pipeline_layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState::default(),
+        depth_stencil: None,
+        multisample: wgpu::MultisampleState::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
 /// A compute pipeline for the entry point `entry` of a module with several.
 pub fn compute_pipeline_at(
     device: &wgpu::Device,

@@ -728,37 +728,15 @@ impl SparseGpu {
             None,
             crate::raster::PIPELINE_REMEDY,
             || {
-                let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                    label: Some("raster gather"),
-                    bind_group_layouts: &[Some(&self.gather.layout)],
-                    immediate_size: 0,
-                });
-                device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                    label: Some("raster gather"),
-                    layout: Some(&layout),
-                    vertex: wgpu::VertexState {
-                        module: &module,
-                        entry_point: Some("vs_main"),
-                        compilation_options: Default::default(),
-                        buffers: &[],
-                    },
-                    primitive: wgpu::PrimitiveState::default(),
-                    depth_stencil: None,
-                    multisample: wgpu::MultisampleState::default(),
-                    fragment: Some(wgpu::FragmentState {
-                        module: &module,
-                        entry_point: Some("fs_main"),
-                        compilation_options: Default::default(),
-                        // The sums go to the storage buffers; the colour is not kept.
-                        targets: &[Some(wgpu::ColorTargetState {
-                            format: FORMAT,
-                            blend: None,
-                            write_mask: wgpu::ColorWrites::empty(),
-                        })],
-                    }),
-                    multiview_mask: None,
-                    cache: None,
-                })
+                // The sums go to the storage buffers; the colour is not kept.
+                crate::raster::fullscreen_pipeline(
+                    device,
+                    "raster gather",
+                    &module,
+                    &self.gather.layout,
+                    FORMAT,
+                    wgpu::ColorWrites::empty(),
+                )
             },
         )?;
         let raster = RasterGather {

@@ -1490,39 +1490,7 @@ fn present_pipeline(
     write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
     let shader = ctx.shader("present.wgsl");
-    let pipeline_layout = ctx
-        .device
-        .create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("present"),
-            bind_group_layouts: &[Some(layout)],
-            immediate_size: 0,
-        });
-    ctx.device
-        .create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("present"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format,
-                    blend: None,
-                    write_mask,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        })
+    crate::raster::fullscreen_pipeline(&ctx.device, "present", &shader, layout, format, write_mask)
 }
 
 /// The point a `grid` rig turns about: the scene's centre.
