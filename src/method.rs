@@ -161,6 +161,15 @@ pub fn create(
     settings: RenderSettings,
     options: &MethodOptions,
 ) -> Result<Box<dyn Method>, RenderError> {
+    let entry = check_options(name, options)?;
+    let method = (entry.create)(ctx, scene, settings, options)?;
+    options.reject_unused(name)?;
+    Ok(method)
+}
+
+/// The method's registry entry, once every option given is one it takes with a valid value
+/// (checked before any GPU work).
+pub fn check_options(name: &str, options: &MethodOptions) -> Result<&'static Entry, RenderError> {
     let entry = entry(name)?;
     for (key, value) in options.entries() {
         let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
@@ -180,9 +189,7 @@ pub fn create(
         };
         spec.check(name, value)?;
     }
-    let method = (entry.create)(ctx, scene, settings, options)?;
-    options.reject_unused(name)?;
-    Ok(method)
+    Ok(entry)
 }
 
 /// A method's knobs as `key=value` pairs. The CLI's method flags (`--rsm 64`) and the

@@ -76,6 +76,25 @@ const SIZE: &str = "64";
 /// encode.
 const MAX_LEVELS: u8 = 1;
 
+/// The arguments `view` and `render` share in the screenshot tests: the Cornell box, direct
+/// light only, at SIZE², with `views`.
+fn direct_cornell(views: &str) -> [&str; 12] {
+    [
+        "--scene",
+        "cornell",
+        "--method",
+        "direct",
+        "--width",
+        SIZE,
+        "--height",
+        SIZE,
+        "--shadow-res",
+        "256",
+        "--views",
+        views,
+    ]
+}
+
 #[test]
 fn view_screenshot_matches_render_in_each_view() {
     if common::gpu().is_none() {
@@ -94,20 +113,7 @@ fn view_screenshot_matches_render_in_each_view() {
         ("cave", cave.as_str()),
     ] {
         let shot = dir.join(format!("shot_{rig}.png"));
-        let base = [
-            "--scene",
-            "cornell",
-            "--method",
-            "direct",
-            "--width",
-            SIZE,
-            "--height",
-            SIZE,
-            "--shadow-res",
-            "256",
-            "--views",
-            views,
-        ];
+        let base = direct_cornell(views);
         let mut view_args = vec!["view"];
         view_args.extend(base);
         let shot_text = shot.to_str().unwrap();
@@ -164,20 +170,7 @@ fn anaglyph_takes_red_from_the_left_eye_and_cyan_from_the_right() {
         return;
     }
     let dir = common::temp_dir("viewer_anaglyph");
-    let base = [
-        "--scene",
-        "cornell",
-        "--method",
-        "direct",
-        "--width",
-        SIZE,
-        "--height",
-        SIZE,
-        "--shadow-res",
-        "256",
-        "--views",
-        "stereo",
-    ];
+    let base = direct_cornell("stereo");
     let shot = dir.join("shot.png");
     let mut view_args = vec!["view"];
     view_args.extend(base);

@@ -370,21 +370,7 @@ pub fn preview_options(method: &str, options: &MethodOptions) -> MethodOptions {
 
 /// The method exists and takes these options, checked before any GPU work.
 pub fn check_method(name: &str, options: &MethodOptions) -> Result<(), PreviewError> {
-    let entry = method::entry(name)?;
-    for (key, value) in options.entries() {
-        let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
-            return Err(PreviewError::Spec(format!(
-                "method '{name}' has no option(s) {key} (it takes: {})",
-                entry
-                    .options
-                    .iter()
-                    .map(|o| o.name)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
-        };
-        spec.check(name, value)?;
-    }
+    method::check_options(name, options)?;
     Ok(())
 }
 

@@ -5,7 +5,7 @@
 
 use std::path::PathBuf;
 
-use glam::{Mat3, Quat, Vec2, Vec3};
+use glam::{Quat, Vec2, Vec3};
 
 use crate::scene::builtin::procedural::{bunny_candidates, icosphere, load_ply};
 use crate::scene::mesh::{compute_normals, MeshBuilder};
@@ -203,7 +203,11 @@ pub fn preview_scene(name: &str, material: &PreviewMaterial, ball: &Mesh, max_ed
         intensity: LIGHT_INTENSITY,
         range: None,
     });
-    let camera = node(&mut scene, "camera", look_at(CAMERA_EYE, CAMERA_TARGET));
+    let camera = node(
+        &mut scene,
+        "camera",
+        Trs::looking_at(CAMERA_EYE, CAMERA_TARGET),
+    );
     scene.cameras.push(Camera {
         name: "camera".into(),
         node: camera,
@@ -227,18 +231,6 @@ pub fn mirror_point(centre: Vec3, radius: f32, light: Vec3, eye: Vec3) -> Vec3 {
         normal = ((light - p).normalize() + (eye - p).normalize()).normalize();
     }
     centre + radius * normal
-}
-
-/// Node pose at `eye` looking at `target` with +y up (the camera looks along its −z).
-fn look_at(eye: Vec3, target: Vec3) -> Trs {
-    let forward = (target - eye).normalize();
-    let right = forward.cross(Vec3::Y).normalize();
-    let up = right.cross(forward);
-    Trs {
-        translation: eye,
-        rotation: Quat::from_mat3(&Mat3::from_cols(right, up, -forward)),
-        ..Trs::default()
-    }
 }
 
 /// Corners of the face of box [min, max] normal to `axis` on its high side or not.

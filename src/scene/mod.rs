@@ -66,6 +66,18 @@ impl Trs {
     pub fn matrix(&self) -> Mat4 {
         Mat4::from_scale_rotation_translation(self.scale, self.rotation, self.translation)
     }
+
+    /// A node pose at `eye` looking at `target` with +y up (a camera looks along its −z).
+    pub fn looking_at(eye: Vec3, target: Vec3) -> Self {
+        let forward = (target - eye).normalize();
+        let right = forward.cross(Vec3::Y).normalize();
+        let up = right.cross(forward);
+        Self {
+            translation: eye,
+            rotation: Quat::from_mat3(&glam::Mat3::from_cols(right, up, -forward)),
+            ..Self::default()
+        }
+    }
 }
 
 /// A node of the transform hierarchy. Parents always come before their children in

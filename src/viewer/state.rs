@@ -591,14 +591,7 @@ mod tests {
 
     #[test]
     fn fov_override_replaces_the_scene_camera_s() {
-        let mut camera = CameraView {
-            world_from_view: Mat4::IDENTITY,
-            yfov: 1.0,
-            aspect: 1.0,
-            znear: 0.1,
-            zfar: 10.0,
-            off_axis: None,
-        };
+        let mut camera = crate::viewer::dummy_camera();
         let mut state = ViewerState::new(None, 0.0, 0.0, 0.0);
         state.apply_fov(&mut camera);
         assert_eq!(camera.yfov, 1.0);

@@ -23,7 +23,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use glam::{Mat3, Quat, Vec2, Vec3, Vec4};
+use glam::{Quat, Vec2, Vec3, Vec4};
 
 use super::super::mesh::{compute_normals, tessellate, MeshBuilder};
 use super::super::{
@@ -150,18 +150,6 @@ fn grey(b: &mut SceneBuilder, name: &str, rho: f32) -> usize {
     b.material(Material::lambert(name, Vec3::splat(rho)))
 }
 
-/// A node rotation that looks from `eye` toward `target` with +y up (−z forward).
-fn look_at(eye: Vec3, target: Vec3) -> Trs {
-    let forward = (target - eye).normalize();
-    let right = forward.cross(Vec3::Y).normalize();
-    let up = right.cross(forward);
-    Trs {
-        translation: eye,
-        rotation: Quat::from_mat3(&Mat3::from_cols(right, up, -forward)),
-        ..Trs::default()
-    }
-}
-
 fn camera(b: &mut SceneBuilder, eye: Vec3, target: Vec3, yfov_degrees: f32) {
     b.camera(
         Camera {
@@ -173,7 +161,7 @@ fn camera(b: &mut SceneBuilder, eye: Vec3, target: Vec3, yfov_degrees: f32) {
             znear: 0.02,
             zfar: Some(20.0),
         },
-        look_at(eye, target),
+        Trs::looking_at(eye, target),
     );
 }
 
