@@ -369,9 +369,27 @@ struct EvalArgs {
     #[arg(long, default_value = "cornell")]
     scenes: String,
     /// Comma-separated method specs: name[:key=value,...] (a key=value after a comma belongs
-    /// to the method before it).
-    #[arg(long, default_value = "direct,reference")]
-    methods: String,
+    /// to the method before it). Default: direct,reference; none with --sweep.
+    #[arg(long)]
+    methods: Option<String>,
+    /// Also render the sparse method over the grid of its budget knobs (sparse points × RSM
+    /// side × visibility) and write sweep.csv: each setting's time, its error against the
+    /// reference and against the grid's richest setting.
+    #[arg(long)]
+    sweep: bool,
+    /// The sweep's sparse-point counts.
+    #[arg(long, default_value = "1024,2048,4096,8192,16384", requires = "sweep")]
+    sweep_points: String,
+    /// The sweep's RSM sides.
+    #[arg(long, default_value = "32,64,128", requires = "sweep")]
+    sweep_rsm: String,
+    /// The sweep's visibility settings: off, sum, rays-adaptive, rays-all.
+    #[arg(
+        long,
+        default_value = "off,sum,rays-adaptive,rays-all",
+        requires = "sweep"
+    )]
+    sweep_visibility: String,
     /// Output folder (results.csv, <scene>_pareto.png, <scene>_sheet.png, images/, cache/).
     #[arg(long, default_value = "out/eval")]
     out: PathBuf,
@@ -1128,6 +1146,27 @@ fn scene_stem(scene: &str) -> String {
         .to_string()
 }
 
+/// The `--sweep-*` axes as a grid.
+fn sweep_grid(args: &EvalArgs) -> Result<valgi::eval::sweep::SweepGrid, String> {
+    fn numbers(flag: &str, text: &str) -> Result<Vec<u32>, String> {
+        valgi::eval::split_list(text)
+            .iter()
+            .map(|v| {
+                v.parse()
+                    .map_err(|_| format!("--{flag} {v}: not a whole number"))
+            })
+            .collect()
+    }
+    Ok(valgi::eval::sweep::SweepGrid {
+        points: numbers("sweep-points", &args.sweep_points)?,
+        rsm: numbers("sweep-rsm", &args.sweep_rsm)?,
+        visibility: valgi::eval::split_list(&args.sweep_visibility)
+            .iter()
+            .map(|v| valgi::eval::sweep::SweepVisibility::parse(v).map_err(|e| e.to_string()))
+            .collect::<Result<_, _>>()?,
+    })
+}
+
 fn run_eval(args: EvalArgs) -> ExitCode {
     let ref_bounces = match args.ref_bounces.parse() {
         Ok(b) => b,
@@ -1136,9 +1175,26 @@ fn run_eval(args: EvalArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
+    let sweep = if args.sweep {
+        match sweep_grid(&args) {
+            Ok(grid) => Some(grid),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        None
+    };
+    let methods = match (&args.methods, args.sweep) {
+        (Some(text), _) => text.as_str(),
+        (None, true) => "",
+        (None, false) => "direct,reference",
+    };
     let request = valgi::eval::EvalRequest {
         scenes: valgi::eval::split_list(&args.scenes),
-        methods: valgi::eval::split_method_specs(&args.methods),
+        methods: valgi::eval::split_method_specs(methods),
+        sweep,
         out: args.out,
         width: args.width,
         height: args.height,
@@ -1166,6 +1222,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
                 "rows": summary.rows.len(),
                 "references_rendered": summary.references_rendered,
                 "references_cached": summary.references_cached,
+                "sweep_csv": summary.sweep_csv.as_ref().map(|p| p.display().to_string()),
                 "wall_s": (seconds * 1000.0).round() / 1000.0,
             });
             println!("{report}");

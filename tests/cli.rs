@@ -711,3 +711,67 @@ fn auto_exposure_is_reported_and_a_black_png_is_named() {
     assert_eq!(dark_fraction(&dark), 1.0, "{dark}");
     assert!(dark_fraction(&auto) < 0.9, "{auto}");
 }
+
+/// `valgi render --method sparse --quality auto` at 32² and its JSON line.
+fn budget_render(scene: &str, extra: &[&str]) -> serde_json::Value {
+    let out = temp_out("cli-budget", &format!("{scene}.exr"));
+    let output = valgi()
+        .args(["render", "--scene", scene, "--method", "sparse"])
+        .args(["--width", "32", "--height", "32", "--quality", "auto"])
+        .args(extra)
+        .args(["--out", &out])
+        .output()
+        .expect("run valgi");
+    common::assert_success(&output);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
+#[test]
+fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
+    if common::gpu().is_none() {
+        return;
+    }
+    // The Cornell box's blocks hide part of the lit floor from the walls: rays.
+    let cornell = budget_render("cornell", &["--target-flip", "0.1"]);
+    let budget = &cornell["budget"];
+    assert_eq!(budget["occlusion"]["value"], "rays", "{budget}");
+    assert_eq!(cornell["occlusion"], "rays");
+    for knob in ["sparse_points", "rsm", "occlusion"] {
+        let why = budget[knob]["why"].as_str().unwrap_or_default();
+        assert!(why.len() > 20, "{knob}: {budget}");
+    }
+    // The placed points are the chosen count, give or take the rounding of each mesh's share.
+    let chosen = budget["sparse_points"]["value"].as_u64().unwrap() as f64;
+    let placed = cornell["sparse_points"].as_u64().unwrap() as f64;
+    assert!((placed / chosen - 1.0).abs() < 0.02, "{placed} vs {chosen}");
+    assert!(budget["predicted_flip"].as_f64().unwrap() <= 0.1);
+    // In a convex empty box nothing is in the way: no occlusion. A point count given on the
+    // command line stays, and says so.
+    let empty = budget_render("bunny-box-empty", &["--sparse-points", "300"]);
+    assert_eq!(empty["budget"]["occlusion"]["value"], "off", "{empty}");
+    assert_eq!(empty["sparse_points"].as_u64(), Some(300));
+    assert_eq!(empty["budget"]["sparse_points"]["why"], "given");
+    // A target without budget mode, two targets, and nonsense values are refused.
+    let out = temp_out("cli-budget", "x.exr");
+    let out = out.as_str();
+    let sparse = ["--method", "sparse"];
+    assert_refused(
+        &[tiny_render(out, &sparse), vec!["--target-flip", "0.1"]].concat(),
+        &["--quality auto"],
+    );
+    for extra in [
+        vec![
+            "--quality",
+            "auto",
+            "--target-flip",
+            "0.1",
+            "--budget-ms",
+            "100",
+        ],
+        vec!["--quality", "auto", "--target-flip", "1.5"],
+        vec!["--quality", "auto", "--budget-ms", "-3"],
+    ] {
+        assert_refused(&[tiny_render(out, &sparse), extra].concat(), &["--"]);
+    }
+}

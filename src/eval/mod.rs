@@ -5,6 +5,7 @@
 
 pub mod metrics;
 pub mod plot;
+pub mod sweep;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -67,6 +68,9 @@ pub struct EvalRequest {
     pub emitter_lights: u32,
     /// Tone-map exposure (stops) for FLIP and sheets of full images; `None` = automatic.
     pub exposure: Option<f32>,
+    /// Also render the sparse method over this grid of its budget knobs (`--sweep`) and write
+    /// `sweep.csv`.
+    pub sweep: Option<sweep::SweepGrid>,
     pub progress: bool,
 }
 
@@ -89,6 +93,7 @@ impl Default for EvalRequest {
             sparse_spacing: false,
             emitter_lights: scene::emitters::DEFAULT_EMITTER_LIGHTS,
             exposure: None,
+            sweep: None,
             progress: true,
         }
     }
@@ -127,6 +132,11 @@ pub struct EvalSummary {
     /// References rendered this run (the rest came from the cache).
     pub references_rendered: usize,
     pub references_cached: usize,
+    /// The `--sweep` grid's rows, every scene, and where they were written.
+    pub sweep: Vec<sweep::SweepRow>,
+    pub sweep_csv: Option<PathBuf>,
+    /// Budget-mode rows checked against the grid (`sweep_check.csv`).
+    pub sweep_checks: Vec<sweep::AutoCheck>,
 }
 
 pub const CSV_HEADER: &str = "scene,method,settings,width,height,passes_ms,total_ms,gpu_bytes,rmse,relmse,flip,rmse_indirect,relmse_indirect,flip_indirect,flicker,exposure,exposure_indirect";
@@ -312,10 +322,13 @@ impl EvalRow {
 
 /// Runs the evaluation and writes its files under `request.out`.
 pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
-    if request.scenes.is_empty() || request.methods.is_empty() {
+    if request.scenes.is_empty() || (request.methods.is_empty() && request.sweep.is_none()) {
         return Err(EvalError::Settings(
-            "eval needs at least one scene and one method".into(),
+            "eval needs at least one scene and one method (or --sweep)".into(),
         ));
+    }
+    if let Some(grid) = &request.sweep {
+        grid.check()?;
     }
     if request.width == 0 || request.height == 0 || request.ref_spp == 0 || request.frames == 0 {
         return Err(EvalError::Settings(
@@ -338,11 +351,22 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             crate::reference::ReferenceMethod::MAX_PATHS
         )));
     }
-    // Parse every spec before any rendering, so a typo fails at once.
-    let specs: Vec<(String, MethodOptions)> = request
+    // The grid's settings follow the listed methods; `grid_of[i]` is spec i's grid setting.
+    let grid_settings = request
+        .sweep
+        .as_ref()
+        .map(sweep::SweepGrid::settings)
+        .unwrap_or_default();
+    let mut grid_of: Vec<Option<sweep::GridSetting>> = vec![None; request.methods.len()];
+    grid_of.extend(grid_settings.iter().copied().map(Some));
+    let spec_texts = request
         .methods
         .iter()
-        .map(|s| MethodOptions::parse_spec(s))
+        .cloned()
+        .chain(grid_settings.iter().map(sweep::GridSetting::spec));
+    // Parse every spec before any rendering, so a typo fails at once.
+    let specs: Vec<(String, MethodOptions)> = spec_texts
+        .map(|s| MethodOptions::parse_spec(&s))
         .collect::<Result<_, _>>()?;
     for (name, options) in &specs {
         let entry = method::entry(name).map_err(|e| EvalError::Settings(e.to_string()))?;
@@ -398,6 +422,9 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         sheets: vec![],
         references_rendered: 0,
         references_cached: 0,
+        sweep: vec![],
+        sweep_csv: None,
+        sweep_checks: vec![],
     };
     for (scene_spec, (scene, camera, max_edge)) in request.scenes.iter().zip(&scenes) {
         // A reference cached for the bare scene must not serve the edited one.
@@ -410,10 +437,15 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             log::warn!("{warning}");
         }
         let scene_label = slug(&scene.name);
-        // Build every method first: a bad option fails before the reference renders.
-        let mut methods = Vec::with_capacity(specs.len());
-        for (name, options) in &specs {
-            methods.push(method::create(name, &ctx, scene, settings, options)?);
+        // The listed methods are built first, so that a bad option fails before the reference
+        // renders; the sweep's (options checked above) are built one at a time as they render,
+        // so a grid of dozens never holds more than one method's GPU memory.
+        let mut methods: Vec<Option<Box<dyn method::Method>>> = Vec::with_capacity(specs.len());
+        for ((name, options), grid) in specs.iter().zip(&grid_of) {
+            methods.push(match grid {
+                None => Some(method::create(name, &ctx, scene, settings, options)?),
+                Some(_) => None,
+            });
         }
         let world0 = scene.world_from_node_at(0.0);
         let camera0 = scene.camera_view(camera.as_deref(), aspect, &world0)?;
@@ -475,8 +507,15 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             specs.len() as u64,
             &format!("{scene_label}: methods"),
         );
-        for ((name, options), method) in specs.iter().zip(methods.iter_mut()) {
+        let mut grid_rows: Vec<(sweep::GridSetting, usize, Image)> = vec![];
+        // Rows of methods in budget mode: (row, their `budget` report, indirect image).
+        let mut auto_rows: Vec<(usize, serde_json::Value, Image)> = vec![];
+        for (((name, options), slot), grid) in specs.iter().zip(methods.iter_mut()).zip(&grid_of) {
             methods_step.inc(1);
+            let method = match slot {
+                Some(method) => method,
+                None => slot.insert(method::create(name, &ctx, scene, settings, options)?),
+            };
             let settings_text = options.to_string();
             let label = if settings_text.is_empty() {
                 name.clone()
@@ -542,6 +581,25 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             frame
                 .indirect
                 .write_exr(&images.join(format!("{}.indirect.exr", slug(&label))))?;
+            if request.sweep.is_some() && grid.is_none() {
+                if let Some(budget) = method.report().get("budget") {
+                    auto_rows.push((summary.rows.len(), budget.clone(), frame.indirect.clone()));
+                }
+            }
+            if let Some(setting) = grid {
+                // A grid row is one unlabelled point of its own series, not a sheet row; its
+                // method is dropped at once.
+                *slot = None;
+                points.push(plot::ParetoPoint {
+                    series: "sparse grid (--sweep)".into(),
+                    label: String::new(),
+                    ms: row.total_ms,
+                    error: row.flip_indirect,
+                });
+                grid_rows.push((*setting, summary.rows.len(), frame.indirect));
+                summary.rows.push(row);
+                continue;
+            }
             sheet_rows.push(plot::SheetRow {
                 label: format!(
                     "{label}: {:.1} ms, FLIP {:.3}, indirect FLIP {:.3}",
@@ -563,6 +621,25 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
                 error: row.flip_indirect,
             });
             summary.rows.push(row);
+        }
+        if let Some(grid) = &request.sweep {
+            let settings: Vec<sweep::GridSetting> = grid_rows.iter().map(|g| g.0).collect();
+            let rows: Vec<&EvalRow> = grid_rows.iter().map(|g| &summary.rows[g.1]).collect();
+            let images: Vec<Image> = grid_rows.iter().map(|g| g.2.clone()).collect();
+            let scene_rows = sweep::scene_rows(grid, &settings, &rows, &images, exposure_indirect);
+            for (row, budget, image) in &auto_rows {
+                summary.sweep_checks.push(sweep::check_auto(
+                    &summary.rows[*row],
+                    budget,
+                    image,
+                    grid,
+                    &settings,
+                    &images,
+                    &scene_rows,
+                    exposure_indirect,
+                ));
+            }
+            summary.sweep.extend(scene_rows);
         }
         let chart = out.join(format!("{scene_label}_pareto.png"));
         plot::pareto_chart(
@@ -598,6 +675,14 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         path: summary.csv.clone(),
         message: e.to_string(),
     })?;
+    if request.sweep.is_some() {
+        let path = out.join("sweep.csv");
+        sweep::write_csv(&path, &summary.sweep)?;
+        summary.sweep_csv = Some(path);
+        if !summary.sweep_checks.is_empty() {
+            sweep::write_checks(&out.join("sweep_check.csv"), &summary.sweep_checks)?;
+        }
+    }
     Ok(summary)
 }
 

@@ -6,6 +6,7 @@
 //! - [`sparse`]: the GPU passes gather → renormalize → occlusion → interpolation → apply.
 //! - [`math`]: the CPU twin of every kernel, and the documentation of the math.
 
+pub mod budget;
 pub mod math;
 pub mod points;
 pub mod sparse;
@@ -124,11 +125,20 @@ pub fn default_max_edge(
     scene: &Scene,
     options: &MethodOptions,
 ) -> Result<Option<f32>, RenderError> {
-    let points: usize = options.get("sparse-points", SparseSettings::default().sparse_points)?;
+    let mut points: usize =
+        options.get("sparse-points", SparseSettings::default().sparse_points)?;
     if points == 0 {
         return Err(RenderError::Settings(
             "--sparse-points must be at least 1".into(),
         ));
+    }
+    let given = options.entries().any(|(k, _)| k == "sparse-points");
+    if let (Some(target), false) = (budget_target(options)?, given) {
+        // Budget mode chooses the point count, and so the tessellation, from the raw scene.
+        let world = scene.world_from_node_at(0.0);
+        let camera = scene.camera_view(None, 1.0, &world).ok();
+        let survey = budget::Survey::new(scene, &world, camera.as_ref(), 1);
+        points = survey.choose(target).points;
     }
     Ok(points::point_spacing(scene, points))
 }
@@ -262,7 +272,155 @@ pub const OPTIONS: &[OptionSpec] = &[
         default: "geometric",
         help: "weights of the averaged light positions",
     },
+    OptionSpec {
+        name: "quality",
+        kind: OptionKind::Choice(&["manual", "auto"]),
+        default: "manual",
+        help: "manual: the options as given; auto: sparse points, RSM side, occlusion (and an imported scene's tessellation) chosen from a survey of the scene for --target-flip or --budget-ms (options given explicitly are kept); the JSON line's `budget` says what and why",
+    },
+    OptionSpec {
+        name: "target-flip",
+        kind: OptionKind::Text,
+        default: "0.05",
+        help: "--quality auto: the indirect FLIP allowed against the fully converged setting (the error the knobs control; 0 < F < 1)",
+    },
+    OptionSpec {
+        name: "budget-ms",
+        kind: OptionKind::Text,
+        default: "",
+        help: "--quality auto: instead of a FLIP target, the most accurate setting whose predicted frame time fits this many ms (predicted with the constants fitted on lavapipe, 2 cores)",
+    },
 ];
+
+/// `--quality auto`'s target from the options, `None` for `--quality manual`.
+pub fn budget_target(options: &MethodOptions) -> Result<Option<budget::BudgetTarget>, RenderError> {
+    let auto = options.choice("quality", &["manual", "auto"])? == "auto";
+    let flip_text: String = options.get("target-flip", String::new())?;
+    let ms_text: String = options.get("budget-ms", String::new())?;
+    if !auto {
+        if !flip_text.is_empty() || !ms_text.is_empty() {
+            return Err(RenderError::Settings(
+                "--target-flip and --budget-ms need --quality auto".into(),
+            ));
+        }
+        return Ok(None);
+    }
+    match (flip_text.is_empty(), ms_text.is_empty()) {
+        (false, false) => Err(RenderError::Settings(
+            "--quality auto takes --target-flip or --budget-ms, not both".into(),
+        )),
+        (_, false) => match ms_text.parse::<f64>() {
+            Ok(ms) if ms.is_finite() && ms > 0.0 => Ok(Some(budget::BudgetTarget::Ms(ms))),
+            _ => Err(RenderError::Settings(format!(
+                "--budget-ms {ms_text}: must be a positive number of milliseconds"
+            ))),
+        },
+        (true, true) => Ok(Some(budget::BudgetTarget::Flip(DEFAULT_TARGET_FLIP))),
+        (false, true) => match flip_text.parse::<f64>() {
+            Ok(f) if f > 0.0 && f < 1.0 => Ok(Some(budget::BudgetTarget::Flip(f))),
+            _ => Err(RenderError::Settings(format!(
+                "--target-flip {flip_text}: must be a number between 0 and 1 (exclusive)"
+            ))),
+        },
+    }
+}
+
+/// `--target-flip`'s default.
+pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
+
+/// Applies `--quality auto` to `settings`: surveys `scene` as its default camera sees it at
+/// time 0, chooses, and sets every budget knob the options do not give explicitly. Returns
+/// the JSON `budget` report: per knob its value and why.
+pub fn apply_budget(
+    scene: &Scene,
+    aspect: f32,
+    options: &MethodOptions,
+    target: budget::BudgetTarget,
+    settings: &mut SparseSettings,
+) -> Result<serde_json::Value, RenderError> {
+    let world = scene.world_from_node_at(0.0);
+    let camera = scene
+        .camera_view(None, aspect, &world)
+        .map_err(|e| RenderError::Settings(e.to_string()))?;
+    let survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed);
+    let given = |key: &str| options.entries().any(|(k, _)| k == key);
+    let choice = survey.choose(target);
+    // Knobs given explicitly stay; the prediction is for the setting actually used.
+    if !given("sparse-points") {
+        settings.sparse_points = choice.points;
+    }
+    if !given("rsm") {
+        settings.rsm = choice.rsm;
+    }
+    if !given("occlusion") {
+        settings.options.occlusion = if choice.rays {
+            OcclusionMode::Rays
+        } else {
+            OcclusionMode::Off
+        };
+    }
+    let used = survey.predict(
+        settings.sparse_points,
+        settings.rsm,
+        settings.options.occlusion == OcclusionMode::Rays,
+    );
+    let met = match target {
+        budget::BudgetTarget::Flip(f) => used.predicted_flip <= f,
+        budget::BudgetTarget::Ms(ms) => used.predicted_ms <= ms,
+    };
+    let overridden = ["sparse-points", "rsm", "occlusion"]
+        .iter()
+        .any(|k| given(k));
+    let target_text = match target {
+        budget::BudgetTarget::Flip(f) => format!("predicted FLIP ≤ {f}"),
+        budget::BudgetTarget::Ms(ms) => format!("predicted frame ≤ {ms} ms"),
+    };
+    let why = |key: &str, chosen: String| -> String {
+        if given(key) {
+            "given".to_string()
+        } else {
+            chosen
+        }
+    };
+    Ok(serde_json::json!({
+        "target": target_text,
+        "met": met,
+        "predicted_flip": crate::gpu::timing::round3(used.predicted_flip),
+        "predicted_ms": crate::gpu::timing::round3(used.predicted_ms),
+        "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
+        "sparse_points": {
+            "value": settings.sparse_points,
+            "why": why("sparse-points", format!(
+                "spacing {:.3} m over {:.1} m² of surface; radiance varies {:.3} over that distance (δ)",
+                survey.point_spacing(settings.sparse_points), survey.area, used.variation)),
+        },
+        "rsm": {
+            "value": settings.rsm,
+            "why": why("rsm", format!(
+                "{:.0} VALs {:.3} m apart over {:.2} m² lit; their interpolation error ε {:.4}",
+                survey.val_count(settings.rsm), survey.val_spacing(settings.rsm),
+                survey.lit_area, used.val_error)),
+        },
+        "occlusion": {
+            "value": format!("{:?}", settings.options.occlusion).to_lowercase(),
+            "why": why("occlusion", if settings.options.occlusion == OcclusionMode::Rays {
+                format!("geometry blocks {:.3} of the one-bounce light the camera sees: rays to {} clusters per point",
+                    survey.occluded_share, survey.clusters)
+            } else {
+                format!("geometry blocks only {:.3} of the one-bounce light the camera sees: no occlusion",
+                    survey.occluded_share)
+            }),
+        },
+        "choice": match (overridden, choice.met) {
+            (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
+            (false, true) => match target {
+                budget::BudgetTarget::Flip(_) => "the cheapest predicted setting meeting the target",
+                budget::BudgetTarget::Ms(_) => "the most accurate predicted setting within the budget",
+            },
+            (false, false) => "no candidate meets the target: the closest one",
+        },
+    }))
+}
 
 pub static ENTRY: Entry = Entry {
     name: "sparse",
@@ -289,6 +447,8 @@ pub struct SparseMethod {
     /// Per-view parameter blocks and kernel bindings (`--glossy-eye per-view`).
     per_view: ViewCache<(wgpu::Buffer, KernelGroups)>,
     report: serde_json::Map<String, serde_json::Value>,
+    /// What `--quality auto` chose and why (`None` for manual settings).
+    pub budget: Option<serde_json::Value>,
 }
 
 impl SparseMethod {
@@ -344,6 +504,7 @@ impl SparseMethod {
             val_source,
             per_view: ViewCache::default(),
             report: Default::default(),
+            budget: None,
         })
     }
 
@@ -489,7 +650,11 @@ impl Method for SparseMethod {
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
-        self.report.clone()
+        let mut report = self.report.clone();
+        if let Some(budget) = &self.budget {
+            report.insert("budget".into(), budget.clone());
+        }
+        report
     }
 }
 
@@ -499,6 +664,18 @@ fn create(
     render: RenderSettings,
     options: &MethodOptions,
 ) -> Result<Box<dyn Method>, RenderError> {
-    let settings = SparseSettings::from_options(options)?;
-    Ok(Box::new(SparseMethod::new(ctx, scene, render, settings)?))
+    let mut settings = SparseSettings::from_options(options)?;
+    let budget = match budget_target(options)? {
+        Some(target) => Some(apply_budget(
+            scene,
+            render.width as f32 / render.height.max(1) as f32,
+            options,
+            target,
+            &mut settings,
+        )?),
+        None => None,
+    };
+    let mut method = SparseMethod::new(ctx, scene, render, settings)?;
+    method.budget = budget;
+    Ok(Box::new(method))
 }

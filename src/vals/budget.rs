@@ -1,0 +1,1007 @@
+//! `--quality auto`: the sparse method's budget knobs (sparse points, RSM side, occlusion)
+//! chosen per scene from a cheap survey of the scene, not from a table of scenes.
+//!
+//! **The survey** ([`Survey::new`], CPU, 0.1–0.3 s on the built-in scenes) measures what the
+//! knobs trade against:
+//! - *Lit samples*: photons from every light over its RSM views (the texel grid the VALs come
+//!   from), each hit carrying the diffusely reflected flux Φ_s = ρ_d·I(ω)·Ω_s and the surface
+//!   area its texel covers, d²·Ω_s / cos θ. Their sum is the lit area A_lit, and the hit
+//!   share of the views gives the VAL count of a side R: V(R) = R²·Σ views·f_hit. The hits
+//!   are resampled by flux to [`SURVEY_LIT_SAMPLES`] samples of equal flux.
+//! - *Receivers*: the surface points the scene's default camera sees through a jittered
+//!   grid of [`SURVEY_RECEIVERS`] pixels, where the image's error is (by area without one).
+//! - *Transfer*: for every receiver r and lit sample s the one-bounce irradiance share
+//!   w_rs = Φ_s·cos θ_s·cos θ_r / (π (d² + r_s²)) (each sample a disc of its share of the lit
+//!   area, r_s² = A_lit / (π·samples)), and whether a shadow ray finds the segment open
+//!   (v_rs).
+//!
+//! **Error terms**, each a per-receiver relative error averaged with weights
+//! u_r = E_r / (E_r + Ē) (bright receivers count in full, dark ones fade, as in a tone-mapped
+//! image):
+//! - ε(h): irradiance from a source at distance d varies over lengths of order d, so sampled
+//!   at spacing h and interpolated it is off by a relative (h/d)², saturating at 1:
+//!   Σ_s w v·min(1, h²/d²) / Σ_s w v. For the points h = √(A / N) (their spacing over the
+//!   scene's area A), for the VALs s = √(A_lit / V(R)).
+//! - δ(h), measured: the one-bounce radiance toward the eye (diffuse and glossy, through the
+//!   surface's own BRDF, shading normal and visibility) at two surface points ±h away along
+//!   a tangent against the receiver's own, |L± − L| / L. It sees what ε misses: curved and
+//!   glossy surfaces and the edges of indirect shadows. Probed at the spacings of
+//!   [`PROBE_POINTS`] points and interpolated log-log between them.
+//! - o: leaving occlusion out shows the unoccluded irradiance where only the seen part is
+//!   right: per receiver Σ w(1−v) / Σ w.
+//!
+//! **Model** ([`model`], fitted to `valgi eval --sweep` over the built-in failure scenes, the
+//! Cornell box, the door room and Sponza; `src/vals/README.md`, "Budget mode", has the fit
+//! and how far it is off per scene): the predicted *convergence* FLIP (indirect FLIP against
+//! the fully converged setting, the error the knobs control) is
+//! a·(ε(h) + δ(h) + c_vals·ε(s) + c_off·o)^b, with o only when occlusion is off. The frame
+//! time is predicted from the work it does: N·V(R) gathered pairs and, with rays,
+//! N·clusters visibility tests, at rates measured on lavapipe.
+//!
+//! The choice is the cheapest predicted candidate whose predicted FLIP meets `--target-flip`,
+//! or with `--budget-ms` the most accurate one whose predicted time fits.
+
+use glam::{Mat4, Vec3};
+use rayon::prelude::*;
+
+use crate::sampling::{basis, Rng};
+use crate::scene::{CameraView, LightKind, Scene};
+use crate::shading::{spot_attenuation, WorldLight};
+use crate::trace::Tracer;
+
+/// Photons shot from all lights together.
+pub const SURVEY_PHOTONS: usize = 4096;
+/// Lit samples the transfer uses (resampled from the photon hits by flux).
+pub const SURVEY_LIT_SAMPLES: usize = 192;
+/// Receivers spread over the surface.
+pub const SURVEY_RECEIVERS: usize = 768;
+/// Point counts whose spacings the variation probe measures at (densest first, so the
+/// spacings ascend).
+pub const PROBE_POINTS: [usize; 5] = [65536, 16384, 4096, 1024, 256];
+
+/// One lit sample: a photon hit, standing for part of the RSM's reflected flux.
+#[derive(Clone, Copy, Debug)]
+pub struct LitSample {
+    pub position: Vec3,
+    pub normal: Vec3,
+    /// Diffusely reflected flux (the mean of the channels), W.
+    pub flux: f64,
+    /// Visibility cluster (RSM tile over all views) the sample falls in.
+    pub tile: u32,
+}
+
+/// One receiver–lit-sample pair that carries light.
+#[derive(Clone, Copy, Debug)]
+struct Pair {
+    /// Irradiance share w_rs (W/m²), before visibility.
+    w: f64,
+    d2: f64,
+    visible: bool,
+    tile: u32,
+}
+
+/// One receiver's pairs and what they sum to.
+#[derive(Clone, Debug, Default)]
+struct Receiver {
+    position: Vec3,
+    /// Unit normal on the side that receives light.
+    normal: Vec3,
+    pairs: Vec<Pair>,
+    /// Irradiance that arrives (W/m²) and that geometry blocks.
+    seen: f64,
+    hidden: f64,
+    /// Σ over cluster tiles of min(seen, hidden): what deciding each tile whole gets wrong.
+    partial: f64,
+    /// Its weight in the means, u_r (see [`Survey::mean_over_receivers`]).
+    weight: f64,
+}
+
+/// What the survey measured.
+#[derive(Clone, Debug)]
+pub struct Survey {
+    /// World-space surface area, m².
+    pub area: f64,
+    /// Area the lights' RSM views see lit, m².
+    pub lit_area: f64,
+    /// Σ over RSM views of the share of the view's texels that hit lit geometry: the VAL
+    /// count of side R is `R²·lit_views`.
+    pub lit_views: f64,
+    /// Visibility clusters a frame shoots rays at (per point).
+    pub clusters: u32,
+    /// The relative error of leaving visibility out: per receiver the blocked irradiance over
+    /// the unoccluded, Σ w(1−v) / Σ w, averaged with weights by the unoccluded irradiance.
+    pub occluded_share: f64,
+    /// The relative error of deciding visibility per whole cluster tile (`--visibility-rays
+    /// adaptive` settles a tile seen in part one way): per receiver Σ over tiles of
+    /// min(seen, hidden) over the arriving, averaged.
+    pub partial_share: f64,
+    receivers: Vec<Receiver>,
+    /// Surface area the camera sees, m² (all of it without a camera).
+    pub visible_area: f64,
+    /// The camera's position, when receivers are what it sees.
+    eye: Option<Vec3>,
+    /// (h, δ(h)) at the spacings of [`PROBE_POINTS`] points, h ascending.
+    pub variation: Vec<(f64, f64)>,
+    pub lit_samples: usize,
+    pub survey_ms: f64,
+}
+
+/// Light views as the RSM lays them out: (light, forward, up, tan of the half field of view)
+/// for perspective views, and a directional light's square.
+enum LightView {
+    Perspective {
+        light: usize,
+        origin: Vec3,
+        forward: Vec3,
+        tan_half: f32,
+    },
+    Orthographic {
+        light: usize,
+        center: Vec3,
+        direction: Vec3,
+        half: f32,
+    },
+}
+
+const CUBE_FORWARDS: [Vec3; 6] = [
+    Vec3::X,
+    Vec3::NEG_X,
+    Vec3::Y,
+    Vec3::NEG_Y,
+    Vec3::Z,
+    Vec3::NEG_Z,
+];
+
+fn light_views(lights: &[WorldLight], center: Vec3, radius: f32) -> Vec<LightView> {
+    let mut views = vec![];
+    for (i, light) in lights.iter().enumerate() {
+        match light.kind {
+            LightKind::Point | LightKind::Emitter => {
+                for forward in CUBE_FORWARDS {
+                    views.push(LightView::Perspective {
+                        light: i,
+                        origin: light.position,
+                        forward,
+                        tan_half: 1.0,
+                    });
+                }
+            }
+            LightKind::Spot {
+                outer_cone_angle, ..
+            } => views.push(LightView::Perspective {
+                light: i,
+                origin: light.position,
+                forward: light.direction,
+                tan_half: outer_cone_angle.clamp(1e-3, 85f32.to_radians()).tan(),
+            }),
+            LightKind::Directional => views.push(LightView::Orthographic {
+                light: i,
+                center,
+                direction: light.direction,
+                half: radius,
+            }),
+        }
+    }
+    views
+}
+
+/// Grey value of a colour: the mean of its channels.
+fn grey(c: Vec3) -> f64 {
+    ((c.x + c.y + c.z) / 3.0) as f64
+}
+
+impl Survey {
+    /// Surveys the scene posed by `world_from_node`, seen by `camera` (receivers spread by
+    /// area without one). Deterministic for a given `seed`.
+    pub fn new(
+        scene: &Scene,
+        world_from_node: &[Mat4],
+        camera: Option<&CameraView>,
+        seed: u64,
+    ) -> Survey {
+        let started = std::time::Instant::now();
+        let tracer = Tracer::new(scene, world_from_node);
+        let triangles = tracer.world_triangles();
+        let areas: Vec<f64> = triangles
+            .iter()
+            .map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length() as f64)
+            .map(|a| if a.is_finite() { a } else { 0.0 })
+            .collect();
+        let area: f64 = areas.iter().sum();
+        let bounds = scene.world_bounds(world_from_node);
+        let (center, radius) = if bounds.is_empty() {
+            (Vec3::ZERO, 1.0)
+        } else {
+            (bounds.center(), (bounds.extent().length() * 0.5).max(1e-3))
+        };
+        let views = light_views(&tracer.lights, center, radius);
+        let layers: u32 = views.len() as u32;
+        let tiles = crate::light::rsm::cluster_tiles(128, layers);
+        let clusters = (tiles * tiles * layers).min(crate::light::rsm::MAX_CLUSTERS);
+
+        // Photons: the same count per view, on a jittered grid of its image plane.
+        let per_view = if views.is_empty() {
+            0
+        } else {
+            (SURVEY_PHOTONS / views.len()).max(16)
+        };
+        let side = (per_view as f64).sqrt().ceil() as usize;
+        let mut lit = vec![];
+        let mut lit_area = 0.0;
+        let mut lit_views = 0.0;
+        let mut rng = Rng::new(seed, 0x5u64, 0);
+        for (view_index, view) in views.iter().enumerate() {
+            let mut hits = 0usize;
+            for j in 0..side * side {
+                let u = ((j % side) as f32 + rng.next_f32()) / side as f32 * 2.0 - 1.0;
+                let v = ((j / side) as f32 + rng.next_f32()) / side as f32 * 2.0 - 1.0;
+                let cell = |t: f32| (((t + 1.0) * 0.5 * tiles as f32) as u32).min(tiles - 1);
+                let tile = crate::light::rsm::layer_tile(
+                    tiles,
+                    tiles,
+                    view_index as u32,
+                    cell(u),
+                    cell(v),
+                ) % crate::light::rsm::MAX_CLUSTERS;
+                let (origin, dir, light, solid_or_area, ortho) = match *view {
+                    LightView::Perspective {
+                        light,
+                        origin,
+                        forward,
+                        tan_half,
+                    } => {
+                        let (right, up) = basis(forward);
+                        let (x, y) = (u * tan_half, v * tan_half);
+                        let raw = forward + right * x + up * y;
+                        // Solid angle of the sample's share of the image plane.
+                        let plane = (2.0 * tan_half).powi(2) / (side * side) as f32;
+                        let omega = plane / (1.0 + x * x + y * y).powf(1.5);
+                        (origin, raw.normalize(), light, omega, false)
+                    }
+                    LightView::Orthographic {
+                        light,
+                        center,
+                        direction,
+                        half,
+                    } => {
+                        let (right, up) = basis(direction);
+                        let origin = center - direction * (2.0 * half)
+                            + right * (u * half)
+                            + up * (v * half);
+                        let cell = (2.0 * half).powi(2) / (side * side) as f32;
+                        (origin, direction, light, cell, true)
+                    }
+                };
+                let Some(hit) = tracer.intersect(origin, dir, f32::INFINITY) else {
+                    continue;
+                };
+                let light = &tracer.lights[light];
+                let cos = hit.geometric_normal.dot(-dir).abs().max(0.05);
+                let (incoming, texel_area) = if ortho {
+                    (
+                        grey(light.intensity) * solid_or_area as f64,
+                        solid_or_area / cos,
+                    )
+                } else {
+                    let mut intensity = grey(light.intensity);
+                    if let LightKind::Spot {
+                        inner_cone_angle,
+                        outer_cone_angle,
+                    } = light.kind
+                    {
+                        intensity *= spot_attenuation(
+                            inner_cone_angle,
+                            outer_cone_angle,
+                            light.direction.dot(dir),
+                        ) as f64;
+                    } else if light.kind == LightKind::Emitter {
+                        intensity *= crate::shading::emitter_lobe(light.direction, dir) as f64;
+                    }
+                    (
+                        intensity * solid_or_area as f64,
+                        hit.t * hit.t * solid_or_area / cos,
+                    )
+                };
+                let flux = incoming * grey(hit.rho_d);
+                if !(flux > 0.0 && flux.is_finite()) {
+                    continue;
+                }
+                hits += 1;
+                lit_area += texel_area as f64;
+                let normal = if hit.geometric_normal.dot(dir) < 0.0 {
+                    hit.geometric_normal
+                } else {
+                    -hit.geometric_normal
+                };
+                lit.push(LitSample {
+                    position: hit.position,
+                    normal,
+                    flux,
+                    tile,
+                });
+            }
+            lit_views += hits as f64 / (side * side) as f64;
+        }
+        let lit = resample_by_flux(&lit, SURVEY_LIT_SAMPLES, &mut rng);
+
+        // Receivers: what the camera sees, where the image's error is; uniform by area when
+        // the camera sees nothing.
+        let (mut receivers, mut visible_area) = camera
+            .map(|c| view_receivers(&tracer, c, SURVEY_RECEIVERS, &mut rng))
+            .unwrap_or_default();
+        visible_area = visible_area.min(area);
+        if receivers.is_empty() {
+            visible_area = area;
+            receivers = sample_by_area(&triangles, &areas, SURVEY_RECEIVERS, &mut rng);
+        }
+        let epsilon = tracer.epsilon;
+        // Each lit sample stands for its share of the lit area: a disc of that area, whose
+        // irradiance stays finite at contact.
+        let sample_disc = lit_area / lit.len().max(1) as f64 / std::f64::consts::PI;
+        let per_receiver: Vec<(Vec3, Vec<Pair>)> = receivers
+            .par_iter()
+            .map(|&(x, n)| receiver_pairs(&tracer, &lit, sample_disc, x, n, epsilon))
+            .collect();
+        // Each receiver's seen and hidden irradiance, per cluster tile.
+        let mut receivers_out = Vec::with_capacity(per_receiver.len());
+        for ((x, _), (n, pairs)) in receivers.iter().zip(per_receiver) {
+            let mut by_tile: std::collections::BTreeMap<u32, (f64, f64)> = Default::default();
+            for p in &pairs {
+                let entry = by_tile.entry(p.tile).or_default();
+                if p.visible {
+                    entry.0 += p.w;
+                } else {
+                    entry.1 += p.w;
+                }
+            }
+            let (mut seen, mut hidden, mut partial) = (0.0, 0.0, 0.0);
+            for (s, h) in by_tile.into_values() {
+                seen += s;
+                hidden += h;
+                partial += s.min(h);
+            }
+            receivers_out.push(Receiver {
+                position: *x,
+                normal: n,
+                pairs,
+                seen,
+                hidden,
+                partial,
+                weight: 0.0,
+            });
+        }
+        let mean_seen =
+            receivers_out.iter().map(|r| r.seen).sum::<f64>() / receivers_out.len().max(1) as f64;
+        for r in &mut receivers_out {
+            r.weight = if mean_seen > 0.0 {
+                r.seen / (r.seen + mean_seen)
+            } else {
+                0.0
+            };
+        }
+        let mut survey = Survey {
+            area,
+            lit_area,
+            lit_views,
+            clusters,
+            occluded_share: 0.0,
+            partial_share: 0.0,
+            receivers: receivers_out,
+            visible_area,
+            eye: camera.map(CameraView::position),
+            variation: vec![],
+            lit_samples: lit.len(),
+            survey_ms: 0.0,
+        };
+        // Leaving visibility out shows seen + hidden where seen is right: relative to the
+        // brighter of the two, hidden / (seen + hidden), and weighted by that brightness (a
+        // receiver wholly in shadow, seen = 0, is where the leak shows most).
+        let mean_unoccluded = survey
+            .receivers
+            .iter()
+            .map(|r| r.seen + r.hidden)
+            .sum::<f64>()
+            / survey.receivers.len().max(1) as f64;
+        let (mut num, mut den) = (0.0, 0.0);
+        for r in survey.receivers.iter().filter(|r| r.seen + r.hidden > 0.0) {
+            let unoccluded = r.seen + r.hidden;
+            let u = unoccluded / (unoccluded + mean_unoccluded);
+            num += u * r.hidden / unoccluded;
+            den += u;
+        }
+        survey.occluded_share = if den > 0.0 { num / den } else { 0.0 };
+        survey.partial_share = survey.mean_over_receivers(|r| (r.partial / r.seen).min(1.0));
+        survey.variation = PROBE_POINTS
+            .iter()
+            .map(|&n| {
+                let h = survey.point_spacing(n);
+                (
+                    h,
+                    survey.variation_probe(&tracer, &lit, sample_disc, h, seed),
+                )
+            })
+            .collect();
+        survey.survey_ms = started.elapsed().as_secs_f64() * 1000.0;
+        survey
+    }
+
+    /// δ(h) measured: per receiver, the irradiance at two surface points ±h away along a
+    /// tangent (found by a ray down onto the surface, with their own shading normals and
+    /// visibility) against the receiver's own, mean |E± − E| / E, averaged.
+    fn variation_probe(
+        &self,
+        tracer: &Tracer,
+        lit: &[LitSample],
+        disc_radius2: f64,
+        h: f64,
+        seed: u64,
+    ) -> f64 {
+        let eye = self.eye;
+        let h = h as f32;
+        let deltas: Vec<Option<f64>> = self
+            .receivers
+            .par_iter()
+            .enumerate()
+            .map(|(i, r)| {
+                if r.seen <= 0.0 {
+                    return None;
+                }
+                let (t1, t2) = basis(r.normal);
+                let angle = Rng::new(seed, 0x9, i as u64).next_f32() * std::f32::consts::TAU;
+                let t = t1 * angle.cos() + t2 * angle.sin();
+                let center = surface_below(tracer, r.position, r.normal, 0.0)?;
+                let l0 = radiance_at(tracer, lit, disc_radius2, &center, eye);
+                if l0 <= 0.0 {
+                    return None;
+                }
+                let mut sum = 0.0;
+                for sign in [1.0f32, -1.0] {
+                    let l = match surface_below(tracer, r.position + t * (sign * h), r.normal, h) {
+                        Some(hit) => radiance_at(tracer, lit, disc_radius2, &hit, eye),
+                        // Off the surface's edge: the neighbourhood holds no second sample.
+                        None => l0,
+                    };
+                    sum += ((l - l0).abs() / l0).min(1.0);
+                }
+                Some(sum / 2.0)
+            })
+            .collect();
+        self.mean_over_receivers_indexed(|i| deltas[i])
+    }
+
+    /// [`Survey::mean_over_receivers`] of a per-receiver value given by index (receivers
+    /// without one are left out).
+    fn mean_over_receivers_indexed(&self, f: impl Fn(usize) -> Option<f64>) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for (i, r) in self.receivers.iter().enumerate() {
+            if let Some(v) = f(i) {
+                num += r.weight * v;
+                den += r.weight;
+            }
+        }
+        if den > 0.0 {
+            num / den
+        } else {
+            0.0
+        }
+    }
+
+    /// Σ u_r·f(r) / Σ u_r over the receivers that see light, u_r = E_r / (E_r + Ē): a
+    /// receiver's relative error counts in full where it is bright and fades where it is
+    /// dark, as a tone-mapped image shows it.
+    fn mean_over_receivers(&self, f: impl Fn(&Receiver) -> f64) -> f64 {
+        let (mut num, mut den) = (0.0, 0.0);
+        for r in self.receivers.iter().filter(|r| r.seen > 0.0) {
+            num += r.weight * f(r);
+            den += r.weight;
+        }
+        if den > 0.0 {
+            num / den
+        } else {
+            0.0
+        }
+    }
+
+    /// Spacing of `points` sparse points over the scene's area, m.
+    pub fn point_spacing(&self, points: usize) -> f64 {
+        (self.area / points.max(1) as f64).sqrt()
+    }
+
+    /// VALs an RSM of side `rsm` makes (texels that see lit geometry).
+    pub fn val_count(&self, rsm: u32) -> f64 {
+        (rsm as f64).powi(2) * self.lit_views
+    }
+
+    /// Spacing of the VALs of an RSM of side `rsm` over the lit area, m.
+    pub fn val_spacing(&self, rsm: u32) -> f64 {
+        (self.lit_area / self.val_count(rsm).max(1.0)).sqrt()
+    }
+
+    /// ε(h): the relative interpolation error of irradiance sampled at spacing `h`, per
+    /// receiver Σ_s w v·min(1, h²/d²) / Σ_s w v, averaged over the receivers (module docs).
+    pub fn interpolation_error(&self, h: f64) -> f64 {
+        let h2 = h * h;
+        self.mean_over_receivers(|r| {
+            let off: f64 = r
+                .pairs
+                .iter()
+                .filter(|p| p.visible)
+                .map(|p| p.w * (h2 / p.d2).min(1.0))
+                .sum();
+            off / r.seen
+        })
+    }
+
+    /// δ(h): the measured relative variation of irradiance over a distance h on the surface,
+    /// interpolated log-log between the probed spacings (clamped at their ends).
+    pub fn variation_error(&self, h: f64) -> f64 {
+        let v = &self.variation;
+        match v.len() {
+            0 => 0.0,
+            1 => v[0].1,
+            _ => {
+                let i = v
+                    .iter()
+                    .position(|&(hk, _)| hk >= h)
+                    .unwrap_or(v.len() - 1)
+                    .max(1);
+                let ((h0, e0), (h1, e1)) = (v[i - 1], v[i]);
+                if e0 <= 0.0 || e1 <= 0.0 {
+                    return e0 + (e1 - e0) * ((h - h0) / (h1 - h0)).clamp(0.0, 1.0);
+                }
+                let t = ((h / h0).ln() / (h1 / h0).ln()).clamp(0.0, 1.0);
+                (e0.ln() + t * (e1.ln() - e0.ln())).exp()
+            }
+        }
+    }
+
+    /// True when the lights reach no surface: there is no indirect light to budget for.
+    pub fn is_dark(&self) -> bool {
+        !self.receivers.iter().any(|r| r.seen > 0.0)
+    }
+}
+
+/// `count` samples drawn with probability ∝ flux (systematic resampling), each carrying an
+/// equal share of the total flux.
+fn resample_by_flux(samples: &[LitSample], count: usize, rng: &mut Rng) -> Vec<LitSample> {
+    let total: f64 = samples.iter().map(|s| s.flux).sum();
+    if samples.is_empty() || total <= 0.0 || !total.is_finite() {
+        return vec![];
+    }
+    let n = count.min(samples.len());
+    let step = total / n as f64;
+    let mut next = rng.next_f32() as f64 * step;
+    let mut acc = 0.0;
+    let mut out = Vec::with_capacity(n);
+    for s in samples {
+        acc += s.flux;
+        while next < acc && out.len() < n {
+            out.push(LitSample { flux: step, ..*s });
+            next += step;
+        }
+    }
+    out
+}
+
+/// The surface points `camera`'s rays hit through a jittered grid of about `count` pixels,
+/// with their geometric normals on the camera's side.
+fn view_receivers(
+    tracer: &Tracer,
+    camera: &CameraView,
+    count: usize,
+    rng: &mut Rng,
+) -> (Vec<(Vec3, Vec3)>, f64) {
+    let [l, r, b, t] = camera.tangent_extents();
+    let side = (count as f64).sqrt().ceil() as usize;
+    let eye = camera.position();
+    let mut out = Vec::with_capacity(side * side);
+    let plane = ((r - l) * (t - b)) as f64 / (side * side) as f64;
+    let mut area = 0.0;
+    for j in 0..side * side {
+        let u = ((j % side) as f32 + rng.next_f32()) / side as f32;
+        let v = ((j / side) as f32 + rng.next_f32()) / side as f32;
+        let in_view = Vec3::new(l + (r - l) * u, b + (t - b) * v, -1.0);
+        let dir = camera
+            .world_from_view
+            .transform_vector3(in_view)
+            .normalize();
+        if let Some(hit) = tracer.intersect(eye, dir, f32::INFINITY) {
+            // The pixel's solid angle, and the surface it covers at the hit.
+            let omega = plane / (in_view.length() as f64).powi(3);
+            let cos = (hit.geometric_normal.dot(dir).abs() as f64).max(0.05);
+            area += (hit.t as f64).powi(2) * omega / cos;
+            out.push((hit.position, hit.geometric_normal));
+        }
+    }
+    (out, area)
+}
+
+/// `count` points uniform by area over `triangles` (stratified in the area CDF), with their
+/// triangles' unit normals.
+fn sample_by_area(
+    triangles: &[[Vec3; 3]],
+    areas: &[f64],
+    count: usize,
+    rng: &mut Rng,
+) -> Vec<(Vec3, Vec3)> {
+    let total: f64 = areas.iter().sum();
+    if total <= 0.0 || triangles.is_empty() {
+        return vec![];
+    }
+    let mut out = Vec::with_capacity(count);
+    let mut acc = 0.0;
+    let mut k = 0usize;
+    for (tri, &a) in triangles.iter().zip(areas) {
+        acc += a;
+        while k < count && (k as f64 + 0.5) / count as f64 * total < acc {
+            let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+            if u + v > 1.0 {
+                (u, v) = (1.0 - u, 1.0 - v);
+            }
+            let [p0, p1, p2] = *tri;
+            let x = p0 + (p1 - p0) * u + (p2 - p0) * v;
+            let n = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+            if n != Vec3::ZERO {
+                out.push((x, n));
+            }
+            k += 1;
+        }
+    }
+    out
+}
+
+/// The pairs of one receiver, on the side of its surface that receives more light (a
+/// triangle's winding need not face the room), and that side's normal.
+fn receiver_pairs(
+    tracer: &Tracer,
+    lit: &[LitSample],
+    disc_radius2: f64,
+    x: Vec3,
+    n: Vec3,
+    epsilon: f32,
+) -> (Vec3, Vec<Pair>) {
+    let side_weight = |n: Vec3| -> f64 {
+        lit.iter()
+            .map(|s| {
+                let to = s.position - x;
+                let d2 = to.length_squared().max(1e-12);
+                let d = d2.sqrt();
+                let cos_r = n.dot(to) / d;
+                let cos_s = -s.normal.dot(to) / d;
+                if cos_r > 0.0 && cos_s > 0.0 {
+                    (cos_r * cos_s) as f64 / d2 as f64
+                } else {
+                    0.0
+                }
+            })
+            .sum()
+    };
+    let n = if side_weight(-n) > side_weight(n) {
+        -n
+    } else {
+        n
+    };
+    (n, pairs_at(tracer, lit, disc_radius2, x, n, epsilon))
+}
+
+/// The transfer pairs of a receiver at `x` with unit normal `n`.
+fn pairs_at(
+    tracer: &Tracer,
+    lit: &[LitSample],
+    disc_radius2: f64,
+    x: Vec3,
+    n: Vec3,
+    epsilon: f32,
+) -> Vec<Pair> {
+    let origin = x + n * (4.0 * epsilon);
+    let mut pairs = vec![];
+    for s in lit {
+        let to = s.position + s.normal * (4.0 * epsilon) - origin;
+        let d2 = to.length_squared();
+        if d2 <= 0.0 || !d2.is_finite() {
+            continue;
+        }
+        let d = d2.sqrt();
+        let cos_r = n.dot(to) / d;
+        let cos_s = -s.normal.dot(to) / d;
+        if cos_r <= 0.0 || cos_s <= 0.0 {
+            continue;
+        }
+        // A disc of radius r on axis delivers Φ/(π(d² + r²)): finite at contact.
+        let d2_disc = d2 as f64 + disc_radius2;
+        let w = s.flux * (cos_r * cos_s) as f64 / (std::f64::consts::PI * d2_disc);
+        let visible = tracer.unoccluded(origin, to / d, d * (1.0 - 1e-4));
+        pairs.push(Pair {
+            w,
+            d2: d2_disc,
+            visible,
+            tile: s.tile,
+        });
+    }
+    pairs
+}
+
+/// One-bounce radiance (grey) leaving `hit` toward `eye` from the lit samples it sees, through
+/// its own BRDF: diffuse and glossy, so that curved and glossy surfaces vary as the image
+/// does. Without an eye, the diffuse part toward the normal.
+fn radiance_at(
+    tracer: &Tracer,
+    lit: &[LitSample],
+    disc_radius2: f64,
+    hit: &crate::trace::Hit,
+    eye: Option<Vec3>,
+) -> f64 {
+    let n = hit.normal;
+    let wo = eye.map_or(n, |e| (e - hit.position).normalize_or(n));
+    let origin = hit.position + n * (4.0 * tracer.epsilon);
+    let mut sum = 0.0;
+    for s in lit {
+        let to = s.position + s.normal * (4.0 * tracer.epsilon) - origin;
+        let d2 = to.length_squared();
+        if d2 <= 0.0 || !d2.is_finite() {
+            continue;
+        }
+        let d = d2.sqrt();
+        let wi = to / d;
+        let cos_r = n.dot(wi);
+        let cos_s = -s.normal.dot(wi);
+        if cos_r <= 0.0 || cos_s <= 0.0 {
+            continue;
+        }
+        let f = grey(crate::shading::brdf(hit.rho_d, hit.rho_s, hit.k, n, wi, wo));
+        if f <= 0.0 || !tracer.unoccluded(origin, wi, d * (1.0 - 1e-4)) {
+            continue;
+        }
+        sum += f * s.flux * (cos_r * cos_s) as f64
+            / (std::f64::consts::PI * (d2 as f64 + disc_radius2));
+    }
+    sum
+}
+
+/// The surface under `x` along −`n` within `reach` (plus a margin), its shading normal
+/// turned to `n`'s side.
+fn surface_below(tracer: &Tracer, x: Vec3, n: Vec3, reach: f32) -> Option<crate::trace::Hit> {
+    let lift = reach.max(100.0 * tracer.epsilon);
+    // Tilted off the axes: an axis-aligned ray starting on a box's slab plane can slip through
+    // the BVH's slab test (0·∞).
+    let down = (-n + Vec3::new(1.3e-4, 2.1e-4, 3.7e-4)).normalize();
+    let mut hit = tracer.intersect(x + n * lift, down, 2.5 * lift)?;
+    if hit.normal.dot(n) < 0.0 {
+        hit.normal = -hit.normal;
+    }
+    Some(hit)
+}
+
+/// The fitted model (module docs; `src/vals/README.md`, "Budget mode", has the fit and its
+/// residuals): predicted convergence FLIP = `a·(ε(h) + δ(h) + c_vals·ε(s) + c_off·o)^b`.
+pub mod model {
+    pub const A: f64 = 0.302;
+    pub const B: f64 = 1.025;
+    /// Weight of the VALs' interpolation error ε(s).
+    pub const C_VALS: f64 = 8.0;
+    /// Weight of the occluded share o when visibility is off.
+    pub const C_OFF: f64 = 1.5;
+    /// Gather cost per point–VAL pair, ms (lavapipe, 2 cores: 1.08e8 pairs/s over the sweep).
+    pub const GATHER_MS_PER_PAIR: f64 = 9.3e-6;
+    /// Visibility cost per point and cluster (16 rays), ms, and its fixed part.
+    pub const VISIBILITY_MS_PER_POINT_CLUSTER: f64 = 4.4e-3;
+    pub const VISIBILITY_MS_FIXED: f64 = 47.0;
+    /// The rest of a frame (shadow maps, RSM, G-buffer, direct, interpolation, apply) at
+    /// 128², ms: the same for every choice, so it only shifts the budget.
+    pub const FRAME_MS_FIXED: f64 = 60.0;
+}
+
+/// The point counts and RSM sides budget mode chooses among: the range the model was fitted
+/// over (the sweep's 1024–16384 points and 32–128 texels), in steps of √2 and 1.5. Outside
+/// it the measured error left the prediction by up to 3× (256 points on the Cornell box:
+/// predicted 0.098, measured 0.159).
+pub const CANDIDATE_POINTS: [usize; 9] = [1024, 1448, 2048, 2896, 4096, 5793, 8192, 11585, 16384];
+pub const CANDIDATE_RSM: [u32; 5] = [32, 48, 64, 96, 128];
+
+/// What budget mode aims at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum BudgetTarget {
+    /// The cheapest setting whose predicted convergence FLIP is at most this.
+    Flip(f64),
+    /// The lowest predicted convergence FLIP whose predicted frame time is at most this many
+    /// milliseconds on the device the model was fitted on.
+    Ms(f64),
+}
+
+/// One candidate setting with its predictions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BudgetChoice {
+    pub points: usize,
+    pub rsm: u32,
+    /// Shadow rays to the VAL clusters (`--occlusion rays`), or no indirect occlusion.
+    pub rays: bool,
+    pub predicted_flip: f64,
+    pub predicted_ms: f64,
+    /// The error terms behind the prediction: ε(h) + δ(h) of the points, ε(s) of the VALs,
+    /// and the occluded share o.
+    pub variation: f64,
+    pub val_error: f64,
+    pub occluded_share: f64,
+    /// False when no candidate meets the target (the choice is then the closest one).
+    pub met: bool,
+}
+
+impl Survey {
+    /// Predicts a candidate's convergence FLIP and frame time.
+    pub fn predict(&self, points: usize, rsm: u32, rays: bool) -> BudgetChoice {
+        let h = self.point_spacing(points);
+        let variation = self.interpolation_error(h) + self.variation_error(h);
+        let val_error = self.interpolation_error(self.val_spacing(rsm));
+        let visibility = if rays {
+            0.0
+        } else {
+            model::C_OFF * self.occluded_share
+        };
+        let error = variation + model::C_VALS * val_error + visibility;
+        let predicted_flip = model::A * error.max(0.0).powf(model::B);
+        let pairs = points as f64 * self.val_count(rsm);
+        let predicted_ms = model::FRAME_MS_FIXED
+            + model::GATHER_MS_PER_PAIR * pairs
+            + if rays {
+                model::VISIBILITY_MS_FIXED
+                    + model::VISIBILITY_MS_PER_POINT_CLUSTER * points as f64 * self.clusters as f64
+            } else {
+                0.0
+            };
+        BudgetChoice {
+            points,
+            rsm,
+            rays,
+            predicted_flip,
+            predicted_ms,
+            variation,
+            val_error,
+            occluded_share: self.occluded_share,
+            met: true,
+        }
+    }
+
+    /// The setting budget mode picks for `target` among the candidates (module docs).
+    pub fn choose(&self, target: BudgetTarget) -> BudgetChoice {
+        let mut all = vec![];
+        for &points in &CANDIDATE_POINTS {
+            for &rsm in &CANDIDATE_RSM {
+                for rays in [false, true] {
+                    all.push(self.predict(points, rsm, rays));
+                }
+            }
+        }
+        let by_ms =
+            |a: &&BudgetChoice, b: &&BudgetChoice| a.predicted_ms.total_cmp(&b.predicted_ms);
+        let by_flip =
+            |a: &&BudgetChoice, b: &&BudgetChoice| a.predicted_flip.total_cmp(&b.predicted_flip);
+        let pick = match target {
+            BudgetTarget::Flip(flip) => all
+                .iter()
+                .filter(|c| c.predicted_flip <= flip)
+                .min_by(by_ms)
+                .copied(),
+            BudgetTarget::Ms(ms) => all
+                .iter()
+                .filter(|c| c.predicted_ms <= ms)
+                .min_by(by_flip)
+                .copied(),
+        };
+        pick.unwrap_or_else(|| {
+            // Nothing meets the target: the most accurate (for an error target) or the
+            // cheapest (for a time budget) candidate, marked as missing it.
+            let closest = match target {
+                BudgetTarget::Flip(_) => all.iter().min_by(by_flip),
+                BudgetTarget::Ms(_) => all.iter().min_by(by_ms),
+            };
+            BudgetChoice {
+                met: false,
+                ..*closest.expect("candidates are never empty")
+            }
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn survey_of(name: &str) -> Survey {
+        let scene = crate::scene::load_with(name, &crate::scene::LoadParams::default())
+            .expect("built-in scene");
+        let world = scene.world_from_node_at(0.0);
+        let camera = scene.camera_view(None, 1.0, &world).expect("camera");
+        Survey::new(&scene, &world, Some(&camera), 1)
+    }
+
+    #[test]
+    fn a_spot_over_a_plane_lights_the_disc_its_outer_cone_cuts() {
+        // plane-spot: outer cone 35°, 1 m above a 4 m plane. The lit disc has radius tan 35°
+        // and fills π/4 of the RSM's square view.
+        let survey = survey_of("plane-spot");
+        let radius = 35f64.to_radians().tan();
+        let disc = std::f64::consts::PI * radius * radius;
+        assert!(
+            (survey.lit_area / disc - 1.0).abs() < 0.02,
+            "lit area {} vs {disc}",
+            survey.lit_area
+        );
+        assert!(
+            (survey.lit_views - std::f64::consts::FRAC_PI_4).abs() < 0.02,
+            "{}",
+            survey.lit_views
+        );
+        assert!((survey.area - 16.0).abs() < 1e-3, "{}", survey.area);
+        assert!((survey.val_count(64) - 64.0 * 64.0 * survey.lit_views).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_convex_room_needs_no_occlusion_and_a_room_behind_a_door_needs_rays() {
+        // Nothing stands between any two points of a convex box's inner walls.
+        let empty = survey_of("bunny-box-empty");
+        assert!(empty.occluded_share < 1e-3, "{}", empty.occluded_share);
+        assert!(empty.partial_share < 1e-3, "{}", empty.partial_share);
+        assert!(!empty.choose(BudgetTarget::Flip(0.05)).rays);
+        // The door room's light arrives through a doorway: much of it is blocked.
+        let door = survey_of("door-room");
+        assert!(door.occluded_share > 0.05, "{}", door.occluded_share);
+        let choice = door.choose(BudgetTarget::Flip(0.05));
+        assert!(choice.rays && choice.met, "{choice:?}");
+        assert!(choice.predicted_flip <= 0.05);
+    }
+
+    #[test]
+    fn the_interpolation_error_is_quadratic_in_the_spacing_below_every_distance() {
+        // Every pair's distance is at least the sample disc's radius, so at spacings far below
+        // it min(1, h²/d²) = h²/d² throughout and halving h quarters ε.
+        let survey = survey_of("cornell");
+        let (e1, e2) = (
+            survey.interpolation_error(1e-4),
+            survey.interpolation_error(5e-5),
+        );
+        assert!(e1 > 0.0);
+        assert!((e1 / e2 - 4.0).abs() < 1e-6, "{e1} / {e2}");
+        // And it saturates at 1 when the spacing exceeds every distance.
+        assert!((survey.interpolation_error(1e6) - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn radiance_varies_more_over_longer_distances_and_tighter_targets_cost_more() {
+        let survey = survey_of("cornell");
+        let v = &survey.variation;
+        assert_eq!(v.len(), PROBE_POINTS.len());
+        for pair in v.windows(2) {
+            assert!(pair[0].0 < pair[1].0, "spacings ascend: {v:?}");
+            assert!(pair[0].1 <= pair[1].1 * 1.05, "δ grows with h: {v:?}");
+        }
+        assert!(v[0].1 > 0.0);
+        let loose = survey.choose(BudgetTarget::Flip(0.1));
+        let tight = survey.choose(BudgetTarget::Flip(0.03));
+        assert!(loose.met && tight.met, "{loose:?} {tight:?}");
+        assert!(tight.predicted_ms >= loose.predicted_ms);
+        assert!(tight.predicted_flip <= 0.03 && loose.predicted_flip <= 0.1);
+        // A time budget gets the most accurate setting that fits it.
+        let budget = survey.choose(BudgetTarget::Ms(tight.predicted_ms));
+        assert!(budget.predicted_ms <= tight.predicted_ms);
+        assert!(budget.predicted_flip <= tight.predicted_flip);
+        // An impossible target is marked, with the most accurate candidate.
+        let impossible = survey.choose(BudgetTarget::Flip(1e-9));
+        assert!(!impossible.met);
+    }
+
+    #[test]
+    fn resampling_keeps_the_total_flux_and_favours_bright_samples() {
+        let mk = |flux| LitSample {
+            position: Vec3::ZERO,
+            normal: Vec3::Y,
+            flux,
+            tile: 0,
+        };
+        let samples = vec![mk(1.0), mk(3.0), mk(0.0), mk(4.0)];
+        let mut rng = Rng::new(1, 2, 3);
+        let out = resample_by_flux(&samples, 4, &mut rng);
+        let total: f64 = out.iter().map(|s| s.flux).sum();
+        assert!((total - 8.0).abs() < 1e-9, "{total}");
+        assert_eq!(out.len(), 4);
+    }
+}
