@@ -121,7 +121,7 @@ pub fn setup_lights(
 }
 
 /// Cube faces in the order the shader's `cube_face` picks them: +X, −X, +Y, −Y, +Z, −Z.
-const CUBE_FACES: [(Vec3, Vec3); 6] = [
+pub const CUBE_FACES: [(Vec3, Vec3); 6] = [
     (Vec3::X, Vec3::Y),
     (Vec3::NEG_X, Vec3::Y),
     (Vec3::Y, Vec3::Z),

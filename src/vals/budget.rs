@@ -143,21 +143,12 @@ enum LightView {
     },
 }
 
-const CUBE_FORWARDS: [Vec3; 6] = [
-    Vec3::X,
-    Vec3::NEG_X,
-    Vec3::Y,
-    Vec3::NEG_Y,
-    Vec3::Z,
-    Vec3::NEG_Z,
-];
-
 fn light_views(lights: &[WorldLight], center: Vec3, radius: f32) -> Vec<LightView> {
     let mut views = vec![];
     for (i, light) in lights.iter().enumerate() {
         match light.kind {
             LightKind::Point | LightKind::Emitter => {
-                for forward in CUBE_FORWARDS {
+                for (forward, _) in crate::raster::shadows::CUBE_FACES {
                     views.push(LightView::Perspective {
                         light: i,
                         origin: light.position,
@@ -650,6 +641,41 @@ fn sample_by_area(
     out
 }
 
+/// The transfer from lit sample `s` to a receiver at `origin` with unit normal `n`.
+struct Link {
+    /// Unit direction to the sample, and its distance.
+    wi: Vec3,
+    d: f32,
+    /// d² + r_s² (the sample a disc of radius r_s).
+    d2_disc: f64,
+    /// w = Φ·cos θ_s·cos θ_r / (π (d² + r_s²)): a disc of radius r on axis delivers
+    /// Φ/(π(d² + r²)), finite at contact.
+    w: f64,
+}
+
+/// The link from `s` (lifted `lift` off its surface) to `origin`, `None` when either side
+/// faces away.
+fn link(origin: Vec3, n: Vec3, s: &LitSample, lift: f32, disc_radius2: f64) -> Option<Link> {
+    let to = s.position + s.normal * lift - origin;
+    let d2 = to.length_squared();
+    if d2 <= 0.0 || !d2.is_finite() {
+        return None;
+    }
+    let d = d2.sqrt();
+    let wi = to / d;
+    let (cos_r, cos_s) = (n.dot(wi), -s.normal.dot(wi));
+    if cos_r <= 0.0 || cos_s <= 0.0 {
+        return None;
+    }
+    let d2_disc = d2 as f64 + disc_radius2;
+    Some(Link {
+        wi,
+        d,
+        d2_disc,
+        w: s.flux * (cos_r * cos_s) as f64 / (std::f64::consts::PI * d2_disc),
+    })
+}
+
 /// The pairs of one receiver, on the side of its surface that receives more light (a
 /// triangle's winding need not face the room), and that side's normal.
 fn receiver_pairs(
@@ -662,18 +688,8 @@ fn receiver_pairs(
 ) -> (Vec3, Vec<Pair>) {
     let side_weight = |n: Vec3| -> f64 {
         lit.iter()
-            .map(|s| {
-                let to = s.position - x;
-                let d2 = to.length_squared().max(1e-12);
-                let d = d2.sqrt();
-                let cos_r = n.dot(to) / d;
-                let cos_s = -s.normal.dot(to) / d;
-                if cos_r > 0.0 && cos_s > 0.0 {
-                    (cos_r * cos_s) as f64 / d2 as f64
-                } else {
-                    0.0
-                }
-            })
+            .filter_map(|s| link(x, n, s, 0.0, disc_radius2))
+            .map(|l| l.w)
             .sum()
     };
     let n = if side_weight(-n) > side_weight(n) {
@@ -694,31 +710,17 @@ fn pairs_at(
     epsilon: f32,
 ) -> Vec<Pair> {
     let origin = x + n * (4.0 * epsilon);
-    let mut pairs = vec![];
-    for s in lit {
-        let to = s.position + s.normal * (4.0 * epsilon) - origin;
-        let d2 = to.length_squared();
-        if d2 <= 0.0 || !d2.is_finite() {
-            continue;
-        }
-        let d = d2.sqrt();
-        let cos_r = n.dot(to) / d;
-        let cos_s = -s.normal.dot(to) / d;
-        if cos_r <= 0.0 || cos_s <= 0.0 {
-            continue;
-        }
-        // A disc of radius r on axis delivers Φ/(π(d² + r²)): finite at contact.
-        let d2_disc = d2 as f64 + disc_radius2;
-        let w = s.flux * (cos_r * cos_s) as f64 / (std::f64::consts::PI * d2_disc);
-        let visible = tracer.unoccluded(origin, to / d, d * (1.0 - 1e-4));
-        pairs.push(Pair {
-            w,
-            d2: d2_disc,
-            visible,
-            tile: s.tile,
-        });
-    }
-    pairs
+    lit.iter()
+        .filter_map(|s| {
+            let l = link(origin, n, s, 4.0 * epsilon, disc_radius2)?;
+            Some(Pair {
+                w: l.w,
+                d2: l.d2_disc,
+                visible: tracer.unoccluded(origin, l.wi, l.d * (1.0 - 1e-4)),
+                tile: s.tile,
+            })
+        })
+        .collect()
 }
 
 /// One-bounce radiance (grey) leaving `hit` toward `eye` from the lit samples it sees, through
@@ -733,29 +735,17 @@ fn radiance_at(
 ) -> f64 {
     let n = hit.normal;
     let wo = eye.map_or(n, |e| (e - hit.position).normalize_or(n));
-    let origin = hit.position + n * (4.0 * tracer.epsilon);
-    let mut sum = 0.0;
-    for s in lit {
-        let to = s.position + s.normal * (4.0 * tracer.epsilon) - origin;
-        let d2 = to.length_squared();
-        if d2 <= 0.0 || !d2.is_finite() {
-            continue;
-        }
-        let d = d2.sqrt();
-        let wi = to / d;
-        let cos_r = n.dot(wi);
-        let cos_s = -s.normal.dot(wi);
-        if cos_r <= 0.0 || cos_s <= 0.0 {
-            continue;
-        }
-        let f = grey(crate::shading::brdf(hit.rho_d, hit.rho_s, hit.k, n, wi, wo));
-        if f <= 0.0 || !tracer.unoccluded(origin, wi, d * (1.0 - 1e-4)) {
-            continue;
-        }
-        sum += f * s.flux * (cos_r * cos_s) as f64
-            / (std::f64::consts::PI * (d2 as f64 + disc_radius2));
-    }
-    sum
+    let lift = 4.0 * tracer.epsilon;
+    let origin = hit.position + n * lift;
+    lit.iter()
+        .filter_map(|s| {
+            let l = link(origin, n, s, lift, disc_radius2)?;
+            let f = grey(crate::shading::brdf(
+                hit.rho_d, hit.rho_s, hit.k, n, l.wi, wo,
+            ));
+            (f > 0.0 && tracer.unoccluded(origin, l.wi, l.d * (1.0 - 1e-4))).then_some(f * l.w)
+        })
+        .sum()
 }
 
 /// The surface under `x` along −`n` within `reach` (plus a margin), its shading normal
