@@ -391,13 +391,13 @@ pub fn apply_budget(
         "sparse_points": {
             "value": settings.sparse_points,
             "why": why("sparse-points", format!(
-                "spacing {:.3} m over {:.1} m² of surface; radiance varies {:.3} over that distance (δ)",
+                "spacing {:.3e} m over {:.3e} m² of surface; radiance varies {:.3} over that distance (ε + δ)",
                 survey.point_spacing(settings.sparse_points), survey.area, used.variation)),
         },
         "rsm": {
             "value": settings.rsm,
             "why": why("rsm", format!(
-                "{:.0} VALs {:.3} m apart over {:.2} m² lit; their interpolation error ε {:.4}",
+                "{:.0} VALs {:.3e} m apart over {:.3e} m² lit; their interpolation error ε {:.4}",
                 survey.val_count(settings.rsm), survey.val_spacing(settings.rsm),
                 survey.lit_area, used.val_error)),
         },
@@ -412,6 +412,7 @@ pub fn apply_budget(
             }),
         },
         "choice": match (overridden, choice.met) {
+            _ if survey.is_dark() => "no light reaches a surface the camera sees: nothing to budget, the cheapest candidate",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
             (false, true) => match target {
                 budget::BudgetTarget::Flip(_) => "the cheapest predicted setting meeting the target",
