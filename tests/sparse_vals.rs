@@ -76,6 +76,11 @@ fn close(a: Vec3, b: Vec3, rel: f32, abs: f32) -> bool {
     (a - b).abs().max_element() <= rel * a.abs().max_element().max(b.abs().max_element()) + abs
 }
 
+/// Asserts [`close`] and names `what` with both values when it fails.
+fn assert_close(a: Vec3, b: Vec3, rel: f32, abs: f32, what: std::fmt::Arguments) {
+    assert!(close(a, b, rel, abs), "{what}: {a} vs {b}");
+}
+
 fn cornell_coarse() -> Scene {
     builtin::load("cornell", &BuiltinParams { max_edge: 0.1 }).expect("cornell")
 }
@@ -298,17 +303,19 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
         for (i, r) in receivers.iter().enumerate() {
             let cpu = math::gather(r, eye, &vals, weights, true);
             let gpu = &gathered.lights[i];
-            assert!(
-                close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
-                "point {i}: E_d {} vs {}",
+            assert_close(
                 gpu.diffuse,
-                cpu.diffuse
+                cpu.diffuse,
+                1e-3,
+                1e-9,
+                format_args!("point {i}: E_d"),
             );
-            assert!(
-                close(gpu.glossy, cpu.glossy, 1e-3, 1e-9),
-                "point {i}: E_s {} vs {}",
+            assert_close(
                 gpu.glossy,
-                cpu.glossy
+                cpu.glossy,
+                1e-3,
+                1e-9,
+                format_args!("point {i}: E_s"),
             );
             // Positions are stored as f16 offsets from the point: 2⁻¹¹ relative.
             let reach = (cpu.diffuse_position - r.position).length();
@@ -600,25 +607,33 @@ fn raster_gather_writes_what_the_compute_gather_writes() {
         .count();
     assert!(lit > placed / 2, "{lit} of {placed} points gathered light");
     for (i, (c, r)) in compute.lights.iter().zip(&raster.lights).enumerate() {
-        assert!(
-            close(c.diffuse, r.diffuse, 1e-5, 1e-12),
-            "point {i}: diffuse {} vs {}",
+        assert_close(
             c.diffuse,
-            r.diffuse
+            r.diffuse,
+            1e-5,
+            1e-12,
+            format_args!("point {i}: diffuse"),
         );
-        assert!(
-            close(c.glossy, r.glossy, 1e-5, 1e-12),
-            "point {i}: glossy {} vs {}",
+        assert_close(
             c.glossy,
-            r.glossy
+            r.glossy,
+            1e-5,
+            1e-12,
+            format_args!("point {i}: glossy"),
         );
-        assert!(
-            close(c.diffuse_position, r.diffuse_position, 1e-3, 1e-6),
-            "point {i}: diffuse position"
+        assert_close(
+            c.diffuse_position,
+            r.diffuse_position,
+            1e-3,
+            1e-6,
+            format_args!("point {i}: diffuse position"),
         );
-        assert!(
-            close(c.glossy_position, r.glossy_position, 1e-3, 1e-6),
-            "point {i}: glossy position"
+        assert_close(
+            c.glossy_position,
+            r.glossy_position,
+            1e-3,
+            1e-6,
+            format_args!("point {i}: glossy position"),
         );
     }
     for (i, (c, r)) in compute.spheres.iter().zip(&raster.spheres).enumerate() {

@@ -369,16 +369,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         .map(|s| MethodOptions::parse_spec(&s))
         .collect::<Result<_, _>>()?;
     for (name, options) in &specs {
-        let entry = method::entry(name).map_err(|e| EvalError::Settings(e.to_string()))?;
-        for (key, value) in options.entries() {
-            let Some(spec) = entry.options.iter().find(|o| o.name == key) else {
-                return Err(EvalError::Settings(format!(
-                    "method '{name}' has no option(s) {key}"
-                )));
-            };
-            spec.check(name, value)
-                .map_err(|e| EvalError::Settings(e.to_string()))?;
-        }
+        method::check_options(name, options).map_err(|e| EvalError::Settings(e.to_string()))?;
     }
     let out = &request.out;
     let cache_dir = out.join("cache");

@@ -297,11 +297,7 @@ pub fn check_auto(
         .position(|s| *s == richest)
         .map(|i| metrics::flip(indirect, &grid_indirect[i], exposure))
         .unwrap_or(f64::NAN);
-    let target_flip = budget
-        .get("target")
-        .and_then(|t| t.as_str())
-        .and_then(|t| t.strip_prefix("predicted FLIP ≤ "))
-        .and_then(|f| f.parse().ok());
+    let target_flip = budget.get("target_flip").and_then(|t| t.as_f64());
     let value = |knob: &str| {
         budget
             .get(knob)

@@ -793,9 +793,32 @@ pub fn fullscreen_pipeline(
     format: wgpu::TextureFormat,
     write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
+    unbuffered_pipeline(
+        device,
+        label,
+        module,
+        "vs_main",
+        &[Some(layout)],
+        format,
+        write_mask,
+    )
+}
+
+/// A render pipeline whose vertex entry `vertex_entry` makes its own vertices (no vertex
+/// buffers), with `fs_main` of the same module into one colour target of `format`: no depth,
+/// no blending, triangle lists.
+pub fn unbuffered_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    vertex_entry: &str,
+    groups: &[Option<&wgpu::BindGroupLayout>],
+    format: wgpu::TextureFormat,
+    write_mask: wgpu::ColorWrites,
+) -> wgpu::RenderPipeline {
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
-        bind_group_layouts: &[Some(layout)],
+        bind_group_layouts: groups,
         immediate_size: 0,
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
@@ -803,7 +826,7 @@ pub fn fullscreen_pipeline(
         layout: Some(&pipeline_layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some("vs_main"),
+            entry_point: Some(vertex_entry),
             compilation_options: Default::default(),
             buffers: &[],
         },

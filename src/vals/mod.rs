@@ -384,6 +384,10 @@ pub fn apply_budget(
     };
     Ok(serde_json::json!({
         "target": target_text,
+        "target_flip": match target {
+            budget::BudgetTarget::Flip(f) => Some(f),
+            budget::BudgetTarget::Ms(_) => None,
+        },
         "met": met,
         "predicted_flip": crate::gpu::timing::round3(used.predicted_flip),
         "predicted_ms": crate::gpu::timing::round3(used.predicted_ms),

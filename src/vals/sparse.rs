@@ -706,20 +706,15 @@ impl SparseGpu {
             Some(u64::from(width) * u64::from(height)),
             "use the compute gather (--gather compute) or fewer --sparse-points",
             || {
-                device.create_texture(&wgpu::TextureDescriptor {
-                    label: Some("raster gather target"),
-                    size: wgpu::Extent3d {
-                        width,
-                        height,
-                        depth_or_array_layers: 1,
-                    },
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D2,
-                    format: FORMAT,
-                    usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-                    view_formats: &[],
-                })
+                // Built lazily behind `&self`: its few kilobytes are not in the solution's
+                // byte count.
+                crate::gpu::GpuBytes::default().texture_2d(
+                    device,
+                    "raster gather target",
+                    (width, height),
+                    FORMAT,
+                    wgpu::TextureUsages::RENDER_ATTACHMENT,
+                )
             },
         )?;
         let module = ctx.shader("vals_gather_raster.wgsl");

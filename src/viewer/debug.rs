@@ -69,36 +69,15 @@ impl DebugOverlay {
         let val_layout = GroupLayout::new(device, "debug splats vals", vertex, VAL_BINDINGS);
         let shader = ctx.shader(SHADER);
         let pipeline = |label, entry, groups: &[Option<&wgpu::BindGroupLayout>]| {
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some(label),
-                bind_group_layouts: groups,
-                immediate_size: 0,
-            });
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some(label),
-                layout: Some(&layout),
-                vertex: wgpu::VertexState {
-                    module: &shader,
-                    entry_point: Some(entry),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &shader,
-                    entry_point: Some("fs_main"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            crate::raster::unbuffered_pipeline(
+                device,
+                label,
+                &shader,
+                entry,
+                groups,
+                format,
+                wgpu::ColorWrites::ALL,
+            )
         };
         let point_pipeline = pipeline(
             "debug splats: points",
