@@ -7,11 +7,18 @@
 #
 #   bash scripts/gpu-bench.sh [OUT=out/gpu-bench] [SIZE=full|small]
 #
+# VALGI=path runs a valgi binary built elsewhere instead of building one (a machine without a
+# Rust toolchain); SPONZA=file and RGBD=folder point at copies of the shared data; PARTS="a b"
+# runs only the parts named (a rerun after a change).
+#
 # Parts:
 #   table1   the paper's Table 1 grid (16k/64k/512k VALs × 4k/16k points) at 1920×1080, the
-#            per-stage split (Table 2 rows), pairs/s and % of the FMA peak, and brute force
+#            per-stage split (Table 2 rows), pairs/s and % of the FMA peak, brute force, and
+#            the gather's VAL slices and tile size swept at 16k VALs
 #   scenes   the gather's pair rate on the door room and on Sponza (sun, 256²), no brute force
 #   views    one lighting solution shared by 1–8 views against one view per solution
+#   mr       one full 640×480 RGB-D frame (every pixel a VAL) lighting the bunny, per pass
+#   negative seed 002's Table 1 (frame time per N+M on bunny-box)
 #   eval     speed against indirect error of every method on cornell, corridor and the door
 #            room (the Pareto charts), LPV against HO-LPV at the same grid and steps
 # SIZE=small shrinks every image and grid so that the suite also finishes on lavapipe
@@ -22,11 +29,11 @@ OUT=${1:-out/gpu-bench}
 SIZE=${2:-full}
 case "$SIZE" in
 full)
-    W=1920 H=1080 VALS=16384,65536,524288 POINTS=4096,16384 SMALL=512
+    W=1920 H=1080 VALS=16384,65536,524288 POINTS=4096,16384 SMALL=512 SLICES=1,16,64,256 TILES=64,256
     SCENE_W=256 VIEWS=1,2,4,8 LARGE=3840x2160 EVAL_W=256 EVAL_H=256 SPP=256
     ;;
 small)
-    W=160 H=90 VALS=4096 POINTS=1024 SMALL=64
+    W=160 H=90 VALS=4096 POINTS=1024 SMALL=64 SLICES=1,4 TILES=64
     SCENE_W=64 VIEWS=1,2 LARGE=320x180 EVAL_W=64 EVAL_H=64 SPP=16
     ;;
 *)
@@ -35,14 +42,21 @@ small)
     ;;
 esac
 mkdir -p "$OUT"
-cargo build --release --quiet --bin valgi
-VALGI=target/release/valgi
-SPONZA=../shared/data/sponza/Sponza.gltf
+if [ -z "${VALGI:-}" ]; then
+    cargo build --release --quiet --bin valgi
+    VALGI=target/release/valgi
+fi
+SPONZA=${SPONZA:-../shared/data/sponza/Sponza.gltf}
+RGBD=${RGBD:-../shared/data/rgbd/RGBD}
 start=$(date +%s)
 
 part() {
     local name=$1
     shift
+    if [ -n "${PARTS:-}" ] && [[ " $PARTS " != *" $name "* ]]; then
+        echo "== $name: skipped (not in PARTS)"
+        return
+    fi
     local t0
     t0=$(date +%s)
     echo "== $name: $*"
@@ -57,11 +71,11 @@ part() {
 }
 
 part table1 bench --width "$W" --height "$H" --vals "$VALS" --points "$POINTS" \
-    --small "$SMALL" --out "$OUT/table1"
+    --small "$SMALL" --gather-slices "$SLICES" --tiles "$TILES" --out "$OUT/table1"
 part door bench --scene door-room --width "$SCENE_W" --height "$SCENE_W" --vals 16384 \
     --points 4096 --small 64 --no-brute --out "$OUT/door"
 if [ -f "$SPONZA" ]; then
-    part sponza bench --scene sponza --light sun:-0.3,-1,-0.2,5 \
+    part sponza bench --scene "$SPONZA" --light sun:-0.3,-1,-0.2,5 \
         --camera-eye -11,1.8,-0.4 --camera-target 10,3.5,-0.4 --fov 60 \
         --width "$SCENE_W" --height "$SCENE_W" --vals 16384 --points 4096 --small 64 \
         --no-brute --out "$OUT/sponza"
@@ -70,6 +84,16 @@ else
 fi
 part views bench --views "$VIEWS" --large "$LARGE" --width "$EVAL_W" --height "$EVAL_H" \
     --out "$OUT/views"
+if [ -d "$RGBD" ]; then
+    part mr mr --rgbd "$RGBD" --frames 0..3 --out "$OUT/mr"
+    # What the full sensor frame is compared with: a 64k-VAL frame at the same size and
+    # point count (a point light's six 104² RSM faces).
+    part mr64k render --scene cornell --method sparse --sparse-points 1024 --rsm 104 \
+        --width 640 --height 480 --frames 4 --no-write --out "$OUT/mr64k"
+else
+    echo "== mr: skipped ($RGBD not found)"
+fi
+part negative negative-bench --width "$EVAL_W" --height "$EVAL_H" --frames 3 --out "$OUT/negative"
 part eval eval --scenes cornell,corridor,door-room --width "$EVAL_W" --height "$EVAL_H" \
     --ref-spp "$SPP" --frames 3 --out "$OUT/eval" \
     --methods direct,sparse,sparse:occlusion=sum,brute,lpv:steps=16,holpv:steps=16,negative,reference

@@ -447,6 +447,13 @@ struct BenchArgs {
     /// Skip the brute-force run (slow on software drivers).
     #[arg(long)]
     no_brute: bool,
+    /// Also time the default configuration with the gather split into each of these many
+    /// VAL slices (1..=256), at the first --vals count.
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=256))]
+    gather_slices: Vec<u32>,
+    /// Also time the default configuration with each of these gather tile sizes (1..=256).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=256))]
+    tiles: Vec<u32>,
     /// Instead of the Table 1 grid: time frames with these numbers of views (grid rig) per
     /// method, plus one view at --large, and the mid-eye glossy error; writes views.csv,
     /// views.png and glossy_eye.csv.
@@ -980,6 +987,8 @@ fn main() -> ExitCode {
                 brute: !args.no_brute,
                 out: args.out,
                 edits: args.scene_edits.edits(),
+                gather_slices: args.gather_slices,
+                tiles: args.tiles,
             };
             match valgi::bench::run(&request) {
                 Ok(path) => {

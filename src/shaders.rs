@@ -53,6 +53,14 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/vals/vals_gather_common.wgsl"),
     ),
     (
+        "vals_gather_partials.wgsl",
+        include_str!("../shaders/vals/vals_gather_partials.wgsl"),
+    ),
+    (
+        "vals_gather_reduce.wgsl",
+        include_str!("../shaders/vals/vals_gather_reduce.wgsl"),
+    ),
+    (
         "vals_gather_raster.wgsl",
         include_str!("../shaders/vals/vals_gather_raster.wgsl"),
     ),

@@ -104,6 +104,7 @@ fn workgroup_sizes_match_the_dispatches() {
         ("atlas_apply.wgsl", "cs_main", [tile, tile, 1]),
         ("atlas_apply.wgsl", "cs_add", [tile, tile, 1]),
         ("vals_gather.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_gather_reduce.wgsl", "cs_main", [group, 1, 1]),
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occluder_bounds.wgsl", "cs_main", [group, 1, 1]),
@@ -199,6 +200,10 @@ fn shared_constants_match() {
         (
             "vals_gather_raster.wgsl",
             &[("RASTER_WIDTH", valgi::vals::sparse::RASTER_GATHER_WIDTH)],
+        ),
+        (
+            "vals_append.wgsl",
+            &[("GROUP", valgi::light::rsm::APPEND_GROUP)],
         ),
         ("vals_occlusion.wgsl", &occlusion),
         ("vals_occluder_bounds.wgsl", &occlusion),

@@ -25,6 +25,7 @@ fn settings(points: usize) -> SparseSettings {
             weights: Weights::Geometric,
             visibility_history: 0,
             adaptive_rays: false,
+            gather_slices: 0,
         },
         ..Default::default()
     }

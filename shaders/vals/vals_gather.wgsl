@@ -3,8 +3,9 @@
 // is fetched from the buffer once per workgroup and read from workgroup memory once per
 // invocation, not once per point. Writes the irradiance sums (in the slots the
 // renormalized intensities later take), the averaged positions as f16 offsets from the point,
-// and the occlusion spheres.
-#include "vals_gather_common.wgsl"
+// and the occlusion spheres. Split over VAL slices (dispatch z > 1), each workgroup gathers
+// one slice and stores partial sums for `vals_gather_reduce.wgsl` instead.
+#include "vals_gather_partials.wgsl"
 
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
@@ -42,6 +43,11 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     }
     let count = workgroupUniformLoad(&shared_count);
     let tile = clamp(params.tile, 1u, TILE_MAX);
+    // This workgroup's slice of the VAL list: all of it unless the gather is split.
+    let slices = groups.z;
+    let chunk = (count + slices - 1u) / slices;
+    let begin = min(gid.z * chunk, count);
+    let end = min(begin + chunk, count);
     // The workgroup's GROUP · POINTS_PER_INVOCATION points, strided by GROUP so that the
     // invocations of a SIMD row read neighbouring points.
     let first = (linear_index(gid, groups) / GROUP) * GROUP * POINTS_PER_INVOCATION + lid;
@@ -55,8 +61,8 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     any_active = load_slot(2u, first + 2u * GROUP, use_visibility) || any_active;
     any_active = load_slot(3u, first + 3u * GROUP, use_visibility) || any_active;
 
-    for (var base = 0u; base < count; base += tile) {
-        let m = min(tile, count - base);
+    for (var base = begin; base < end; base += tile) {
+        let m = min(tile, end - base);
         for (var i = lid; i < m; i += GROUP) {
             tile_vals[i] = vals[base + i];
         }
@@ -94,15 +100,20 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         }
         workgroupBarrier();
     }
-    write_slot(0u, first, count, glossy_on);
-    write_slot(1u, first, count, glossy_on);
-    write_slot(2u, first, count, glossy_on);
-    write_slot(3u, first, count, glossy_on);
+    write_slot(0u, first, count, glossy_on, gid.z, slices);
+    write_slot(1u, first, count, glossy_on, gid.z, slices);
+    write_slot(2u, first, count, glossy_on, gid.z, slices);
+    write_slot(3u, first, count, glossy_on, gid.z, slices);
 }
 
-fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool) {
+fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, slice: u32, slices: u32) {
     let index = first + q * GROUP;
-    if (index < params.point_count) {
+    if (index >= params.point_count) {
+        return;
+    }
+    if (slices > 1u) {
+        partial_store((slice * params.point_count + index) * PARTIAL_VEC4S, all_sums[q]);
+    } else {
         write_point(index, points[q], all_sums[q], count, glossy_on);
     }
 }

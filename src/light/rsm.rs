@@ -432,7 +432,8 @@ struct Append {
     rows: u32,
 }
 
-/// Rows per workgroup of the append passes (`@workgroup_size(64, 1, 1)`).
+/// Invocations per workgroup of the append passes (`@workgroup_size(64, 1, 1)`), one
+/// workgroup per row of candidates.
 pub const APPEND_GROUP: u32 = 64;
 
 /// `vals_rsm.wgsl`: the layer's view, the instance transforms and the lights.
@@ -1034,11 +1035,17 @@ impl Rsm {
                 .clear_buffer(&self.val_count_buffer, 0, None);
         }
         if let Some(append) = self.append.as_ref().filter(|a| a.rows > 0) {
+            let max_groups = passes
+                .ctx()
+                .device
+                .limits()
+                .max_compute_workgroups_per_dimension;
             for pipeline in &append.pipelines {
                 passes.compute("vals append", |pass| {
                     pass.set_pipeline(pipeline);
                     pass.set_bind_group(0, &append.group, &[]);
-                    pass.dispatch_workgroups(append.rows.div_ceil(APPEND_GROUP), 1, 1);
+                    let (x, y) = crate::gpu::linear_groups(append.rows, max_groups);
+                    pass.dispatch_workgroups(x, y, 1);
                 })?;
             }
         }

@@ -54,6 +54,7 @@ impl Default for SparseSettings {
                 weights: Weights::Geometric,
                 visibility_history: 50,
                 adaptive_rays: false,
+                gather_slices: 0,
             },
             glossy_eye: GlossyEye::Mid,
         }
@@ -102,12 +103,28 @@ impl SparseSettings {
                     .get("visibility-history", d.options.visibility_history)?,
                 adaptive_rays: options.choice("visibility-rays", &["all", "adaptive"])?
                     == "adaptive",
+                gather_slices: gather_slices_option(options)?,
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
                 _ => GlossyEye::Mid,
             },
         })
+    }
+}
+
+/// `gather-slices`: `auto` (0) or a count in 1..=[`sparse::GATHER_SLICES_MAX`].
+fn gather_slices_option(options: &MethodOptions) -> Result<u32, RenderError> {
+    let text: String = options.get("gather-slices", "auto".to_string())?;
+    match text.trim() {
+        "auto" => Ok(0),
+        n => match n.parse::<u32>() {
+            Ok(n) if (1..=sparse::GATHER_SLICES_MAX).contains(&n) => Ok(n),
+            _ => Err(RenderError::Settings(format!(
+                "--gather-slices {text}: must be auto or a whole number 1..={}",
+                sparse::GATHER_SLICES_MAX
+            ))),
+        },
     }
 }
 
@@ -178,6 +195,11 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     ]
 }
 
+/// Milliseconds of the gather: its pass plus, split over VAL slices, the reduction.
+pub fn gather_ms(timings: &crate::gpu::PassTimings) -> f64 {
+    timings.get("gather").unwrap_or(0.0) + timings.get("gather reduce").unwrap_or(0.0)
+}
+
 /// Table 2 of the paper: per-pass milliseconds grouped as its rows.
 pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
     let get = |l: &str| timings.get(l).unwrap_or(0.0);
@@ -185,7 +207,7 @@ pub fn table2(timings: &crate::gpu::PassTimings) -> serde_json::Value {
     serde_json::json!({
         "rsm": round(get("rsm")),
         "direct": round(get("shadow") + get("gbuffer") + get("direct")),
-        "gather": round(get("gather")),
+        "gather": round(gather_ms(timings)),
         "renormalize": round(get("renormalize")),
         "visibility": round(get("visibility")),
         "occlusion": round(get("occlusion")),
@@ -235,6 +257,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Choice(&["compute", "raster"]),
         default: "compute",
         help: "the gather as a compute pass (VALs through workgroup memory, 4 points per invocation) or as a fragment pass over a point target (the paper's form); same sums",
+    },
+    OptionSpec {
+        name: "gather-slices",
+        kind: OptionKind::Text,
+        default: "auto",
+        help: "the compute gather split over this many slices of the VAL list, whose partial sums a second pass adds (auto: whole on a CPU device; on a GPU enough slices for about 2048 workgroups, since a few thousand points alone leave most of a large GPU idle)",
     },
     OptionSpec {
         name: "glossy",
@@ -515,7 +543,7 @@ impl SparseMethod {
 
     /// GPU bytes of the sparse solution alone (points, links, vertex lights).
     pub fn solution_bytes(&self) -> u64 {
-        self.sparse.bytes.0
+        self.sparse.bytes.0 + self.sparse.gather_partial_bytes()
     }
 }
 
@@ -615,6 +643,10 @@ impl Method for SparseMethod {
             "instance_vertices": self.sparse.vertex_count,
             "tile": opts.tile,
             "gather": format!("{:?}", opts.gather).to_lowercase(),
+            "gather_slices": match opts.gather {
+                GatherForm::Compute => self.sparse.gather_slices(ctx, &opts),
+                GatherForm::Raster => 1,
+            },
             "glossy": if opts.glossy { "on" } else { "off" },
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),

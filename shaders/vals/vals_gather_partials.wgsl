@@ -1,0 +1,36 @@
+// The gather split over slices of the VAL list (`gather-slices`, dispatch z): a point's sums
+// are plain sums over VALs, so each slice's workgroups gather their own part of the list and
+// store the partial sums here, slice-major (`partials[(slice · points + point) · 5 ..]`), and
+// `vals_gather_reduce.wgsl` adds the slices and writes the point. This is what fills a GPU
+// when the points alone are too few: 4096 points are 16 workgroups of the unsplit gather.
+#include "vals_gather_common.wgsl"
+
+@group(1) @binding(0) var<storage, read_write> partials: array<vec4<f32>>;
+
+// vec4 words per (slice, point): the 20 floats of `Sums`. `GATHER_PARTIAL_VEC4S` in
+// `src/vals/sparse.rs`.
+const PARTIAL_VEC4S: u32 = 5u;
+
+fn partial_store(at: u32, s: Sums) {
+    partials[at] = vec4<f32>(s.diffuse, s.md.weight);
+    partials[at + 1u] = vec4<f32>(s.md.sum, s.ms.weight);
+    partials[at + 2u] = vec4<f32>(s.md.sum_squares, s.glossy.r);
+    partials[at + 3u] = vec4<f32>(s.ms.sum, s.glossy.g);
+    partials[at + 4u] = vec4<f32>(s.ms.sum_squares, s.glossy.b);
+}
+
+fn partial_add(sums: ptr<function, Sums>, at: u32) {
+    let a = partials[at];
+    let b = partials[at + 1u];
+    let c = partials[at + 2u];
+    let d = partials[at + 3u];
+    let e = partials[at + 4u];
+    (*sums).diffuse += a.xyz;
+    (*sums).md.weight += a.w;
+    (*sums).md.sum += b.xyz;
+    (*sums).ms.weight += b.w;
+    (*sums).md.sum_squares += c.xyz;
+    (*sums).ms.sum += d.xyz;
+    (*sums).ms.sum_squares += e.xyz;
+    (*sums).glossy += vec3<f32>(c.w, d.w, e.w);
+}
