@@ -7,11 +7,9 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use bytemuck::{Pod, Zeroable};
-
-use crate::gpu::{GpuContext, Passes};
+use crate::gpu::GpuContext;
 use crate::method::Method;
-use crate::raster::{compute_pipeline, RenderError, RenderSettings};
+use crate::raster::{RenderError, RenderSettings};
 use crate::scene::Scene;
 use crate::vals::math::OcclusionMode;
 use crate::vals::sparse::GatherForm;
@@ -46,84 +44,7 @@ pub struct BenchRequest {
     pub tiles: Vec<u32>,
 }
 
-/// `FmaParams` in `shaders/bench/bench_fma.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-pub struct FmaParams {
-    pub iterations: u32,
-    pub pad0: u32,
-    pub pad1: u32,
-    pub pad2: u32,
-}
-
-/// Threads per workgroup of the FMA-peak kernel (`bench_fma.wgsl`).
-pub const FMA_GROUP: u32 = 256;
-
-/// Fused multiply-adds per second of the trivial kernel (best of three runs).
-pub fn fma_peak(ctx: &GpuContext) -> Result<f64, RenderError> {
-    let device = &ctx.device;
-    let threads: u32 = FMA_GROUP * 256;
-    let sink = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("fma sink"),
-        size: threads as u64 * 16,
-        usage: wgpu::BufferUsages::STORAGE,
-        mapped_at_creation: false,
-    });
-    let params = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("fma params"),
-        size: 16,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    let cs = wgpu::ShaderStages::COMPUTE;
-    let layout = crate::gpu::bindings::GroupLayout::new(
-        device,
-        "fma",
-        cs,
-        &[
-            crate::gpu::bindings::Slot::Uniform,
-            crate::gpu::bindings::Slot::StorageRw,
-        ],
-    );
-    let group = layout.bind(device, &[&params, &sink]);
-    let pipeline = compute_pipeline(
-        device,
-        "fma peak",
-        &ctx.shader("bench_fma.wgsl"),
-        &layout.layout,
-    );
-    let run = |iterations: u32| -> Result<f64, RenderError> {
-        ctx.queue.write_buffer(
-            &params,
-            0,
-            bytemuck::bytes_of(&FmaParams {
-                iterations,
-                pad0: 0,
-                pad1: 0,
-                pad2: 0,
-            }),
-        );
-        let mut passes = Passes::new(ctx);
-        passes.compute("fma", |pass| {
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(threads / FMA_GROUP, 1, 1);
-        })?;
-        let ms = passes.finish()?.get("fma").unwrap_or(0.0).max(1e-6);
-        Ok(threads as f64 * iterations as f64 * 16.0 / (ms * 1e-3))
-    };
-    // Grow the work until one run takes long enough to time well.
-    let mut iterations = 64u32;
-    let mut rate = run(iterations)?;
-    while threads as f64 * iterations as f64 * 16.0 / rate < 0.2 && iterations < 1 << 20 {
-        iterations *= 4;
-        rate = run(iterations)?;
-    }
-    let best = (0..3)
-        .map(|_| run(iterations))
-        .collect::<Result<Vec<f64>, _>>()?;
-    Ok(best.into_iter().fold(rate, f64::max))
-}
+pub use crate::gpu::peak::{fma_peak, FmaParams, FMA_GROUP};
 
 /// The RSM resolution that gives about `target` VALs on this scene, from one probe render.
 fn rsm_for(ctx: &GpuContext, scene: &Scene, target: u32) -> Result<u32, RenderError> {

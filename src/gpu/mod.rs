@@ -2,6 +2,7 @@
 //! of the bytes each method owns on the GPU.
 
 pub mod bindings;
+pub mod peak;
 pub mod readback;
 pub mod resources;
 pub mod timing;

@@ -124,6 +124,9 @@ pub struct Survey {
     pub variation: Vec<(f64, f64)>,
     pub lit_samples: usize,
     pub survey_ms: f64,
+    /// Predicted times are the fitted model's times × this: 1 on the fitting device, its FMA
+    /// peak over the device's for another ([`model::FIT_FMA_PEAK`]).
+    pub time_scale: f64,
 }
 
 /// Light views as the RSM lays them out: (light, forward, up, tan of the half field of view)
@@ -383,6 +386,7 @@ impl Survey {
             variation: vec![],
             lit_samples: lit.len(),
             survey_ms: 0.0,
+            time_scale: 1.0,
         };
         // Leaving visibility out shows seen + hidden where seen is right: relative to the
         // brighter of the two, hidden / (seen + hidden), and weighted by that brightness (a
@@ -779,6 +783,10 @@ pub mod model {
     /// The rest of a frame (shadow maps, RSM, G-buffer, direct, interpolation, apply) at
     /// 128², ms: the same for every choice, so it only shifts the budget.
     pub const FRAME_MS_FIXED: f64 = 60.0;
+    /// The FMA peak (`gpu::peak::fma_peak`) of the device the times above were fitted on,
+    /// FMA/s: lavapipe on 2 cores measures 21–38 GFMA/s from run to run. On another device
+    /// the times are scaled by this over that device's peak ([`Survey::time_scale`]).
+    pub const FIT_FMA_PEAK: f64 = 30e9;
 }
 
 /// The point counts and RSM sides budget mode chooses among: the range the model was fitted
@@ -794,7 +802,7 @@ pub enum BudgetTarget {
     /// The cheapest setting whose predicted convergence FLIP is at most this.
     Flip(f64),
     /// The lowest predicted convergence FLIP whose predicted frame time is at most this many
-    /// milliseconds on the device the model was fitted on.
+    /// milliseconds (the fitted times scaled to the device by [`Survey::time_scale`]).
     Ms(f64),
 }
 
@@ -830,14 +838,17 @@ impl Survey {
         let error = variation + model::C_VALS * val_error + visibility;
         let predicted_flip = model::A * error.max(0.0).powf(model::B);
         let pairs = points as f64 * self.val_count(rsm);
-        let predicted_ms = model::FRAME_MS_FIXED
-            + model::GATHER_MS_PER_PAIR * pairs
-            + if rays {
-                model::VISIBILITY_MS_FIXED
-                    + model::VISIBILITY_MS_PER_POINT_CLUSTER * points as f64 * self.clusters as f64
-            } else {
-                0.0
-            };
+        let predicted_ms = self.time_scale
+            * (model::FRAME_MS_FIXED
+                + model::GATHER_MS_PER_PAIR * pairs
+                + if rays {
+                    model::VISIBILITY_MS_FIXED
+                        + model::VISIBILITY_MS_PER_POINT_CLUSTER
+                            * points as f64
+                            * self.clusters as f64
+                } else {
+                    0.0
+                });
         BudgetChoice {
             points,
             rsm,
@@ -977,6 +988,32 @@ mod tests {
         // An impossible target is marked, with the most accurate candidate.
         let impossible = survey.choose(BudgetTarget::Flip(1e-9));
         assert!(!impossible.met);
+    }
+
+    #[test]
+    fn a_faster_device_affords_the_setting_a_proportionally_larger_budget_buys() {
+        let mut survey = survey_of("cornell");
+        let slow = survey.choose(BudgetTarget::Ms(300.0));
+        assert!(slow.met, "{slow:?}");
+        survey.time_scale = 0.01;
+        // Every prediction is a hundredth: 3 ms now buys what 300 ms bought.
+        let fast = survey.choose(BudgetTarget::Ms(3.0));
+        assert_eq!(
+            (fast.points, fast.rsm, fast.rays),
+            (slow.points, slow.rsm, slow.rays)
+        );
+        assert!((fast.predicted_ms - slow.predicted_ms * 0.01).abs() < 1e-9 * slow.predicted_ms);
+        // And 300 ms buys at least as accurate a setting as before.
+        let rich = survey.choose(BudgetTarget::Ms(300.0));
+        assert!(rich.predicted_flip <= slow.predicted_flip);
+        // A FLIP target's choice does not depend on the device: the same setting, cheaper.
+        let at_scale = survey.choose(BudgetTarget::Flip(0.05));
+        survey.time_scale = 1.0;
+        let at_one = survey.choose(BudgetTarget::Flip(0.05));
+        assert_eq!(
+            (at_scale.points, at_scale.rsm, at_scale.rays),
+            (at_one.points, at_one.rsm, at_one.rays)
+        );
     }
 
     #[test]

@@ -150,12 +150,21 @@ pub fn default_max_edge(
         ));
     }
     let given = options.entries().any(|(k, _)| k == "sparse-points");
-    if let (Some(target), false) = (budget_target(options)?, given) {
-        // Budget mode chooses the point count, and so the tessellation, from the raw scene.
-        let world = scene.world_from_node_at(0.0);
-        let camera = scene.camera_view(None, 1.0, &world).ok();
-        let survey = budget::Survey::new(scene, &world, camera.as_ref(), 1);
-        points = survey.choose(target).points;
+    match (budget_target(options)?, given) {
+        (Some(budget::BudgetTarget::Flip(flip)), false) => {
+            // Budget mode chooses the point count, and so the tessellation, from the raw
+            // scene.
+            let world = scene.world_from_node_at(0.0);
+            let camera = scene.camera_view(None, 1.0, &world).ok();
+            let survey = budget::Survey::new(scene, &world, camera.as_ref(), 1);
+            points = survey.choose(budget::BudgetTarget::Flip(flip)).points;
+        }
+        (Some(budget::BudgetTarget::Ms(_)), false) => {
+            // A time budget's point count depends on the device, which is not open yet:
+            // tessellate for the densest candidate (finer meshes cost only preprocessing).
+            points = *budget::CANDIDATE_POINTS.last().expect("candidates");
+        }
+        _ => {}
     }
     Ok(points::point_spacing(scene, points))
 }
@@ -316,7 +325,7 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "budget-ms",
         kind: OptionKind::Text,
         default: "",
-        help: "--quality auto: instead of a FLIP target, the most accurate setting whose predicted frame time fits this many ms (predicted with the constants fitted on lavapipe, 2 cores)",
+        help: "--quality auto: instead of a FLIP target, the most accurate setting whose predicted frame time fits this many ms (the constants fitted on lavapipe, scaled to this device by its measured FMA peak)",
     },
 ];
 
@@ -364,13 +373,17 @@ pub fn apply_budget(
     aspect: f32,
     options: &MethodOptions,
     target: budget::BudgetTarget,
+    device_fma_peak: Option<f64>,
     settings: &mut SparseSettings,
 ) -> Result<serde_json::Value, RenderError> {
     let world = scene.world_from_node_at(0.0);
     let camera = scene
         .camera_view(None, aspect, &world)
         .map_err(|e| RenderError::Settings(e.to_string()))?;
-    let survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed);
+    let mut survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed);
+    if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
+        survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
+    }
     let given = |key: &str| options.entries().any(|(k, _)| k == key);
     let choice = survey.choose(target);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
@@ -420,6 +433,8 @@ pub fn apply_budget(
         "predicted_flip": crate::gpu::timing::round3(used.predicted_flip),
         "predicted_ms": crate::gpu::timing::round3(used.predicted_ms),
         "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
+        "time_scale": survey.time_scale,
+        "device_fma_peak": device_fma_peak,
         "sparse_points": {
             "value": settings.sparse_points,
             "why": why("sparse-points", format!(
@@ -703,13 +718,22 @@ fn create(
 ) -> Result<Box<dyn Method>, RenderError> {
     let mut settings = SparseSettings::from_options(options)?;
     let budget = match budget_target(options)? {
-        Some(target) => Some(apply_budget(
-            scene,
-            render.width as f32 / render.height.max(1) as f32,
-            options,
-            target,
-            &mut settings,
-        )?),
+        Some(target) => {
+            // A time budget is predicted for this device: the fitted times scaled by the
+            // FMA peak measured here. An error target's choice does not depend on it.
+            let peak = match target {
+                budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::fma_peak(ctx)?),
+                budget::BudgetTarget::Flip(_) => None,
+            };
+            Some(apply_budget(
+                scene,
+                render.width as f32 / render.height.max(1) as f32,
+                options,
+                target,
+                peak,
+                &mut settings,
+            )?)
+        }
         None => None,
     };
     let mut method = SparseMethod::new(ctx, scene, render, settings)?;
