@@ -87,8 +87,8 @@ part views bench --views "$VIEWS" --large "$LARGE" --width "$EVAL_W" --height "$
 if [ -d "$RGBD" ]; then
     part mr mr --rgbd "$RGBD" --frames 0..3 --out "$OUT/mr"
     # What the full sensor frame is compared with: a 64k-VAL frame at the same size and
-    # point count (a point light's six 104² RSM faces).
-    part mr64k render --scene cornell --method sparse --sparse-points 1024 --rsm 104 \
+    # point count (cornell's spot light lights 60 % of its 328² RSM: 64,438 VALs).
+    part mr64k render --scene cornell --method sparse --sparse-points 1024 --rsm 328 \
         --width 640 --height 480 --frames 4 --no-write --out "$OUT/mr64k"
 else
     echo "== mr: skipped ($RGBD not found)"
