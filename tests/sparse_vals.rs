@@ -1241,3 +1241,21 @@ fn the_same_frame_renders_bit_identically() {
     assert_eq!(a.indirect.pixels, b.indirect.pixels);
     assert!(a.indirect.pixels.iter().any(|p| p[0] > 0.0));
 }
+
+#[test]
+fn solutions_on_one_device_share_its_pipelines_and_render_as_on_their_own() {
+    // The sparse passes' pipelines are compiled once per device: a second scene's solution
+    // binds its own buffers to the pipelines the first one compiled, and must render exactly
+    // what it renders on a device of its own.
+    let (Some(shared), Some(own)) = (common::gpu(), common::gpu()) else {
+        return;
+    };
+    let corridor = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).expect("corridor");
+    let s = sparse_settings(32, 300, OcclusionMode::Rays, true);
+    run_sparse(&shared, &cornell_coarse(), 32, s, Stage::Apply);
+    let (_, after_cornell, _) = run_sparse(&shared, &corridor, 32, s, Stage::Apply);
+    let (_, alone, _) = run_sparse(&own, &corridor, 32, s, Stage::Apply);
+    assert!(alone.indirect.pixels.iter().any(|p| p[0] > 0.0));
+    assert_eq!(after_cornell.indirect.pixels, alone.indirect.pixels);
+    assert_eq!(after_cornell.direct.pixels, alone.direct.pixels);
+}

@@ -139,6 +139,7 @@ impl Bindable for wgpu::Sampler {
 }
 
 /// A bind-group layout with the slot list it was made from.
+#[derive(Clone)]
 pub struct GroupLayout {
     pub layout: wgpu::BindGroupLayout,
     label: &'static str,
@@ -173,6 +174,11 @@ impl GroupLayout {
     /// # Panics
     /// When the resources do not match the slots in number or kind: a programming error in
     /// the technique, caught by its first test run.
+    /// How many bindings the layout has.
+    pub fn slot_count(&self) -> usize {
+        self.slots.len()
+    }
+
     pub fn bind(&self, device: &wgpu::Device, resources: &[&dyn Bindable]) -> wgpu::BindGroup {
         assert_eq!(
             resources.len(),

@@ -268,8 +268,7 @@ impl SceneBvh {
             bytemuck::cast_slice(&instances),
         );
         let top_buffer = init(&mut bytes, "bvh top", bytemuck::cast_slice(&top_nodes));
-        let cs = wgpu::ShaderStages::COMPUTE;
-        let layout = GroupLayout::new(&ctx.device, "scene bvh", cs, BVH_BINDINGS);
+        let layout = Self::layout(ctx);
         let group = layout.bind(
             &ctx.device,
             &[
@@ -294,6 +293,25 @@ impl SceneBvh {
             layout,
             group,
         })
+    }
+
+    /// The BVH's bind-group layout, one per device, so that pipelines made for one scene's
+    /// BVH (and shared by every user of the device) take another's group.
+    pub fn layout(ctx: &GpuContext) -> GroupLayout {
+        struct Shared(GroupLayout);
+        let shared = ctx.shared(|| {
+            let cs = wgpu::ShaderStages::COMPUTE;
+            Ok::<_, std::convert::Infallible>(Shared(GroupLayout::new(
+                &ctx.device,
+                "scene bvh",
+                cs,
+                BVH_BINDINGS,
+            )))
+        });
+        match shared {
+            Ok(shared) => shared.0.clone(),
+            Err(never) => match never {},
+        }
     }
 
     /// Places the instances for this frame and builds the top level over them (CPU records

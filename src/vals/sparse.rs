@@ -299,6 +299,126 @@ const APPLY_BINDINGS: &[Slot] = &[
     Slot::Uniform,
 ];
 
+use Slot::{Storage as R, StorageRw as W};
+
+/// The solution kernels' bindings, each list once (binding 0 is the parameter block, read-only
+/// storage; see `GpuBytes::params`). The gather's: instances, points (model, meta), VALs, VAL
+/// count, then the point diffuse, glossy and extra slots it writes, and the cluster visibility.
+const GATHER_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, W, W, R];
+/// Instances, points, point diffuse and glossy (renormalized in place), extra, clamp counts.
+const RENORMALIZE_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, W];
+/// Instances, points, the occluder tiles' bounds it writes.
+const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W];
+/// Instances, points, point diffuse and glossy (dimmed in place), extra, occluder bounds.
+const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R];
+/// Instances, points, point lights, instance ranges, links, the vertex lights it writes.
+const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, W];
+/// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
+const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
+
+/// The sparse passes' layouts and pipelines, compiled once per device and shared by every
+/// solution on it (a preview's balls, a viewer's rebuilds, an eval sweep's settings): each
+/// binds its own buffers. On lavapipe compiling them took ~300 ms of every method's set-up.
+struct SparsePipelines {
+    gather: (GroupLayout, wgpu::ComputePipeline),
+    gather_reduce: wgpu::ComputePipeline,
+    partials: GroupLayout,
+    renormalize: (GroupLayout, wgpu::ComputePipeline),
+    occluder_bounds: (GroupLayout, wgpu::ComputePipeline),
+    occlusion: (GroupLayout, wgpu::ComputePipeline),
+    interpolate: (GroupLayout, wgpu::ComputePipeline),
+    /// Group 1 is the scene BVH's ([`SceneBvh::layout`]).
+    visibility: (GroupLayout, wgpu::ComputePipeline),
+    apply: (GroupLayout, wgpu::RenderPipeline),
+}
+
+impl SparsePipelines {
+    fn shared(ctx: &GpuContext) -> Result<std::sync::Arc<Self>, GpuError> {
+        ctx.shared(|| Self::new(ctx))
+    }
+
+    fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
+        let device = &ctx.device;
+        let cs = wgpu::ShaderStages::COMPUTE;
+        let compute = |name: &'static str,
+                       shader: &str,
+                       groups: &[&wgpu::BindGroupLayout]|
+         -> Result<wgpu::ComputePipeline, GpuError> {
+            ctx.scoped(
+                &format!("the {name} pipeline"),
+                None,
+                crate::raster::PIPELINE_REMEDY,
+                || compute_pipeline_groups(device, name, &ctx.shader(shader), groups, "cs_main"),
+            )
+        };
+        let kernel = |name: &'static str, shader: &str, slots: &'static [Slot]| {
+            let layout = GroupLayout::new(device, name, cs, slots);
+            let pipeline = compute(name, shader, &[&layout.layout])?;
+            Ok::<_, GpuError>((layout, pipeline))
+        };
+        let partials = GroupLayout::new(device, "gather partials", cs, &[W]);
+        // The raster gather binds the gather's group in a fragment shader.
+        let gather_layout = GroupLayout::new(
+            device,
+            "gather",
+            cs | wgpu::ShaderStages::FRAGMENT,
+            GATHER_BINDINGS,
+        );
+        let groups = [&gather_layout.layout, &partials.layout];
+        let gather = compute("gather", "vals_gather.wgsl", &groups)?;
+        let gather_reduce = compute("gather reduce", "vals_gather_reduce.wgsl", &groups)?;
+        let bvh = SceneBvh::layout(ctx);
+        let visibility_layout = GroupLayout::new(device, "visibility", cs, VISIBILITY_BINDINGS);
+        let visibility = compute(
+            "visibility",
+            "vals_visibility.wgsl",
+            &[&visibility_layout.layout, &bvh.layout],
+        )?;
+        // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
+        let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
+        let apply_layout = GroupLayout::new(device, "apply", vs_fs, APPLY_BINDINGS);
+        let apply_module = ctx.shader("vals_apply.wgsl");
+        let apply_pipeline_layout =
+            device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some("apply"),
+                bind_group_layouts: &[Some(&apply_layout.layout)],
+                immediate_size: 0,
+            });
+        let apply = ScenePipeline {
+            label: "apply",
+            module: &apply_module,
+            layout: &apply_pipeline_layout,
+            vertex: POSITION_ONLY,
+            // Equal against the G-buffer's depth (both vertex stages are @invariant): each
+            // pixel is shaded once, by the surface the G-buffer holds.
+            depth_write: false,
+            depth_compare: wgpu::CompareFunction::Equal,
+            depth_bias: wgpu::DepthBiasState::default(),
+            targets: &[RADIANCE_FORMAT],
+        }
+        .build(device);
+        Ok(Self {
+            gather: (gather_layout, gather),
+            gather_reduce,
+            partials,
+            renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
+            occluder_bounds: kernel(
+                "occluder bounds",
+                "vals_occluder_bounds.wgsl",
+                OCCLUDER_BOUNDS_BINDINGS,
+            )?,
+            occlusion: kernel("occlusion", "vals_occlusion.wgsl", OCCLUSION_BINDINGS)?,
+            interpolate: kernel(
+                "interpolation",
+                "vals_interpolate.wgsl",
+                INTERPOLATE_BINDINGS,
+            )?,
+            visibility: (visibility_layout, visibility),
+            apply: (apply_layout, apply),
+        })
+    }
+}
+
 /// One compute pass of the solution: pipeline, layout, and the buffers after the parameter
 /// block in binding order.
 struct Kernel {
@@ -508,103 +628,52 @@ impl SparseGpu {
         let clamp_buffer = empty(&mut bytes, "renormalize clamps", 8);
         let params_buffer = bytes.params::<SparseParams>(device, "sparse params");
 
-        let cs = wgpu::ShaderStages::COMPUTE;
-        // One kernel per pass: its pipeline, layout and (buffer, writable) list in the
-        // shader's binding order; binding 0 is always the parameter block (read-only
-        // storage, see `GpuBytes::params`), so a per-view parameter block needs only new
-        // bind groups.
-        // The split gather's partial sums: group 1 of the gather and of its reduction.
-        let partials_layout = GroupLayout::new(device, "gather partials", cs, &[Slot::StorageRw]);
-        let make_for = |stages: wgpu::ShaderStages,
-                        name: &'static str,
-                        shader: &str,
-                        list: &[(&wgpu::Buffer, bool)],
-                        more_groups: &[&wgpu::BindGroupLayout]| {
-            let entries: Vec<wgpu::BindGroupLayoutEntry> = list
-                .iter()
-                .enumerate()
-                .map(|(i, (_, rw))| {
-                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, stages)
-                })
-                .collect();
-            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-                label: Some(name),
-                entries: &entries,
-            });
-            let pipeline = ctx.scoped(
-                &format!("the {name} pipeline"),
-                None,
-                crate::raster::PIPELINE_REMEDY,
-                || {
-                    let groups: Vec<&wgpu::BindGroupLayout> = std::iter::once(&layout)
-                        .chain(more_groups.iter().copied())
-                        .collect();
-                    compute_pipeline_groups(device, name, &ctx.shader(shader), &groups, "cs_main")
-                },
-            )?;
-            let buffers: Vec<wgpu::Buffer> =
-                list.iter().skip(1).map(|(b, _)| (*b).clone()).collect();
+        let pipelines = SparsePipelines::shared(ctx)?;
+        // One kernel per pass: the device's pipeline and layout for it, and this solution's
+        // buffers after the parameter block in the binding order of its slot list.
+        let kernel = |name: &'static str,
+                      (layout, pipeline): &(GroupLayout, wgpu::ComputePipeline),
+                      list: &[&wgpu::Buffer]| {
+            debug_assert_eq!(list.len() + 1, layout.slot_count(), "{name}: bindings");
             let mut kernel = Kernel {
                 label: name,
-                pipeline,
-                layout,
-                buffers,
+                pipeline: pipeline.clone(),
+                layout: layout.layout.clone(),
+                buffers: list.iter().map(|b| (*b).clone()).collect(),
                 group: None,
             };
-            kernel.group = Some(kernel.bind(device, list[0].0));
-            Ok::<_, GpuError>(kernel)
-        };
-        let make = |name: &'static str, shader: &str, list: &[(&wgpu::Buffer, bool)]| {
-            make_for(cs, name, shader, list, &[])
+            kernel.group = Some(kernel.bind(device, &params_buffer));
+            kernel
         };
         let instances = &scene_gpu.instance_buffer;
-        // The raster gather binds the same group in a fragment shader.
-        let gather = make_for(
-            cs | wgpu::ShaderStages::FRAGMENT,
+        let gather = kernel(
             "gather",
-            "vals_gather.wgsl",
+            &pipelines.gather,
             &[
-                (&params_buffer, false),
-                (instances, false),
-                (&points_model_buffer, false),
-                (&points_meta_buffer, false),
-                (vals_buffer, false),
-                (val_count_buffer, false),
-                (&point_diffuse, true),
-                (&point_glossy, true),
-                (&point_extra, true),
-                (&visibility_buffer, false),
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                vals_buffer,
+                val_count_buffer,
+                &point_diffuse,
+                &point_glossy,
+                &point_extra,
+                &visibility_buffer,
             ],
-            &[&partials_layout.layout],
-        )?;
-        let gather_reduce = ctx.scoped(
-            "the gather reduce pipeline",
-            None,
-            crate::raster::PIPELINE_REMEDY,
-            || {
-                compute_pipeline_groups(
-                    device,
-                    "gather reduce",
-                    &ctx.shader("vals_gather_reduce.wgsl"),
-                    &[&gather.layout, &partials_layout.layout],
-                    "cs_main",
-                )
-            },
-        )?;
-        let renormalize = make(
+        );
+        let renormalize = kernel(
             "renormalize",
-            "vals_renormalize.wgsl",
+            &pipelines.renormalize,
             &[
-                (&params_buffer, false),
-                (instances, false),
-                (&points_model_buffer, false),
-                (&points_meta_buffer, false),
-                (&point_diffuse, true),
-                (&point_glossy, true),
-                (&point_extra, false),
-                (&clamp_buffer, true),
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                &point_diffuse,
+                &point_glossy,
+                &point_extra,
+                &clamp_buffer,
             ],
-        )?;
+        );
         // Two vec4 per tile and super-tile of occluder discs; at most one tile per point.
         let (most_tiles, most_supers) = occlusion_tiles(point_count.max(1), 1);
         let occluder_bounds = empty(
@@ -612,47 +681,44 @@ impl SparseGpu {
             "occluder bounds",
             32 * (most_tiles + most_supers) as u64,
         );
-        let occluder_bounds_kernel = make(
+        let occluder_bounds_kernel = kernel(
             "occluder bounds",
-            "vals_occluder_bounds.wgsl",
+            &pipelines.occluder_bounds,
             &[
-                (&params_buffer, false),
-                (instances, false),
-                (&points_model_buffer, false),
-                (&points_meta_buffer, false),
-                (&occluder_bounds, true),
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                &occluder_bounds,
             ],
-        )?;
-        let occlusion = make(
+        );
+        let occlusion = kernel(
             "occlusion",
-            "vals_occlusion.wgsl",
+            &pipelines.occlusion,
             &[
-                (&params_buffer, false),
-                (instances, false),
-                (&points_model_buffer, false),
-                (&points_meta_buffer, false),
-                (&point_diffuse, true),
-                (&point_glossy, true),
-                (&point_extra, false),
-                (&occluder_bounds, false),
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                &point_diffuse,
+                &point_glossy,
+                &point_extra,
+                &occluder_bounds,
             ],
-        )?;
-        let interpolate = make(
+        );
+        let interpolate = kernel(
             "interpolation",
-            "vals_interpolate.wgsl",
+            &pipelines.interpolate,
             &[
-                (&params_buffer, false),
-                (instances, false),
-                (&points_model_buffer, false),
-                (&points_meta_buffer, false),
-                (&point_diffuse, false),
-                (&point_glossy, false),
-                (&point_extra, false),
-                (&ranges_buffer, false),
-                (&links_buffer, false),
-                (&vertex_lights, true),
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                &point_diffuse,
+                &point_glossy,
+                &point_extra,
+                &ranges_buffer,
+                &links_buffer,
+                &vertex_lights,
             ],
-        )?;
+        );
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
         let bvh = SceneBvh::new(ctx, scene)?;
@@ -665,80 +731,19 @@ impl SparseGpu {
             )));
         }
         bytes.add(GpuBytes(bvh.bytes.0));
-        let visibility_list = [
-            (&params_buffer, false),
-            (instances, false),
-            (&points_model_buffer, false),
-            (&points_meta_buffer, false),
-            (vals_buffer, false),
-            (&rsm.cluster_samples, false),
-            (&visibility_buffer, true),
-            (&visibility_history, false),
-        ];
-        let visibility_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("visibility"),
-            entries: &visibility_list
-                .iter()
-                .enumerate()
-                .map(|(i, (_, rw))| {
-                    if *rw { Slot::StorageRw } else { Slot::Storage }.entry(i as u32, cs)
-                })
-                .collect::<Vec<_>>(),
-        });
-        let visibility_pipeline = {
-            let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-                label: Some("visibility"),
-                bind_group_layouts: &[Some(&visibility_bgl), Some(&bvh.layout.layout)],
-                immediate_size: 0,
-            });
-            ctx.scoped(
-                "the visibility pipeline",
-                None,
-                crate::raster::PIPELINE_REMEDY,
-                || {
-                    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                        label: Some("visibility"),
-                        layout: Some(&layout),
-                        module: &ctx.shader("vals_visibility.wgsl"),
-                        entry_point: Some("cs_main"),
-                        compilation_options: Default::default(),
-                        cache: None,
-                    })
-                },
-            )?
-        };
-        let visibility_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("visibility"),
-            layout: &visibility_bgl,
-            entries: &visibility_list
-                .iter()
-                .enumerate()
-                .map(|(i, (b, _))| buffer_binding(i as u32, b))
-                .collect::<Vec<_>>(),
-        });
-
-        // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
-        let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
-        let apply_bgl = GroupLayout::new(device, "apply", vs_fs, APPLY_BINDINGS);
-        let apply_module = ctx.shader("vals_apply.wgsl");
-        let apply_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("apply"),
-            bind_group_layouts: &[Some(&apply_bgl.layout)],
-            immediate_size: 0,
-        });
-        let apply_pipeline = ScenePipeline {
-            label: "apply",
-            module: &apply_module,
-            layout: &apply_layout,
-            vertex: POSITION_ONLY,
-            // Equal against the G-buffer's depth (both vertex stages are @invariant): each
-            // pixel is shaded once, by the surface the G-buffer holds.
-            depth_write: false,
-            depth_compare: wgpu::CompareFunction::Equal,
-            depth_bias: wgpu::DepthBiasState::default(),
-            targets: &[RADIANCE_FORMAT],
-        }
-        .build(device);
+        let visibility_group = pipelines.visibility.0.bind(
+            device,
+            &[
+                &params_buffer,
+                instances,
+                &points_model_buffer,
+                &points_meta_buffer,
+                vals_buffer,
+                &rsm.cluster_samples,
+                &visibility_buffer,
+                &visibility_history,
+            ],
+        );
 
         Ok(Self {
             point_count,
@@ -762,8 +767,8 @@ impl SparseGpu {
             vertex_lights,
             ranges_buffer,
             gather,
-            gather_reduce,
-            partials_layout,
+            gather_reduce: pipelines.gather_reduce.clone(),
+            partials_layout: pipelines.partials.clone(),
             partials: std::cell::RefCell::new(None),
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
@@ -773,13 +778,13 @@ impl SparseGpu {
             occlusion,
             occluder_bounds: occluder_bounds_kernel,
             interpolate,
-            apply_pipeline,
-            apply_bgl,
+            apply_pipeline: pipelines.apply.1.clone(),
+            apply_bgl: pipelines.apply.0.clone(),
             bvh,
             visibility_buffer,
             visibility_history,
             solutions_recorded: std::cell::Cell::new(0),
-            visibility_pipeline,
+            visibility_pipeline: pipelines.visibility.1.clone(),
             visibility_group,
             rsm_tiles: rsm.tile_count(),
         })
