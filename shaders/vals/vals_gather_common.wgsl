@@ -45,28 +45,27 @@ struct Sums {
     ms: Moments,
 }
 
-// The invocation's points' cluster visibility words (all 255s without FLAG_VISIBILITY).
-var<private> point_visibility: array<u32, VISIBILITY_WORDS * POINT_SLOTS>;
-
-// V of the VAL's cluster (`flux.w`) at this invocation's point `slot`.
-// VALs outside every cluster (appended external ones, w = 32) are not scaled.
-fn val_visibility(val: Val, slot: u32) -> f32 {
-    let cluster = u32(val.flux.w);
+// Visibility V of a VAL's cluster (`flux.w`) at a point, from the point's cluster words (V·255,
+// four clusters per word): `word` is the one holding the cluster. VALs outside every cluster
+// (appended external ones, w = 32) are not scaled. Each form keeps its points' words where
+// it reads them fastest (see each).
+fn cluster_visibility(cluster: u32, word: u32) -> f32 {
     if (cluster >= VISIBILITY_WORDS * 4u) {
         return 1.0;
     }
-    let word = point_visibility[slot * VISIBILITY_WORDS + cluster / 4u];
     return f32((word >> (8u * (cluster % 4u))) & 255u) / 255.0;
 }
 
+// The cluster of a VAL, as `cluster_visibility` takes it.
+fn val_cluster(val: Val) -> u32 {
+    return u32(val.flux.w);
+}
+
 // Adds one VAL's contribution at the point (x, n, k) with mirror direction r, scaled by its
-// cluster's visibility there.
-fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: Val, slot: u32, glossy_on: bool, flux_weights: bool, use_visibility: bool) {
+// cluster's visibility V there (1 without visibility).
+fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: Val, visibility: f32, glossy_on: bool, flux_weights: bool) {
     let gw = disc_geometry(point.position, point.normal, val);
-    var g = gw.x;
-    if (use_visibility) {
-        g *= val_visibility(val, slot);
-    }
+    let g = gw.x * visibility;
     let e = val.flux.rgb * (g / PI);
     var strength = val.position_area.w * g;
     if (flux_weights) {
@@ -91,17 +90,19 @@ fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: V
     }
 }
 
-// Slot q's point `index`, its visibility words, mirror direction and cleared sums;
-// false when the slot is past the last point (it then gathers at a harmless placeholder and
-// is never written).
-fn load_slot(q: u32, index: u32, use_visibility: bool) -> bool {
-    let is_active = index < params.point_count;
-    for (var w = 0u; w < VISIBILITY_WORDS; w++) {
-        point_visibility[q * VISIBILITY_WORDS + w] = 0xffffffffu;
-        if (use_visibility && is_active) {
-            point_visibility[q * VISIBILITY_WORDS + w] = visibility[index * VISIBILITY_WORDS + w];
-        }
+// Point `index`'s visibility word `w` (all clusters seen without visibility or past the
+// last point).
+fn visibility_word(index: u32, w: u32, use_visibility: bool) -> u32 {
+    if (use_visibility && index < params.point_count) {
+        return visibility[index * VISIBILITY_WORDS + w];
     }
+    return 0xffffffffu;
+}
+
+// Slot q's point `index`, mirror direction and cleared sums; false when the slot is past the
+// last point (it then gathers at a harmless placeholder and is never written).
+fn load_slot(q: u32, index: u32) -> bool {
+    let is_active = index < params.point_count;
     var point: WorldPoint;
     point.normal = vec3<f32>(0.0, 0.0, 1.0);
     var r = vec3<f32>(0.0, 0.0, 1.0);
