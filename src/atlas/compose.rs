@@ -26,19 +26,13 @@ impl AtlasOnVals {
         let device = &ctx.device;
         let cs = wgpu::ShaderStages::COMPUTE;
         let add_bgl = GroupLayout::new(device, "atlas add", cs, super::ADD_BINDINGS);
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("atlas add"),
-            bind_group_layouts: &[Some(&add_bgl.layout)],
-            immediate_size: 0,
-        });
-        let add_pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("atlas add"),
-            layout: Some(&pipeline_layout),
-            module: &ctx.shader("atlas_apply.wgsl"),
-            entry_point: Some("cs_add"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let add_pipeline = crate::gpu::compute_pipeline_groups(
+            device,
+            "atlas add",
+            &ctx.shader("atlas_apply.wgsl"),
+            &[&add_bgl.layout],
+            "cs_add",
+        );
         Self {
             layer,
             name,

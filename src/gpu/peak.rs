@@ -46,19 +46,13 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
         ],
     );
     let group = layout.bind(device, &[&params, &sink]);
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some("fma peak"),
-        bind_group_layouts: &[Some(&layout.layout)],
-        immediate_size: 0,
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("fma peak"),
-        layout: Some(&pipeline_layout),
-        module: &ctx.shader("bench_fma.wgsl"),
-        entry_point: Some("cs_main"),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let pipeline = super::compute_pipeline_groups(
+        device,
+        "fma peak",
+        &ctx.shader("bench_fma.wgsl"),
+        &[&layout.layout],
+        "cs_main",
+    );
     let run = |iterations: u32| -> Result<f64, GpuError> {
         ctx.queue.write_buffer(
             &params,

@@ -856,29 +856,5 @@ pub fn compute_pipeline_at(
     layout: &wgpu::BindGroupLayout,
     entry: &str,
 ) -> wgpu::ComputePipeline {
-    compute_pipeline_groups(device, label, module, &[layout], entry)
-}
-
-/// A compute pipeline whose bind groups 0, 1, … have `layouts`.
-pub fn compute_pipeline_groups(
-    device: &wgpu::Device,
-    label: &str,
-    module: &wgpu::ShaderModule,
-    layouts: &[&wgpu::BindGroupLayout],
-    entry: &str,
-) -> wgpu::ComputePipeline {
-    let groups: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|l| Some(*l)).collect();
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: &groups,
-        immediate_size: 0,
-    });
-    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some(label),
-        layout: Some(&pipeline_layout),
-        module,
-        entry_point: Some(entry),
-        compilation_options: Default::default(),
-        cache: None,
-    })
+    crate::gpu::compute_pipeline_groups(device, label, module, &[layout], entry)
 }

@@ -18,13 +18,12 @@ use super::math::{OcclusionMode, PointLights, Weights};
 use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
 use crate::gpu::bindings::{GroupLayout, Slot};
-use crate::gpu::{linear_groups, GpuBytes, GpuContext, GpuError, Passes};
+use crate::gpu::{compute_pipeline_groups, linear_groups, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
-    buffer_binding, cleared, compute_pipeline_groups, RenderError, ScenePipeline, POSITION_ONLY,
-    RADIANCE_FORMAT,
+    buffer_binding, cleared, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
 };
 use crate::scene::{Material, Scene};
 
@@ -629,50 +628,46 @@ impl SparseGpu {
         let params_buffer = bytes.params::<SparseParams>(device, "sparse params");
 
         let pipelines = SparsePipelines::shared(ctx)?;
+        let instances = &scene_gpu.instance_buffer;
         // One kernel per pass: the device's pipeline and layout for it, and this solution's
-        // buffers after the parameter block in the binding order of its slot list.
+        // buffers after the parameter block in the binding order of its slot list: every
+        // kernel reads the instances and the points first, then `list`.
         let kernel = |name: &'static str,
                       (layout, pipeline): &(GroupLayout, wgpu::ComputePipeline),
                       list: &[&wgpu::Buffer]| {
-            debug_assert_eq!(list.len() + 1, layout.slot_count(), "{name}: bindings");
+            let buffers: Vec<wgpu::Buffer> = [instances, &points_model_buffer, &points_meta_buffer]
+                .into_iter()
+                .chain(list.iter().copied())
+                .cloned()
+                .collect();
+            debug_assert_eq!(buffers.len() + 1, layout.slot_count(), "{name}: bindings");
             let mut kernel = Kernel {
                 label: name,
                 pipeline: pipeline.clone(),
                 layout: layout.layout.clone(),
-                buffers: list.iter().map(|b| (*b).clone()).collect(),
+                buffers,
                 group: None,
             };
             kernel.group = Some(kernel.bind(device, &params_buffer));
             kernel
         };
-        let instances = &scene_gpu.instance_buffer;
+        let lights = [&point_diffuse, &point_glossy, &point_extra];
         let gather = kernel(
             "gather",
             &pipelines.gather,
             &[
-                instances,
-                &points_model_buffer,
-                &points_meta_buffer,
                 vals_buffer,
                 val_count_buffer,
-                &point_diffuse,
-                &point_glossy,
-                &point_extra,
+                lights[0],
+                lights[1],
+                lights[2],
                 &visibility_buffer,
             ],
         );
         let renormalize = kernel(
             "renormalize",
             &pipelines.renormalize,
-            &[
-                instances,
-                &points_model_buffer,
-                &points_meta_buffer,
-                &point_diffuse,
-                &point_glossy,
-                &point_extra,
-                &clamp_buffer,
-            ],
+            &[&lights[..], &[&clamp_buffer]].concat(),
         );
         // Two vec4 per tile and super-tile of occluder discs; at most one tile per point.
         let (most_tiles, most_supers) = occlusion_tiles(point_count.max(1), 1);
@@ -684,40 +679,21 @@ impl SparseGpu {
         let occluder_bounds_kernel = kernel(
             "occluder bounds",
             &pipelines.occluder_bounds,
-            &[
-                instances,
-                &points_model_buffer,
-                &points_meta_buffer,
-                &occluder_bounds,
-            ],
+            &[&occluder_bounds],
         );
         let occlusion = kernel(
             "occlusion",
             &pipelines.occlusion,
-            &[
-                instances,
-                &points_model_buffer,
-                &points_meta_buffer,
-                &point_diffuse,
-                &point_glossy,
-                &point_extra,
-                &occluder_bounds,
-            ],
+            &[&lights[..], &[&occluder_bounds]].concat(),
         );
         let interpolate = kernel(
             "interpolation",
             &pipelines.interpolate,
             &[
-                instances,
-                &points_model_buffer,
-                &points_meta_buffer,
-                &point_diffuse,
-                &point_glossy,
-                &point_extra,
-                &ranges_buffer,
-                &links_buffer,
-                &vertex_lights,
-            ],
+                &lights[..],
+                &[&ranges_buffer, &links_buffer, &vertex_lights],
+            ]
+            .concat(),
         );
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
