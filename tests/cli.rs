@@ -459,6 +459,13 @@ fn shadow_budgets_val_budgets_spp_and_sparse_points_out_of_range_are_refused() {
         &tiny_render(out, &["--max-vals", "0"]),
         &["--max-vals", "0"],
     );
+    for slices in ["0", "257", "half", "-1"] {
+        let flag = format!("--gather-slices={slices}");
+        assert_refused(
+            &tiny_render(out, &["--method", "sparse", &flag]),
+            &["--gather-slices", slices, "1..=256"],
+        );
+    }
     // plane-point's point light has six RSM views: five VALs cannot give each one.
     assert_refused(
         &tiny_render(out, &["--method", "sparse", "--max-vals", "5"]),
