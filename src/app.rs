@@ -251,20 +251,18 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     }
     let loading = crate::progress::Step::new(true, 1, &format!("loading {}", request.scene));
     let load_started = Instant::now();
-    let (mut scene, tessellation) = load_scene(
+    let aspect = request.settings.width as f32 / request.settings.height as f32;
+    let (scene, tessellation, camera) = load_scene_edited(
         &request.scene,
         &[(&request.method, &request.options)],
         request.max_edge,
         request.allow_external_paths,
         request.emitter_lights,
+        (&request.edits, request.camera.as_deref(), aspect),
     )?;
     let load_ms = load_started.elapsed().as_secs_f64() * 1000.0;
     loading.inc(1);
     loading.finish();
-    let aspect = request.settings.width as f32 / request.settings.height as f32;
-    let camera = request
-        .edits
-        .apply(&mut scene, request.camera.as_deref(), aspect)?;
     // From here on the request names the camera the edits chose.
     let request = &RenderRequest {
         camera,
@@ -538,33 +536,74 @@ pub fn load_scene(
     allow_external_paths: bool,
     emitter_lights: u32,
 ) -> Result<(scene::Scene, Tessellation), AppError> {
+    let none = crate::scene::edits::SceneEdits::default();
+    let (scene, tessellation, _) = load_scene_edited(
+        spec,
+        methods,
+        max_edge,
+        allow_external_paths,
+        emitter_lights,
+        (&none, None, 1.0),
+    )?;
+    Ok((scene, tessellation))
+}
+
+/// [`load_scene`] with the command line's lights and camera applied (`edits`, the camera
+/// selector and the image's aspect): the tessellation's choice sees them too (budget mode
+/// surveys the lit scene from that camera). Returns the camera the edits leave it with.
+pub fn load_scene_edited(
+    spec: &str,
+    methods: &[(&str, &MethodOptions)],
+    max_edge: Option<f32>,
+    allow_external_paths: bool,
+    emitter_lights: u32,
+    (edits, camera, aspect): (&crate::scene::edits::SceneEdits, Option<&str>, f32),
+) -> Result<(scene::Scene, Tessellation, Option<String>), AppError> {
     let fallback = BuiltinParams::default().max_edge;
     let params = scene::LoadParams {
         max_edge: max_edge.unwrap_or(fallback),
         allow_external_paths,
         emitter_lights,
     };
-    let mut failure = None;
-    let (scene, edges) = scene::load_choosing_max_edge(spec, &params, |raw| {
+    let mut failure: Option<AppError> = None;
+    let (mut scene, edges) = scene::load_choosing_max_edge(spec, &params, |raw| {
         if max_edge.is_some() {
             return None;
+        }
+        // The raw scene with the edits, when a method will survey it.
+        let mut edited = None;
+        for (method, options) in methods {
+            if crate::vals::uses_sparse_points(method)
+                && crate::vals::surveys_for_tessellation(options).unwrap_or(false)
+                && edited.is_none()
+            {
+                let mut copy = raw.clone();
+                match edits.apply(&mut copy, camera, aspect) {
+                    Ok(selector) => edited = Some((copy, selector)),
+                    Err(e) => failure = Some(e.into()),
+                }
+            }
         }
         let mut finest: Option<f32> = None;
         for (method, options) in methods {
             if !crate::vals::uses_sparse_points(method) {
                 continue;
             }
-            match crate::vals::default_max_edge(raw, options) {
+            let view = edited
+                .as_ref()
+                .map(|(s, selector)| (s, selector.as_deref(), aspect));
+            match crate::vals::default_max_edge(raw, options, view) {
                 Ok(Some(edge)) => finest = Some(finest.map_or(edge, |f| f.min(edge))),
                 Ok(None) => {}
-                Err(e) => failure = Some(e),
+                Err(e) => failure = Some(e.into()),
             }
         }
         finest
     })?;
     if let Some(e) = failure {
-        return Err(e.into());
+        return Err(e);
     }
+    let camera = edits.apply(&mut scene, camera, aspect)?;
     let (max_edge, source) = match (max_edge, edges.chosen) {
         (Some(given), _) => (given, "option"),
         (None, Some(spacing)) => (spacing, "sparse spacing"),
@@ -577,6 +616,7 @@ pub fn load_scene(
             source,
             used_max_edge: edges.used,
         },
+        camera,
     ))
 }
 

@@ -156,17 +156,17 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         "sparse-points",
         request.points.iter().copied().max().unwrap_or(4096),
     );
-    let (mut scene, tessellation) = crate::app::load_scene(
+    let (scene, tessellation, camera_selector) = crate::app::load_scene_edited(
         &request.scene,
         &[("sparse", &densest)],
         None,
         false,
         crate::scene::emitters::DEFAULT_EMITTER_LIGHTS,
-    )?;
-    let camera_selector = request.edits.apply(
-        &mut scene,
-        None,
-        request.width as f32 / request.height as f32,
+        (
+            &request.edits,
+            None,
+            request.width as f32 / request.height as f32,
+        ),
     )?;
     println!(
         "scene: {} ({} triangles, max edge {:.3} m from {}, {} lights)",

@@ -913,3 +913,68 @@ fn the_sponza_alias_resolves_to_the_shared_file() {
         }
     }
 }
+
+/// Budget mode chooses an imported scene's tessellation from a survey of the scene as it will
+/// be rendered: with the command line's light. A room without lights of its own, lit only by
+/// `--light`, is refined to the spacing of the point count budget mode then picks for it (the
+/// survey once saw the unlit raw scene and refined it for the cheapest count).
+#[test]
+fn budget_mode_tessellates_for_the_points_it_picks_with_the_command_line_light() {
+    use valgi::method::MethodOptions;
+    let dir = temp_dir("budget-tessellation");
+    // A 4 × 2.5 × 3 m room of six inward-facing quads, an L-shaped wall inside it.
+    let mut obj = String::new();
+    let quads: [[[f32; 3]; 4]; 8] = [
+        [[0., 0., 0.], [4., 0., 0.], [4., 0., 3.], [0., 0., 3.]],
+        [[0., 2.5, 0.], [0., 2.5, 3.], [4., 2.5, 3.], [4., 2.5, 0.]],
+        [[0., 0., 0.], [0., 0., 3.], [0., 2.5, 3.], [0., 2.5, 0.]],
+        [[4., 0., 0.], [4., 2.5, 0.], [4., 2.5, 3.], [4., 0., 3.]],
+        [[0., 0., 0.], [0., 2.5, 0.], [4., 2.5, 0.], [4., 0., 0.]],
+        [[0., 0., 3.], [4., 0., 3.], [4., 2.5, 3.], [0., 2.5, 3.]],
+        [[2., 0., 0.], [2., 2., 0.], [2., 2., 2.], [2., 0., 2.]],
+        [[2., 0., 2.], [2., 2., 2.], [3., 2., 2.], [3., 0., 2.]],
+    ];
+    for (q, quad) in quads.iter().enumerate() {
+        for v in quad {
+            obj += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+        }
+        let b = 4 * q + 1;
+        obj += &format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3);
+    }
+    std::fs::write(dir.join("room.obj"), obj).unwrap();
+    let spec = dir.join("room.obj").to_str().unwrap().to_string();
+    let mut options = MethodOptions::default();
+    options.set("quality", "auto");
+    let edits = valgi::scene::edits::SceneEdits {
+        lights: vec!["point:1,2,1.5,20".parse().unwrap()],
+        ..Default::default()
+    };
+    let aspect = 1.5;
+    let (scene, tess, _camera) = valgi::app::load_scene_edited(
+        &spec,
+        &[("sparse", &options)],
+        None,
+        false,
+        EMITTERS,
+        (&edits, None, aspect),
+    )
+    .unwrap();
+    assert_eq!(tess.source, "sparse spacing");
+    assert_eq!(
+        scene.lights.len(),
+        1,
+        "the command line's light is in the scene"
+    );
+    // What budget mode picks when the method is built on the loaded scene.
+    let target = valgi::vals::budget_target(&options).unwrap().unwrap();
+    let mut settings = valgi::vals::SparseSettings::default();
+    let report =
+        valgi::vals::apply_budget(&scene, aspect, &options, target, None, &mut settings).unwrap();
+    let spacing = valgi::vals::points::point_spacing(&scene, settings.sparse_points).unwrap();
+    assert!(
+        (tess.max_edge / spacing - 1.0).abs() < 0.02,
+        "tessellated for {} m, budget mode picked {} points ({spacing} m apart): {report}",
+        tess.max_edge,
+        settings.sparse_points
+    );
+}

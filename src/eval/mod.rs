@@ -388,16 +388,22 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
     let method_pairs: Vec<(&str, &MethodOptions)> =
         specs.iter().map(|(n, o)| (n.as_str(), o)).collect();
     for spec in &request.scenes {
-        let (mut scene, max_edge) = if request.sparse_spacing {
-            let (scene, tessellation) =
-                crate::app::load_scene(spec, &method_pairs, None, false, request.emitter_lights)?;
-            (scene, tessellation.max_edge)
+        let edits = (&request.edits, request.camera.as_deref(), aspect);
+        let (scene, camera, max_edge) = if request.sparse_spacing {
+            let (scene, tessellation, camera) = crate::app::load_scene_edited(
+                spec,
+                &method_pairs,
+                None,
+                false,
+                request.emitter_lights,
+                edits,
+            )?;
+            (scene, camera, tessellation.max_edge)
         } else {
-            (scene::load_with(spec, &params)?, request.max_edge)
+            let mut scene = scene::load_with(spec, &params)?;
+            let camera = request.edits.apply(&mut scene, edits.1, aspect)?;
+            (scene, camera, request.max_edge)
         };
-        let camera = request
-            .edits
-            .apply(&mut scene, request.camera.as_deref(), aspect)?;
         scenes.push((scene, camera, max_edge));
     }
     let ctx = GpuContext::new()?;

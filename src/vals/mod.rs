@@ -128,6 +128,13 @@ fn gather_slices_option(options: &MethodOptions) -> Result<u32, RenderError> {
     }
 }
 
+/// Whether [`default_max_edge`] surveys the scene for these options (budget mode with a FLIP
+/// target choosing the point count), so that the caller can hand it the edited scene.
+pub fn surveys_for_tessellation(options: &MethodOptions) -> Result<bool, RenderError> {
+    let given = options.entries().any(|(k, _)| k == "sparse-points");
+    Ok(!given && matches!(budget_target(options)?, Some(budget::BudgetTarget::Flip(_))))
+}
+
 /// Methods that gather at sparse points (they read the `sparse-points` option).
 pub fn uses_sparse_points(method: &str) -> bool {
     matches!(method, "sparse" | "sparse+atlas")
@@ -138,9 +145,15 @@ pub fn uses_sparse_points(method: &str) -> bool {
 /// about one point (a triangle with edges ≤ s has at most √3/4·s² of area, 0.43 of a point's
 /// share s²). Finer meshes only cost preprocessing (every vertex links to 8 points); coarser
 /// ones blur the points' irradiance across a triangle. `None` for a scene without area.
+///
+/// Under a FLIP target the count comes from a survey of the scene as it will be rendered:
+/// `edited` is the scene with the command line's lights and camera (and that camera's name and
+/// the image's aspect); without it the raw scene and its default camera at aspect 1 are
+/// surveyed.
 pub fn default_max_edge(
     scene: &Scene,
     options: &MethodOptions,
+    edited: Option<(&Scene, Option<&str>, f32)>,
 ) -> Result<Option<f32>, RenderError> {
     let mut points: usize =
         options.get("sparse-points", SparseSettings::default().sparse_points)?;
@@ -152,11 +165,12 @@ pub fn default_max_edge(
     let given = options.entries().any(|(k, _)| k == "sparse-points");
     match (budget_target(options)?, given) {
         (Some(budget::BudgetTarget::Flip(flip)), false) => {
-            // Budget mode chooses the point count, and so the tessellation, from the raw
-            // scene.
-            let world = scene.world_from_node_at(0.0);
-            let camera = scene.camera_view(None, 1.0, &world).ok();
-            let survey = budget::Survey::new(scene, &world, camera.as_ref(), 1);
+            // Budget mode chooses the point count, and so the tessellation, before the scene
+            // is refined: survey it lit and seen as it will be rendered.
+            let (surveyed, camera, aspect) = edited.unwrap_or((scene, None, 1.0));
+            let world = surveyed.world_from_node_at(0.0);
+            let camera = surveyed.camera_view(camera, aspect, &world).ok();
+            let survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1);
             points = survey.choose(budget::BudgetTarget::Flip(flip)).points;
         }
         (Some(budget::BudgetTarget::Ms(_)), false) => {
