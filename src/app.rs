@@ -282,7 +282,10 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     }
     let setup_started = Instant::now();
     let ctx = GpuContext::new()?;
-    let settings = request.settings;
+    let settings = crate::raster::RenderSettings {
+        camera: scene.camera_index(request.camera.as_deref()),
+        ..request.settings
+    };
     let preparing = crate::progress::Step::new(true, 1, &format!("preparing {}", request.method));
     let mut method = method::create(&request.method, &ctx, &scene, settings, &request.options)?;
     preparing.inc(1);

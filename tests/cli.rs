@@ -753,6 +753,24 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     let placed = cornell["sparse_points"].as_u64().unwrap() as f64;
     assert!((placed / chosen - 1.0).abs() < 0.02, "{placed} vs {chosen}");
     assert!(budget["predicted_flip"].as_f64().unwrap() <= 0.1);
+    // The survey looks from the camera the image is drawn from: the scene's own by default,
+    // the command line's when it gives one.
+    let own = budget["surveyed_from"].as_array().expect("surveyed_from");
+    let eye = [0.1, 0.9, 0.2];
+    let moved = budget_render(
+        "cornell",
+        &["--camera-eye", "0.1,0.9,0.2", "--camera-target", "0,0.5,-1"],
+    );
+    let from = moved["budget"]["surveyed_from"]
+        .as_array()
+        .expect("surveyed_from");
+    for (axis, (f, e)) in from.iter().zip(eye).enumerate() {
+        assert!(
+            (f.as_f64().unwrap() - e).abs() < 1e-4,
+            "axis {axis}: {from:?}"
+        );
+    }
+    assert_ne!(own, from, "cornell's own camera stands elsewhere");
     // In a convex empty box nothing is in the way: no occlusion. A point count given on the
     // command line stays, and says so.
     let empty = budget_render("bunny-box-empty", &["--sparse-points", "300"]);

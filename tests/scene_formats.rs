@@ -968,8 +968,15 @@ fn budget_mode_tessellates_for_the_points_it_picks_with_the_command_line_light()
     // What budget mode picks when the method is built on the loaded scene.
     let target = valgi::vals::budget_target(&options).unwrap().unwrap();
     let mut settings = valgi::vals::SparseSettings::default();
-    let report =
-        valgi::vals::apply_budget(&scene, aspect, &options, target, None, &mut settings).unwrap();
+    let report = valgi::vals::apply_budget(
+        &scene,
+        (None, aspect),
+        &options,
+        target,
+        None,
+        &mut settings,
+    )
+    .unwrap();
     let spacing = valgi::vals::points::point_spacing(&scene, settings.sparse_points).unwrap();
     assert!(
         (tess.max_edge / spacing - 1.0).abs() < 0.02,

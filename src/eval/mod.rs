@@ -434,6 +434,12 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             log::warn!("{warning}");
         }
         let scene_label = slug(&scene.name);
+        // Methods that look at the scene when they are built (budget mode) see it from the
+        // camera the images are drawn from.
+        let settings = RenderSettings {
+            camera: scene.camera_index(camera.as_deref()),
+            ..settings
+        };
         // The listed methods are built first, so that a bad option fails before the reference
         // renders; the sweep's (options checked above) are built one at a time as they render,
         // so a grid of dozens never holds more than one method's GPU memory.

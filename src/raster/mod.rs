@@ -38,6 +38,10 @@ pub struct RenderSettings {
     /// own limits). Shadow maps and RSMs each get at most a quarter of it, and a method whose
     /// buffers and textures exceed it is refused before it renders.
     pub gpu_memory_mib: Option<u32>,
+    /// The scene camera (index into `Scene::cameras`) the frames are drawn from, for what a
+    /// method builds from the camera's view before any frame (budget mode's survey); `None`:
+    /// the scene's first camera, or the framing default without one.
+    pub camera: Option<usize>,
 }
 
 impl RenderSettings {
@@ -92,6 +96,7 @@ impl Default for RenderSettings {
             shadow_memory_mib: DEFAULT_SHADOW_MEMORY_MIB,
             max_vals: crate::light::rsm::DEFAULT_MAX_VALS,
             gpu_memory_mib: None,
+            camera: None,
         }
     }
 }

@@ -119,7 +119,7 @@ pub struct Survey {
     /// Surface area the camera sees, m² (all of it without a camera).
     pub visible_area: f64,
     /// The camera's position, when receivers are what it sees.
-    eye: Option<Vec3>,
+    pub eye: Option<Vec3>,
     /// (h, δ(h)) at the spacings of [`PROBE_POINTS`] points, h ascending.
     pub variation: Vec<(f64, f64)>,
     pub lit_samples: usize,

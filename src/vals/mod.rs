@@ -379,20 +379,22 @@ pub fn budget_target(options: &MethodOptions) -> Result<Option<budget::BudgetTar
 /// `--target-flip`'s default.
 pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
 
-/// Applies `--quality auto` to `settings`: surveys `scene` as its default camera sees it at
-/// time 0, chooses, and sets every budget knob the options do not give explicitly. Returns
-/// the JSON `budget` report: per knob its value and why.
+/// Applies `--quality auto` to `settings`: surveys `scene` as the render's camera (`camera`,
+/// an index; `None`: the scene's first) sees it at time 0, chooses, and sets every budget knob
+/// the options do not give explicitly. Returns the JSON `budget` report: per knob its value
+/// and why.
 pub fn apply_budget(
     scene: &Scene,
-    aspect: f32,
+    (camera, aspect): (Option<usize>, f32),
     options: &MethodOptions,
     target: budget::BudgetTarget,
     device_fma_peak: Option<f64>,
     settings: &mut SparseSettings,
 ) -> Result<serde_json::Value, RenderError> {
     let world = scene.world_from_node_at(0.0);
+    let selector = camera.map(|i| i.to_string());
     let camera = scene
-        .camera_view(None, aspect, &world)
+        .camera_view(selector.as_deref(), aspect, &world)
         .map_err(|e| RenderError::Settings(e.to_string()))?;
     let mut survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed);
     if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
@@ -447,6 +449,7 @@ pub fn apply_budget(
         "predicted_flip": crate::gpu::timing::round3(used.predicted_flip),
         "predicted_ms": crate::gpu::timing::round3(used.predicted_ms),
         "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
+        "surveyed_from": survey.eye.map(|e| [e.x, e.y, e.z]),
         "time_scale": survey.time_scale,
         "device_fma_peak": device_fma_peak,
         "sparse_points": {
@@ -741,7 +744,10 @@ fn create(
             };
             Some(apply_budget(
                 scene,
-                render.width as f32 / render.height.max(1) as f32,
+                (
+                    render.camera,
+                    render.width as f32 / render.height.max(1) as f32,
+                ),
                 options,
                 target,
                 peak,
