@@ -116,33 +116,48 @@ fn stereo_views_share_one_update_and_match_mono_renders_from_each_eye() {
 }
 
 /// `glossy-eye per-view` re-gathers the glossy half for each eye and leaves the diffuse half
-/// alone; each eye then sees what a mono render from it sees.
+/// alone; each eye then sees what a mono render from it sees. Also with the gather split over
+/// VAL slices (a GPU's default), whose reduction then writes the glossy half alone.
 #[test]
 fn per_view_glossy_changes_only_the_glossy_term() {
     let Some(ctx) = common::gpu() else { return };
+    for slices in ["1", "3"] {
+        per_view_glossy_with(&ctx, slices);
+    }
+}
+
+fn per_view_glossy_with(ctx: &valgi::gpu::GpuContext, slices: &str) {
     // Spheres with Phong k = 1..1000: the glossy term shows in the image.
     let scene = builtin::load("glossy-row", &builtin::BuiltinParams::default()).unwrap();
     let world = scene.world_from_node();
     let run = |eye: &str| {
-        let o = options(&[("rsm", "32"), ("sparse-points", "512"), ("glossy-eye", eye)]);
+        let o = options(&[
+            ("rsm", "32"),
+            ("sparse-points", "512"),
+            ("glossy-eye", eye),
+            ("gather-slices", slices),
+        ]);
         let mut m = valgi::vals::SparseMethod::new(
-            &ctx,
+            ctx,
             &scene,
             settings(SIZE),
             valgi::vals::SparseSettings::from_options(&o).unwrap(),
         )
         .unwrap();
-        let eyes = views(&ctx, &scene, &ViewRig::Stereo { ipd: 0.2 });
-        let frame = record_frame(&mut m, &ctx, &scene, &world, &eyes).unwrap();
-        let points = m.sparse.read_points(&ctx, &scene, &world).unwrap();
-        let (_, right) = eyes[1].read(&ctx, frame.results[1].has_indirect()).unwrap();
+        let eyes = views(ctx, &scene, &ViewRig::Stereo { ipd: 0.2 });
+        let frame = record_frame(&mut m, ctx, &scene, &world, &eyes).unwrap();
+        let points = m.sparse.read_points(ctx, &scene, &world).unwrap();
+        let (_, right) = eyes[1].read(ctx, frame.results[1].has_indirect()).unwrap();
         (points, right, eyes[1].camera)
     };
     let (mid, mid_right, right_camera) = run("mid");
     let (per_view, per_view_right, _) = run("per-view");
     let mut glossy_changed = 0;
     for (a, b) in mid.lights.iter().zip(&per_view.lights) {
-        assert_eq!(a.diffuse, b.diffuse, "diffuse intensities must not move");
+        assert_eq!(
+            a.diffuse, b.diffuse,
+            "{slices} slices: diffuse intensities moved"
+        );
         assert_eq!(a.diffuse_position, b.diffuse_position);
         if a.glossy != b.glossy {
             glossy_changed += 1;
@@ -154,9 +169,13 @@ fn per_view_glossy_changes_only_the_glossy_term() {
         "{glossy_changed} of {}",
         mid.lights.len()
     );
-    let o = options(&[("rsm", "32"), ("sparse-points", "512")]);
-    let mut mono = method::create("sparse", &ctx, &scene, settings(SIZE), &o).unwrap();
-    let alone = mono.render(&ctx, &scene, &world, &right_camera).unwrap();
+    let o = options(&[
+        ("rsm", "32"),
+        ("sparse-points", "512"),
+        ("gather-slices", slices),
+    ]);
+    let mut mono = method::create("sparse", ctx, &scene, settings(SIZE), &o).unwrap();
+    let alone = mono.render(ctx, &scene, &world, &right_camera).unwrap();
     let scale = mean(&alone.indirect).max(1e-6);
     assert!(max_abs_difference(&per_view_right, &alone.indirect) < 1e-4 * scale.max(1.0));
     assert!(max_abs_difference(&mid_right, &per_view_right) > 0.0);
