@@ -211,8 +211,20 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         let frame = fastest_frame(|| method.render(&ctx, &scene, &world, &camera))?;
         Ok((method.report(), frame.timings))
     };
-    for &target in &request.vals {
-        let rsm = rsm_for(&ctx, &scene, target)?;
+    if request.vals.is_empty() || request.points.is_empty() {
+        return Err(RenderError::Settings(
+            "valgi bench needs at least one --vals and one --points value".into(),
+        )
+        .into());
+    }
+    // The RSM side of each VAL target, probed once (the first serves the sweeps and the
+    // small-size row too).
+    let rsms = request
+        .vals
+        .iter()
+        .map(|&target| rsm_for(&ctx, &scene, target))
+        .collect::<Result<Vec<u32>, _>>()?;
+    for &rsm in &rsms {
         for &points in &request.points {
             // The last row is the default configuration with the gather drawn as the paper
             // draws it (fragments over a point target), beside the compute form above it.
@@ -244,8 +256,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         }
     }
     // The sweeps: the default configuration with another split or tile.
-    if let Some(&target) = request.vals.first() {
-        let rsm = rsm_for(&ctx, &scene, target)?;
+    if let Some(&rsm) = rsms.first() {
         for &points in &request.points {
             let sweep = request
                 .gather_slices
@@ -275,7 +286,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         }
     }
     // Resolution independence: the full configuration at a small square size.
-    let rsm = rsm_for(&ctx, &scene, request.vals[0])?;
+    let rsm = rsms[0];
     let settings = SparseSettings {
         rsm,
         sparse_points: request.points[0],

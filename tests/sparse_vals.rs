@@ -658,7 +658,7 @@ fn split_gather_writes_what_the_whole_gather_writes() {
         s.options.gather_slices = slices;
         let (method, _, points) = run_sparse(&ctx, &scene, 16, s, Stage::Gather);
         // The split runs as asked (a CPU device would otherwise keep the gather whole).
-        assert_eq!(method.sparse.gather_slices(&ctx, &s.options), slices);
+        assert_eq!(method.sparse.gather_slices(&s.options), slices);
         points
     };
     let whole = run(1);

@@ -285,7 +285,7 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "gather-slices",
         kind: OptionKind::Text,
         default: "auto",
-        help: "the compute gather split over this many slices of the VAL list, whose partial sums a second pass adds (auto: whole on a CPU device; on a GPU enough slices for about 2048 workgroups, since a few thousand points alone leave most of a large GPU idle)",
+        help: "the compute gather split over this many slices of the VAL list, whose partial sums a second pass adds (auto: whole on a CPU device; on a GPU enough slices for about 1024 workgroups, since a few thousand points alone leave most of a large GPU idle)",
     },
     OptionSpec {
         name: "glossy",
@@ -676,7 +676,7 @@ impl Method for SparseMethod {
             "tile": opts.tile,
             "gather": format!("{:?}", opts.gather).to_lowercase(),
             "gather_slices": match opts.gather {
-                GatherForm::Compute => self.sparse.gather_slices(ctx, &opts),
+                GatherForm::Compute => self.sparse.gather_slices(&opts),
                 GatherForm::Raster => 1,
             },
             "glossy": if opts.glossy { "on" } else { "off" },

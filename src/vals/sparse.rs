@@ -249,11 +249,11 @@ pub struct SparseGpu {
     vertex_lights: wgpu::Buffer,
     ranges_buffer: wgpu::Buffer,
     gather: Kernel,
-    /// Adds the split gather's slices and writes the points (`vals_gather_reduce.wgsl`); bound
-    /// like `gather`, plus the partial sums.
-    gather_reduce: wgpu::ComputePipeline,
-    /// The partial sums' group (group 1 of the gather and the reduction).
-    partials_layout: GroupLayout,
+    /// The device's pipelines: the gather's reduction and partial-sum group, visibility and
+    /// apply are used from here; the other kernels hold theirs.
+    pipelines: std::sync::Arc<SparsePipelines>,
+    /// The largest storage binding the device allows (caps the partial sums).
+    max_binding: u64,
     /// The partial sums of the slices last recorded: (slices, buffer, group), made when the
     /// slice count changes.
     partials: std::cell::RefCell<Option<(u32, wgpu::Buffer, wgpu::BindGroup)>>,
@@ -268,15 +268,12 @@ pub struct SparseGpu {
     /// The bounds of the occlusion pass's disc tiles (view-free, its own parameter block).
     occluder_bounds: Kernel,
     interpolate: Kernel,
-    apply_pipeline: wgpu::RenderPipeline,
-    apply_bgl: GroupLayout,
     bvh: SceneBvh,
     visibility_buffer: wgpu::Buffer,
     /// Last frame's visibility, blended into this frame's (`visibility-history`).
     visibility_history: wgpu::Buffer,
     /// Solutions recorded so far: the first has no history to blend.
     solutions_recorded: std::cell::Cell<u64>,
-    visibility_pipeline: wgpu::ComputePipeline,
     visibility_group: wgpu::BindGroup,
     /// RSM cluster tiles over all layers.
     rsm_tiles: u32,
@@ -743,8 +740,7 @@ impl SparseGpu {
             vertex_lights,
             ranges_buffer,
             gather,
-            gather_reduce: pipelines.gather_reduce.clone(),
-            partials_layout: pipelines.partials.clone(),
+            max_binding,
             partials: std::cell::RefCell::new(None),
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
@@ -754,13 +750,11 @@ impl SparseGpu {
             occlusion,
             occluder_bounds: occluder_bounds_kernel,
             interpolate,
-            apply_pipeline: pipelines.apply.1.clone(),
-            apply_bgl: pipelines.apply.0.clone(),
             bvh,
             visibility_buffer,
             visibility_history,
             solutions_recorded: std::cell::Cell::new(0),
-            visibility_pipeline: pipelines.visibility.1.clone(),
+            pipelines,
             visibility_group,
             rsm_tiles: rsm.tile_count(),
         })
@@ -817,17 +811,14 @@ impl SparseGpu {
     }
 
     /// The VAL slices the compute gather runs as under `options` on this device.
-    pub fn gather_slices(&self, ctx: &GpuContext, options: &SparseOptions) -> u32 {
-        let limits = ctx.device.limits();
+    pub fn gather_slices(&self, options: &SparseOptions) -> u32 {
         gather_slices(
             options.gather_slices,
             self.cpu_device,
             self.point_count,
             self.val_capacity,
             options.tile,
-            limits
-                .max_storage_buffer_binding_size
-                .min(limits.max_buffer_size),
+            self.max_binding,
         )
     }
 
@@ -865,7 +856,7 @@ impl SparseGpu {
                 })
             },
         )?;
-        let group = self.partials_layout.bind(&ctx.device, &[&buffer]);
+        let group = self.pipelines.partials.bind(&ctx.device, &[&buffer]);
         *self.partials.borrow_mut() = Some((slices, buffer, group.clone()));
         Ok(group)
     }
@@ -1012,7 +1003,7 @@ impl SparseGpu {
                 self.max_groups_per_dimension,
             );
             passes.compute("visibility", |pass| {
-                pass.set_pipeline(&self.visibility_pipeline);
+                pass.set_pipeline(&self.pipelines.visibility.1);
                 pass.set_bind_group(0, &self.visibility_group, &[]);
                 pass.set_bind_group(1, &self.bvh.group, &[]);
                 pass.dispatch_workgroups(x, clusters, chunks);
@@ -1065,7 +1056,7 @@ impl SparseGpu {
         };
         match options.gather {
             GatherForm::Compute if self.point_count > 0 => {
-                let slices = self.gather_slices(passes.ctx(), options);
+                let slices = self.gather_slices(options);
                 let partials = self.partials_for(passes.ctx(), slices)?;
                 let (x, y) = linear_groups(
                     self.point_count
@@ -1081,7 +1072,7 @@ impl SparseGpu {
                 if slices > 1 {
                     let (x, y) = linear_groups(points, max_groups);
                     passes.compute("gather reduce", |pass| {
-                        pass.set_pipeline(&self.gather_reduce);
+                        pass.set_pipeline(&self.pipelines.gather_reduce);
                         pass.set_bind_group(0, gather, &[]);
                         pass.set_bind_group(1, &partials, &[]);
                         pass.dispatch_workgroups(x, y, 1);
@@ -1154,7 +1145,7 @@ impl SparseGpu {
         indirect: &wgpu::TextureView,
     ) -> Result<(), GpuError> {
         let targets = &view.targets;
-        let group = self.apply_bgl.bind(
+        let group = self.pipelines.apply.0.bind(
             &ctx.device,
             &[
                 &view.frame_buffer,
@@ -1179,7 +1170,7 @@ impl SparseGpu {
                 stencil_ops: None,
             }),
             |pass| {
-                pass.set_pipeline(&self.apply_pipeline);
+                pass.set_pipeline(&self.pipelines.apply.1);
                 pass.set_bind_group(0, &group, &[]);
                 scene_gpu.draw(pass, None);
             },
