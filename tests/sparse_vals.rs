@@ -1252,9 +1252,11 @@ fn solutions_on_one_device_share_its_pipelines_and_render_as_on_their_own() {
     };
     let corridor = builtin::load("corridor", &BuiltinParams { max_edge: 0.2 }).expect("corridor");
     let s = sparse_settings(32, 300, OcclusionMode::Rays, true);
-    run_sparse(&shared, &cornell_coarse(), 32, s, Stage::Apply);
-    let (_, after_cornell, _) = run_sparse(&shared, &corridor, 32, s, Stage::Apply);
-    let (_, alone, _) = run_sparse(&own, &corridor, 32, s, Stage::Apply);
+    let (first, _, _) = run_sparse(&shared, &cornell_coarse(), 32, s, Stage::Apply);
+    let (second, after_cornell, _) = run_sparse(&shared, &corridor, 32, s, Stage::Apply);
+    let (apart, alone, _) = run_sparse(&own, &corridor, 32, s, Stage::Apply);
+    assert!(second.sparse.shares_pipelines_with(&first.sparse));
+    assert!(!apart.sparse.shares_pipelines_with(&first.sparse));
     assert!(alone.indirect.pixels.iter().any(|p| p[0] > 0.0));
     assert_eq!(after_cornell.indirect.pixels, alone.indirect.pixels);
     assert_eq!(after_cornell.direct.pixels, alone.direct.pixels);

@@ -169,16 +169,16 @@ impl GroupLayout {
         }
     }
 
-    /// A group binding `resources[i]` at binding i.
-    ///
-    /// # Panics
-    /// When the resources do not match the slots in number or kind: a programming error in
-    /// the technique, caught by its first test run.
     /// How many bindings the layout has.
     pub fn slot_count(&self) -> usize {
         self.slots.len()
     }
 
+    /// A group binding `resources[i]` at binding i.
+    ///
+    /// # Panics
+    /// When the resources do not match the slots in number or kind: a programming error in
+    /// the technique, caught by its first test run.
     pub fn bind(&self, device: &wgpu::Device, resources: &[&dyn Bindable]) -> wgpu::BindGroup {
         assert_eq!(
             resources.len(),

@@ -19,6 +19,13 @@ pub struct FmaParams {
 /// Threads per workgroup of the FMA-peak kernel (`bench_fma.wgsl`).
 pub const FMA_GROUP: u32 = 256;
 
+/// [`fma_peak`] measured once per device (budget mode asks for it at every method build: a
+/// viewer's rebuild or a sweep's settings would measure it again, ~0.3 s on lavapipe).
+pub fn device_fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
+    struct Peak(f64);
+    ctx.shared(|| fma_peak(ctx).map(Peak)).map(|peak| peak.0)
+}
+
 /// Fused multiply-adds per second of the trivial kernel (best of three runs).
 pub fn fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
     let device = &ctx.device;

@@ -739,7 +739,7 @@ fn create(
             // A time budget is predicted for this device: the fitted times scaled by the
             // FMA peak measured here. An error target's choice does not depend on it.
             let peak = match target {
-                budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::fma_peak(ctx)?),
+                budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::device_fma_peak(ctx)?),
                 budget::BudgetTarget::Flip(_) => None,
             };
             Some(apply_budget(

@@ -822,6 +822,11 @@ impl SparseGpu {
         )
     }
 
+    /// Whether `other` binds to the same compiled pipelines (one device's).
+    pub fn shares_pipelines_with(&self, other: &SparseGpu) -> bool {
+        std::sync::Arc::ptr_eq(&self.pipelines, &other.pipelines)
+    }
+
     /// Bytes of the split gather's partial sums as last recorded (0 unsplit).
     pub fn gather_partial_bytes(&self) -> u64 {
         match &*self.partials.borrow() {
