@@ -408,6 +408,11 @@ struct EvalArgs {
     /// Reference bounces (1 = one indirect bounce, as the single-bounce methods; or inf).
     #[arg(long, default_value = "1")]
     ref_bounces: String,
+    /// The reference's specular lobes: off compares the methods that model diffuse light only
+    /// (atlas, the VALs' bounce) with that light alone (glTF dielectrics reflect 4 %
+    /// specularly, a large share on dark textures).
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    ref_specular: String,
     /// Frames per method (≥ 3 measures flicker); frame f is at time f/30 s.
     #[arg(long, default_value_t = 1)]
     frames: u32,
@@ -524,6 +529,11 @@ struct BakeArgs {
     /// Polygon lights: face resolution of each light's depth cube.
     #[arg(long, default_value_t = valgi::atlas::bake::PolygonSettings::default().cube_res)]
     polygon_cube_res: usize,
+    /// Seed of the bake's random choices (surface samples and VPL sites; photon paths with
+    /// --lights polygons): another seed is another, equally valid bake, and a few show how
+    /// much a VPL count's result depends on the draw.
+    #[arg(long, default_value_t = valgi::atlas::BakeSettings::default().seed)]
+    seed: u64,
 }
 
 #[derive(clap::Args)]
@@ -1114,6 +1124,7 @@ fn bake(args: BakeArgs) -> ExitCode {
             near_rays: args.near_rays,
             cube_res: args.cube_res,
             near_radius: args.near_radius,
+            seed: args.seed,
             polygon: valgi::atlas::bake::PolygonSettings {
                 cluster_size: args.cluster_size,
                 cube_res: args.polygon_cube_res,
@@ -1211,6 +1222,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
         edits: args.scene_edits.edits(),
         ref_spp: args.ref_spp,
         ref_bounces,
+        ref_specular: args.ref_specular == "on",
         frames: args.frames,
         max_edge: args
             .max_edge

@@ -133,6 +133,10 @@ pub struct Tracer<'a> {
     pub emitters: EmitterSampler,
     /// Offset for secondary-ray origins, metres (scaled with the scene).
     pub epsilon: f32,
+    /// Drop every material's specular lobe from the hits (`ρ_s = 0`): the light that the
+    /// diffuse-only methods model, for comparing them like with like (glTF dielectrics
+    /// reflect 4 % specularly, which on dark textures is a large share of their light).
+    pub diffuse_only: bool,
 }
 
 impl<'a> Tracer<'a> {
@@ -219,6 +223,7 @@ impl<'a> Tracer<'a> {
             lights: WorldLight::from_scene(scene, world_from_node),
             emitters: EmitterSampler::new(scene, world_from_node),
             epsilon: 1e-4 * size,
+            diffuse_only: false,
         }
     }
 
@@ -398,7 +403,11 @@ impl<'a> Tracer<'a> {
             geometric_normal: ng,
             normal: n,
             rho_d: Material::diffuse_albedo(base, metallic),
-            rho_s: Material::specular_albedo(base, metallic, material.specular_factor),
+            rho_s: if self.diffuse_only {
+                Vec3::ZERO
+            } else {
+                Material::specular_albedo(base, metallic, material.specular_factor)
+            },
             k: Material::phong_exponent(roughness),
             emission: material.emissive * emissive_tex.truncate(),
         }

@@ -52,6 +52,7 @@ fn bake_writes_an_atlas_and_render_uses_it() {
         "unwrap",
         "discretize",
         "direct",
+        "sites",
         "visibility",
         "shoot",
         "fill",

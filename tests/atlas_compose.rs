@@ -82,6 +82,7 @@ fn reference_indirect(scene: &Scene, bounces: u32, spp: u32, seed: u64) -> Image
             bounces: Bounces::Limited(bounces),
             seed,
             progress: false,
+            specular: true,
         },
     )
     .indirect

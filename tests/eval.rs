@@ -122,6 +122,26 @@ fn references_are_cached_by_key() {
         1,
         0.05,
         0.0,
+        true,
+    );
+    // Keys of references with specular light read as they did before the switch existed
+    // (caches stay valid); without it the key differs.
+    assert!(!key.contains("specular"), "{key}");
+    let diffuse_key = eval::reference_key(
+        "cornell",
+        None,
+        4,
+        2,
+        valgi::reference::Bounces::Limited(1),
+        16,
+        1,
+        0.05,
+        0.0,
+        false,
+    );
+    assert!(
+        diffuse_key.starts_with(&key) && diffuse_key != key,
+        "{diffuse_key}"
     );
     let first = eval::cached_reference(&dir, &key, make).unwrap();
     assert!(first.rendered);

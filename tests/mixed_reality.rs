@@ -783,6 +783,7 @@ fn a_synthetic_room_lights_a_virtual_sphere_like_the_path_tracer() {
             bounces: Bounces::Limited(1),
             seed: 5,
             progress: false,
+            specular: true,
         },
     );
     // Compare on the sphere's pixels only (others black in both), cropped to its box.

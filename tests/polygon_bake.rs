@@ -179,6 +179,7 @@ fn per_bounce_and_joint_clustering_are_both_accurate() {
                 bounces: Bounces::Limited(2),
                 samples: 1024,
                 seed: 3,
+                specular: false,
             },
         );
         let (mut sq, mut sum) = (0.0f64, 0.0f64);

@@ -95,6 +95,7 @@ fn render(scene: &Scene, size: u32, spp: u32, bounces: Bounces, seed: u64) -> Re
             bounces,
             seed,
             progress: false,
+            specular: true,
         },
     )
 }
@@ -136,6 +137,36 @@ fn closed_sphere_follows_the_geometric_series_in_rho() {
     }
 }
 
+/// `specular off` drops the materials' specular lobes and nothing else: the closed sphere
+/// given a glTF dielectric's 4 % lobe renders, with the option, bit for bit the Lambertian
+/// sphere (whose light follows the geometric series above); with the lobe kept it is brighter,
+/// directly and after a bounce.
+#[test]
+fn specular_off_renders_the_diffuse_light_alone() {
+    let lambert = sphere_scene();
+    let mut glossy = sphere_scene();
+    glossy.materials[0].specular_factor = 1.0;
+    assert!(Material::specular_albedo(Vec3::splat(RHO), 0.0, 1.0).x > 0.0);
+    let world = lambert.world_from_node();
+    let camera = lambert.camera_view(None, 1.0, &world).unwrap();
+    let settings = |specular| ReferenceSettings {
+        width: 8,
+        height: 8,
+        spp: 16,
+        bounces: Bounces::Limited(2),
+        seed: 5,
+        progress: false,
+        specular,
+    };
+    let diffuse = reference::render(&lambert, &world, &camera, &settings(true));
+    let off = reference::render(&glossy, &world, &camera, &settings(false));
+    assert_eq!(off.direct, diffuse.direct);
+    assert_eq!(off.indirect, diffuse.indirect);
+    let on = reference::render(&glossy, &world, &camera, &settings(true));
+    assert!(on.direct.mean_rgb()[0] > diffuse.direct.mean_rgb()[0]);
+    assert!(on.indirect.mean_rgb()[0] > diffuse.indirect.mean_rgb()[0]);
+}
+
 #[test]
 fn bounce_zero_is_direct_only_and_direct_does_not_depend_on_bounces() {
     let scene = sphere_scene();
@@ -169,6 +200,7 @@ fn progressive_checkpoints_equal_separate_renders() {
         bounces: Bounces::Limited(2),
         seed: 21,
         progress: false,
+        specular: true,
     };
     let mut frames = vec![];
     // Unsorted and repeated on purpose: checkpoints are sorted and deduplicated.
@@ -241,6 +273,7 @@ fn irradiance_in_the_sphere_is_uniform_after_one_bounce() {
         bounces: Bounces::Limited(1),
         samples: 4096,
         seed: 5,
+        specular: true,
     };
     let e = irradiance_at(&scene, &world, &points, &settings);
     // E₁ = ρ·Φ/A = ρ·I/R².
@@ -263,6 +296,7 @@ fn irradiance_in_the_sphere_is_uniform_after_one_bounce() {
             bounces: Bounces::Limited(0),
             samples: 1,
             seed: 0,
+            specular: true,
         },
     );
     let to_light = Vec3::new(0.3, 0.2, 0.1) - points[0].0;
@@ -290,6 +324,7 @@ fn point_light_over_a_plane_matches_the_closed_form_per_pixel() {
             bounces: Bounces::Limited(0),
             seed: 1,
             progress: false,
+            specular: true,
         },
     );
     // The box-filtered closed form ρ/π·I·h/(h²+r²)^{3/2} (ρ = 0.8, I = 1, h = 1), averaged
@@ -434,6 +469,7 @@ fn cli_renders_the_reference_with_a_variance_file() {
     assert_eq!(report["method"], "reference");
     assert_eq!(report["bounces"], "inf");
     assert_eq!(report["spp"], 4);
+    assert_eq!(report["specular"], "on");
     assert!(report["passes"]["path_trace"].as_f64().unwrap() > 0.0);
     assert!(report["paths_per_s"].as_f64().unwrap() > 0.0);
     let variance = Image::read_exr(&dir.join("ref.variance.exr")).unwrap();
@@ -451,6 +487,29 @@ fn cli_renders_the_reference_with_a_variance_file() {
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("bounces"), "{stderr}");
+
+    // The specular switch reaches the path tracer and the report.
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
+        .args(["render", "--scene", "box-point", "--method", "reference"])
+        .args([
+            "--width",
+            "4",
+            "--height",
+            "4",
+            "--spp",
+            "1",
+            "--specular",
+            "off",
+        ])
+        .args(["--max-edge", "0.5", "--out"])
+        .arg(dir.join("off.exr"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(report["specular"], "off");
 }
 
 /// Closest hit by brute force over the scene's own (unmerged) triangles: (t, unit normal).

@@ -207,6 +207,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             bounces,
             seed,
             progress: request.progress,
+            specular: true,
         };
         let key = reference_key(
             scene_spec,
@@ -218,6 +219,7 @@ pub fn run(request: &BakeBenchRequest) -> Result<BakeBenchSummary, EvalError> {
             request.ref_seed,
             request.max_edge,
             0.0,
+            true,
         );
         let reference = cached_reference(&cache_dir, &key, || {
             log::info!("rendering reference: {key}");

@@ -57,6 +57,9 @@ pub struct EvalRequest {
     /// Reference bounce count (1 compares single-bounce methods).
     pub ref_bounces: Bounces,
     pub ref_seed: u64,
+    /// The reference keeps the materials' specular lobes (`--ref-specular`); `false` compares
+    /// the diffuse-only methods (atlas, the VALs' bounce) with the light they model.
+    pub ref_specular: bool,
     /// Frames rendered per method; ≥ 3 gives the flicker metric. Frame f is at `f·frame_dt` s.
     pub frames: u32,
     pub frame_dt: f32,
@@ -87,6 +90,7 @@ impl Default for EvalRequest {
             ref_spp: 256,
             ref_bounces: Bounces::Limited(1),
             ref_seed: 0x5EED,
+            ref_specular: true,
             frames: 1,
             frame_dt: 1.0 / 30.0,
             max_edge: BuiltinParams::default().max_edge,
@@ -204,10 +208,14 @@ pub fn reference_key(
     seed: u64,
     max_edge: f32,
     time: f32,
+    specular: bool,
 ) -> String {
+    // Keys of references with specular light (the default) are as they were before the
+    // option existed, so caches stay valid.
     format!(
-        "v2 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}",
-        camera.unwrap_or("-")
+        "v2 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}{}",
+        camera.unwrap_or("-"),
+        if specular { "" } else { " specular=off" }
     )
 }
 
@@ -462,6 +470,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
             request.ref_seed,
             *max_edge,
             0.0,
+            request.ref_specular,
         );
         let reference = cached_reference(&cache_dir, &key, || {
             log::info!("rendering reference: {key}");
@@ -476,6 +485,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
                     bounces: request.ref_bounces,
                     seed: request.ref_seed,
                     progress: request.progress,
+                    specular: request.ref_specular,
                 },
             )
         })?;
@@ -492,8 +502,10 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         let exposure_indirect = metrics::auto_exposure(ref_indirect);
         let mut sheet_rows = vec![plot::SheetRow {
             label: format!(
-                "reference ({} spp, {} bounce(s)); exposure {exposure:.1} / indirect {exposure_indirect:.1} stops",
-                request.ref_spp, request.ref_bounces
+                "reference ({} spp, {} bounce(s){}); exposure {exposure:.1} / indirect {exposure_indirect:.1} stops",
+                request.ref_spp,
+                request.ref_bounces,
+                if request.ref_specular { "" } else { ", no specular" }
             ),
             tiles: vec![
                 ref_full.tone_map(exposure),

@@ -77,6 +77,9 @@ pub struct ReferenceSettings {
     pub seed: u64,
     /// Draw a progress bar with ETA on stderr (only when stderr is a terminal).
     pub progress: bool,
+    /// Keep the materials' specular lobes (`false`: [`Tracer::diffuse_only`], the light the
+    /// diffuse-only methods — the atlas bake, the VALs' bounce — model).
+    pub specular: bool,
 }
 
 impl Default for ReferenceSettings {
@@ -88,6 +91,7 @@ impl Default for ReferenceSettings {
             bounces: Bounces::Limited(1),
             seed: 0,
             progress: true,
+            specular: true,
         }
     }
 }
@@ -312,7 +316,8 @@ pub fn render_progressive(
     mut at: impl FnMut(u32, ReferenceImage),
 ) {
     let started = Instant::now();
-    let tracer = Tracer::new(scene, world_from_node);
+    let mut tracer = Tracer::new(scene, world_from_node);
+    tracer.diffuse_only = !settings.specular;
     let (w, h) = (settings.width.max(1), settings.height.max(1));
     let mut stops: Vec<u32> = checkpoints.iter().map(|&s| s.max(1)).collect();
     stops.sort_unstable();
@@ -444,6 +449,9 @@ pub struct IrradianceSettings {
     /// Hemisphere samples per point.
     pub samples: u32,
     pub seed: u64,
+    /// Keep the materials' specular lobes (`false`: diffuse reflection only, the light an
+    /// irradiance atlas models; see [`ReferenceSettings::specular`]).
+    pub specular: bool,
 }
 
 /// Estimated irradiance E(x) = ∫ L_in(x, ω) cos θ dω at each surface point `(x, n)` (world
@@ -456,7 +464,8 @@ pub fn irradiance_at(
     points: &[(Vec3, Vec3)],
     settings: &IrradianceSettings,
 ) -> Vec<Vec3> {
-    let tracer = Tracer::new(scene, world_from_node);
+    let mut tracer = Tracer::new(scene, world_from_node);
+    tracer.diffuse_only = !settings.specular;
     let samples = settings.samples.max(1);
     points
         .par_iter()
@@ -528,6 +537,7 @@ impl ReferenceMethod {
             )));
         }
         let seed: u64 = options.get("seed", Self::DEFAULT_SEED)?;
+        let specular = options.choice("specular", &["on", "off"])? == "on";
         Ok(Self {
             settings: ReferenceSettings {
                 width: settings.width,
@@ -536,6 +546,7 @@ impl ReferenceMethod {
                 bounces,
                 seed,
                 progress: true,
+                specular,
             },
             last: None,
         })
@@ -574,6 +585,12 @@ pub static ENTRY: Entry = Entry {
             },
             default: "1",
             help: "random seed of the paths",
+        },
+        OptionSpec {
+            name: "specular",
+            kind: OptionKind::Choice(&["on", "off"]),
+            default: "on",
+            help: "the materials' specular lobes (off: diffuse light only, as the light atlas and the VALs' bounce model it; glTF dielectrics reflect 4 % specularly)",
         },
     ],
     create: |_ctx, _scene, settings, options| {
@@ -634,6 +651,10 @@ impl Method for ReferenceMethod {
         map.insert("spp".into(), self.settings.spp.into());
         map.insert("bounces".into(), self.settings.bounces.to_string().into());
         map.insert("seed".into(), self.settings.seed.into());
+        map.insert(
+            "specular".into(),
+            if self.settings.specular { "on" } else { "off" }.into(),
+        );
         if let Some(last) = &self.last {
             map.insert("paths".into(), last.paths.into());
             let rate = last.paths as f64 / last.seconds.max(1e-9);
