@@ -112,33 +112,25 @@ fn references_are_cached_by_key() {
         paths: 8,
         seconds: 0.0,
     };
-    let key = eval::reference_key(
-        "cornell",
-        None,
-        4,
-        2,
-        valgi::reference::Bounces::Limited(1),
-        16,
-        1,
-        0.05,
-        0.0,
-        true,
-    );
+    let key_with = |specular| {
+        eval::reference_key(
+            "cornell",
+            None,
+            4,
+            2,
+            valgi::reference::Bounces::Limited(1),
+            16,
+            1,
+            0.05,
+            0.0,
+            specular,
+        )
+    };
+    let key = key_with(true);
     // Keys of references with specular light read as they did before the switch existed
     // (caches stay valid); without it the key differs.
     assert!(!key.contains("specular"), "{key}");
-    let diffuse_key = eval::reference_key(
-        "cornell",
-        None,
-        4,
-        2,
-        valgi::reference::Bounces::Limited(1),
-        16,
-        1,
-        0.05,
-        0.0,
-        false,
-    );
+    let diffuse_key = key_with(false);
     assert!(
         diffuse_key.starts_with(&key) && diffuse_key != key,
         "{diffuse_key}"

@@ -439,6 +439,22 @@ fn reference_direct_agrees_with_the_gpu_direct_method() {
     assert!(rel < 0.02, "GPU direct vs reference: relative RMSE {rel}");
 }
 
+/// Runs `valgi render --scene box-point --method reference --max-edge 0.5` with `args` into
+/// `out`; returns its JSON report (the command must succeed).
+fn render_box_reference(args: &[&str], out: &std::path::Path) -> serde_json::Value {
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
+        .args(["render", "--scene", "box-point", "--method", "reference"])
+        .args(args)
+        .args(["--max-edge", "0.5", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+}
+
 #[test]
 fn cli_renders_the_reference_with_a_variance_file() {
     if common::gpu().is_none() {
@@ -446,9 +462,8 @@ fn cli_renders_the_reference_with_a_variance_file() {
     }
     let dir = common::temp_dir("reference-cli");
     let exr = dir.join("ref.exr");
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
-        .args(["render", "--scene", "box-point", "--method", "reference"])
-        .args([
+    let report = render_box_reference(
+        &[
             "--width",
             "16",
             "--height",
@@ -457,15 +472,10 @@ fn cli_renders_the_reference_with_a_variance_file() {
             "4",
             "--bounces",
             "inf",
-        ])
-        .args(["--max-edge", "0.5", "--indirect-only", "--out"])
-        .arg(&exr)
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+            "--indirect-only",
+        ],
+        &exr,
+    );
     assert_eq!(report["method"], "reference");
     assert_eq!(report["bounces"], "inf");
     assert_eq!(report["spp"], 4);
@@ -489,9 +499,8 @@ fn cli_renders_the_reference_with_a_variance_file() {
     assert!(stderr.contains("bounces"), "{stderr}");
 
     // The specular switch reaches the path tracer and the report.
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_valgi"))
-        .args(["render", "--scene", "box-point", "--method", "reference"])
-        .args([
+    let report = render_box_reference(
+        &[
             "--width",
             "4",
             "--height",
@@ -500,15 +509,9 @@ fn cli_renders_the_reference_with_a_variance_file() {
             "1",
             "--specular",
             "off",
-        ])
-        .args(["--max-edge", "0.5", "--out"])
-        .arg(dir.join("off.exr"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+        ],
+        &dir.join("off.exr"),
+    );
     assert_eq!(report["specular"], "off");
 }
 
