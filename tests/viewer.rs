@@ -444,3 +444,67 @@ fn a_scripted_run_whose_method_fails_to_build_exits_with_its_error() {
     assert!(!output.status.success(), "the run succeeded: {stderr}");
     assert!(stderr.contains("has no option(s) rsm"), "stderr: {stderr}");
 }
+
+/// The viewer tessellates an imported scene as `valgi render` does for the method it starts
+/// with: refined to the sparse points' spacing for `sparse` (the same edge as `render`), the
+/// built-in 5 cm for a method without points.
+#[test]
+fn the_viewer_tessellates_an_imported_scene_as_render_does() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer-tessellation");
+    // A 4 × 3 m floor and a 4 × 2.5 m wall, two triangles each.
+    let obj = dir.join("room.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 4 0 0\nv 4 0 3\nv 0 0 3\nv 0 2.5 0\nv 4 2.5 0\n\
+         vn 0 1 0\nvn 0 0 1\nf 1//1 4//1 3//1 2//1\nf 1//2 2//2 6//2 5//2\n",
+    )
+    .unwrap();
+    let scene = obj.to_str().unwrap();
+    let common_args = [
+        "--scene",
+        scene,
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--light",
+        "point:2,2,2,5",
+    ];
+    let sparse_args = ["--opt", "rsm=16", "--opt", "sparse-points=64"];
+    let report_of = |stdout: String| -> serde_json::Value {
+        let line = stdout
+            .lines()
+            .rev()
+            .find(|l| l.starts_with('{'))
+            .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
+        serde_json::from_str(line).expect("JSON report")
+    };
+    let view = |method: &str, options: &[&str]| {
+        let mut args = vec!["view", "--method", method, "--frames", "1"];
+        args.extend(common_args);
+        args.extend(options);
+        windowed(&args).map(|command| report_of(run(command)))
+    };
+    let Some(sparse) = view("sparse", &sparse_args) else {
+        return;
+    };
+    assert_eq!(sparse["max_edge_source"], "sparse spacing", "{sparse}");
+    let mut render = Command::new(env!("CARGO_BIN_EXE_valgi"));
+    render
+        .args(["render", "--method", "sparse", "--out"])
+        .arg(dir.join("room.png"))
+        .args(common_args)
+        .args(sparse_args);
+    let rendered = report_of(run(render));
+    assert_eq!(
+        sparse["max_edge"], rendered["max_edge"],
+        "view {sparse}, render {rendered}"
+    );
+    assert!(sparse["max_edge"].as_f64().unwrap() > 0.05);
+    let direct = view("direct", &[]).unwrap();
+    assert_eq!(direct["max_edge_source"], "default", "{direct}");
+    assert!((direct["max_edge"].as_f64().unwrap() - 0.05).abs() < 1e-6);
+}

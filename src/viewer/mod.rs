@@ -31,7 +31,7 @@ use crate::gpu::{FrameTimings, GpuContext};
 use crate::method::{self, MethodOptions, OptionKind};
 use crate::raster::types::{shared_layout, SharedLayout};
 use crate::raster::{RenderError, RenderSettings};
-use crate::scene::{self, CameraView, Scene};
+use crate::scene::{CameraView, Scene};
 
 pub use state::{
     CameraControl, Components, DebugViews, DragMode, FlyCamera, OrbitCamera, StereoDisplay,
@@ -81,7 +81,10 @@ pub struct ViewerRequest {
     /// Lights and a camera added to the scene (`--light`, `--camera-eye`, …).
     pub edits: crate::scene::edits::SceneEdits,
     pub views: ViewRig,
-    pub max_edge: f32,
+    /// Longest triangle edge; `None`: as `valgi render` chooses it for the starting method
+    /// (an imported scene viewed with a sparse method is refined to its point spacing, any
+    /// other scene to 5 cm). A method switched to in the panel keeps the scene as loaded.
+    pub max_edge: Option<f32>,
     pub allow_external_paths: bool,
     /// Most proxy lights the emissive surfaces become (0 = none).
     pub emitter_lights: u32,
@@ -217,20 +220,16 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     if let Some(path) = &request.screenshot {
         crate::image_io::prepare_output(path).map_err(AppError::from)?;
     }
-    let mut scene = scene::load_with(
-        &request.scene,
-        &scene::LoadParams {
-            max_edge: request.max_edge,
-            allow_external_paths: request.allow_external_paths,
-            emitter_lights: request.emitter_lights,
-        },
-    )
-    .map_err(AppError::from)?;
     let aspect = request.settings.width as f32 / request.settings.height as f32;
-    let camera = request
-        .edits
-        .apply(&mut scene, request.camera.as_deref(), aspect)
-        .map_err(AppError::from)?;
+    let (scene, tessellation, camera) = crate::app::load_scene_edited(
+        &request.scene,
+        &[(request.method.as_str(), &request.options)],
+        request.max_edge,
+        request.allow_external_paths,
+        request.emitter_lights,
+        (&request.edits, request.camera.as_deref(), aspect),
+    )
+    .map_err(ViewerError::App)?;
     // From here on the request names the camera the edits chose.
     let request = &ViewerRequest {
         camera,
@@ -247,6 +246,7 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     let mut app = App {
         request: request.clone(),
         scene: Arc::new(scene),
+        tessellation,
         running: None,
         error: None,
         report: None,
@@ -264,6 +264,8 @@ struct App {
     request: ViewerRequest,
     /// Shared with the rebuild workers.
     scene: Arc<Scene>,
+    /// How the scene was tessellated when it was loaded (reported as `render` reports it).
+    tessellation: crate::app::Tessellation,
     running: Option<Running>,
     error: Option<ViewerError>,
     report: Option<serde_json::Value>,
@@ -296,7 +298,7 @@ impl ApplicationHandler for App {
             .consumed;
         match event {
             WindowEvent::CloseRequested => {
-                self.report = Some(running.report(&self.scene));
+                self.report = Some(running.report(&self.scene, &self.tessellation));
                 event_loop.exit();
             }
             WindowEvent::Resized(size) => {
@@ -346,7 +348,7 @@ impl ApplicationHandler for App {
             WindowEvent::RedrawRequested => match running.redraw(&self.scene) {
                 Ok(done) => {
                     if done {
-                        self.report = Some(running.report(&self.scene));
+                        self.report = Some(running.report(&self.scene, &self.tessellation));
                         event_loop.exit();
                     } else {
                         running.window.request_redraw();
@@ -1124,10 +1126,12 @@ impl Running {
     }
 
     /// The JSON report: the last frame's passes and figures, as `valgi render` prints them.
-    fn report(&self, scene: &Scene) -> serde_json::Value {
+    fn report(&self, scene: &Scene, tessellation: &crate::app::Tessellation) -> serde_json::Value {
         let merged = self.timings.merged();
         let mut report = serde_json::json!({
             "scene": scene.name,
+            "max_edge": tessellation.max_edge,
+            "max_edge_source": tessellation.source,
             "method": self.method.as_ref().map(|m| m.name()),
             "options": self.options.to_string(),
             "views": self.views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
