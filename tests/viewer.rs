@@ -47,6 +47,16 @@ fn run(mut command: Command) -> String {
     stdout
 }
 
+/// The last JSON line a run printed: its report.
+fn report_of(stdout: &str) -> serde_json::Value {
+    let line = stdout
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
+    serde_json::from_str(line).expect("JSON report")
+}
+
 fn load(path: &Path) -> image::RgbImage {
     image::open(path)
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -248,13 +258,7 @@ fn an_option_change_rebuilds_off_the_ui_thread_and_reports_its_figures() {
     let Some(command) = windowed(&args) else {
         return;
     };
-    let stdout = run(command);
-    let line = stdout
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
-    let report: serde_json::Value = serde_json::from_str(line).expect("JSON report");
+    let report = report_of(&run(command));
     eprintln!("{}", report["rebuild"]);
     assert_eq!(report["rebuild"]["ok"], true, "report: {report}");
     assert_eq!(report["rebuild"]["method"], "sparse");
@@ -301,16 +305,8 @@ fn sparse_view(
     for view in debug {
         args.extend(["--debug", view]);
     }
-    let stdout = run(windowed(&args)?);
-    let line = stdout
-        .lines()
-        .rev()
-        .find(|l| l.starts_with('{'))
-        .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
-    Some((
-        load(&shot),
-        serde_json::from_str(line).expect("JSON report"),
-    ))
+    let report = report_of(&run(windowed(&args)?));
+    Some((load(&shot), report))
 }
 
 const DEBUG_SIZE: &str = "96";
@@ -474,19 +470,11 @@ fn the_viewer_tessellates_an_imported_scene_as_render_does() {
         "point:2,2,2,5",
     ];
     let sparse_args = ["--opt", "rsm=16", "--opt", "sparse-points=64"];
-    let report_of = |stdout: String| -> serde_json::Value {
-        let line = stdout
-            .lines()
-            .rev()
-            .find(|l| l.starts_with('{'))
-            .unwrap_or_else(|| panic!("no JSON line in {stdout}"));
-        serde_json::from_str(line).expect("JSON report")
-    };
     let view = |method: &str, options: &[&str]| {
         let mut args = vec!["view", "--method", method, "--frames", "1"];
         args.extend(common_args);
         args.extend(options);
-        windowed(&args).map(|command| report_of(run(command)))
+        windowed(&args).map(|command| report_of(&run(command)))
     };
     let Some(sparse) = view("sparse", &sparse_args) else {
         return;
@@ -498,7 +486,7 @@ fn the_viewer_tessellates_an_imported_scene_as_render_does() {
         .arg(dir.join("room.png"))
         .args(common_args)
         .args(sparse_args);
-    let rendered = report_of(run(render));
+    let rendered = report_of(&run(render));
     assert_eq!(
         sparse["max_edge"], rendered["max_edge"],
         "view {sparse}, render {rendered}"

@@ -373,8 +373,11 @@ fn bake_patches(
     }
     let mut patches = Vec::new();
     let mut samples = Vec::with_capacity(sample_count);
-    let mut sample_direct = Vec::with_capacity(sample_count);
     let mut direct = Vec::new();
+    // Per sample, its direct irradiance over its patch's mean (R + G + B): bounce 1 leaves a
+    // split patch from its lit part (`patch_transfer_pair`).
+    let mut direct_weights = Vec::with_capacity(sample_count);
+    let lum = |e: Vec3| e.x + e.y + e.z;
     for (j, m) in members.iter().enumerate() {
         if m.is_empty() {
             continue;
@@ -382,11 +385,18 @@ fn bake_patches(
         let site = raw[sites[j]];
         let start = samples.len();
         samples.extend(m.iter().map(|&s| raw[s]));
-        sample_direct.extend(m.iter().map(|&s| raw_direct[s]));
         // The patch reflects with its samples' mean albedo (textures included: a patch on a
         // textured wall is as bright as the wall's texture on average, not as its factor).
         let rho = m.iter().map(|&s| raw[s].rho).sum::<Vec3>() / m.len() as f32;
-        direct.push(m.iter().map(|&s| raw_direct[s]).sum::<Vec3>() / m.len() as f32);
+        let mean = m.iter().map(|&s| raw_direct[s]).sum::<Vec3>() / m.len() as f32;
+        direct.push(mean);
+        direct_weights.extend(m.iter().map(|&s| {
+            if lum(mean) > 0.0 {
+                lum(raw_direct[s]) / lum(mean)
+            } else {
+                1.0
+            }
+        }));
         patches.push(Patch {
             position: site.position,
             normal: site.normal,
@@ -396,17 +406,6 @@ fn bake_patches(
         });
     }
     let n = patches.len();
-    let mut direct_weights = vec![1.0f32; samples.len()];
-    for p in &patches {
-        let lum = |e: Vec3| e.x + e.y + e.z;
-        let range = p.samples.clone();
-        let mean = range.clone().map(|k| lum(sample_direct[k])).sum::<f32>() / range.len() as f32;
-        if mean > 0.0 {
-            for k in range {
-                direct_weights[k] = lum(sample_direct[k]) / mean;
-            }
-        }
-    }
     stages.lap("sites");
     check(cancel)?;
     let mut escaped = [0.0f64; 3];
@@ -730,19 +729,16 @@ pub(crate) fn choose_sites(reflected: &[f32], n: usize, rng: &mut Rng) -> Vec<us
     } else {
         0.0
     };
-    let density = |k: usize| {
-        (1.0 - share) / count as f64
-            + if share > 0.0 {
-                share * f64::from(reflected[k].max(0.0)) / total
-            } else {
-                0.0
-            }
-    };
+    // Zero when nothing is lit (then `total` may be 0 and must not divide).
+    let per_power = if share > 0.0 { share / total } else { 0.0 };
+    let density =
+        |k: usize| (1.0 - share) / count as f64 + per_power * f64::from(reflected[k].max(0.0));
     let mut sites = Vec::with_capacity(n);
     let mut k = 0usize;
-    let mut below = 0.0f64; // the density of samples before k
-                            // One offset for all strata (systematic sampling): sites are exactly a stratum apart in
-                            // the density, so two coincide only where one sample's density exceeds a stratum.
+    // The density of the samples before k.
+    let mut below = 0.0f64;
+    // One offset for all strata (systematic sampling): sites are exactly a stratum apart in
+    // the density, so two coincide only where one sample's density exceeds a stratum.
     let offset = f64::from(rng.next_f32());
     for j in 0..n {
         let target = (j as f64 + offset) / n as f64;

@@ -1130,8 +1130,6 @@ impl Running {
         let merged = self.timings.merged();
         let mut report = serde_json::json!({
             "scene": scene.name,
-            "max_edge": tessellation.max_edge,
-            "max_edge_source": tessellation.source,
             "method": self.method.as_ref().map(|m| m.name()),
             "options": self.options.to_string(),
             "views": self.views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
@@ -1169,6 +1167,9 @@ impl Running {
                 "ui_frames": r.frames,
                 "longest_ui_frame_ms": round3(r.longest_frame_ms),
             });
+        }
+        if let Some(obj) = report.as_object_mut() {
+            obj.extend(tessellation.to_json());
         }
         if let (Some(obj), Some(method)) = (report.as_object_mut(), &self.method) {
             for (key, value) in method.report() {
