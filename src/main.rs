@@ -353,9 +353,20 @@ struct ViewArgs {
     #[arg(long, value_name = "KEY=VALUE", requires = "frames")]
     change_option: Option<String>,
     /// Debug views on from the start (switchable in the panel): `points` (the sparse points
-    /// as splats coloured by their diffuse light), `vals` (the VALs coloured by radiance).
+    /// as splats coloured by their diffuse light), `vals` (the VALs coloured by radiance),
+    /// `links` (the 8 links of the vertex under the cursor), `occluders` (the light spheres
+    /// of the point under the cursor and the occluder discs covering them), `reference` (the
+    /// difference to the reference cached by `valgi eval`, see --reference).
     #[arg(long, value_name = "VIEW", value_delimiter = ',')]
     debug: Vec<String>,
+    /// The window pixel X,Y whose surface the links and occluder views show (scripted runs;
+    /// interactively the cursor's).
+    #[arg(long, value_name = "X,Y")]
+    pick: Option<String>,
+    /// An output folder of `valgi eval` (or the `cache` in it): the reference debug view shows
+    /// the difference to its cached reference of the view on screen.
+    #[arg(long, value_name = "DIR")]
+    reference: Option<PathBuf>,
     #[arg(long)]
     allow_external_paths: bool,
     /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive
@@ -930,6 +941,21 @@ fn main() -> ExitCode {
                         }
                         debug
                     },
+                    pick: match &args.pick {
+                        None => None,
+                        Some(xy) => Some(
+                            xy.split_once(',')
+                                .and_then(|(x, y)| {
+                                    Some((x.trim().parse().ok()?, y.trim().parse().ok()?))
+                                })
+                                .ok_or_else(|| {
+                                    valgi::raster::RenderError::Settings(format!(
+                                        "--pick {xy}: expected two whole pixel coordinates X,Y"
+                                    ))
+                                })?,
+                        ),
+                    },
+                    reference: args.reference,
                     change_option: match args.change_option {
                         None => None,
                         Some(kv) => match kv.split_once('=') {

@@ -89,6 +89,18 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/vals/vals_debug_splats.wgsl"),
     ),
     (
+        "vals_debug_occluders.wgsl",
+        include_str!("../shaders/vals/vals_debug_occluders.wgsl"),
+    ),
+    (
+        "vals_occluder_share.wgsl",
+        include_str!("../shaders/vals/vals_occluder_share.wgsl"),
+    ),
+    (
+        "debug_lines.wgsl",
+        include_str!("../shaders/base/debug_lines.wgsl"),
+    ),
+    (
         "negative_common.wgsl",
         include_str!("../shaders/negative/negative_common.wgsl"),
     ),

@@ -279,6 +279,7 @@ fn sparse_view(
     dir: &Path,
     name: &str,
     debug: &[&str],
+    extra: &[&str],
 ) -> Option<(image::RgbImage, serde_json::Value)> {
     let shot = dir.join(format!("{name}.png"));
     let mut args = vec![
@@ -305,6 +306,7 @@ fn sparse_view(
     for view in debug {
         args.extend(["--debug", view]);
     }
+    args.extend(extra);
     let report = report_of(&run(windowed(&args)?));
     Some((load(&shot), report))
 }
@@ -330,31 +332,20 @@ fn changed_in_view(plain: &image::RgbImage, debug: &image::RgbImage, size: u32) 
 /// per VAL.
 #[test]
 fn debug_views_draw_splats_at_the_points_and_vals() {
-    use valgi::scene::{builtin::BuiltinParams, LoadParams};
     if common::gpu().is_none() {
         return;
     }
     let dir = common::temp_dir("viewer_debug");
-    let Some((plain, plain_report)) = sparse_view(&dir, "plain", &[]) else {
+    let Some((plain, plain_report)) = sparse_view(&dir, "plain", &[], &[]) else {
         return;
     };
     assert_eq!(plain_report["debug"]["draws"], 0, "{plain_report}");
-    let (points_shot, points_report) = sparse_view(&dir, "points", &["points"]).unwrap();
+    let (points_shot, points_report) = sparse_view(&dir, "points", &["points"], &[]).unwrap();
     assert_eq!(points_report["debug"]["draws"], 1, "{points_report}");
     let size: u32 = DEBUG_SIZE.parse().unwrap();
 
     // The points' projections through the viewer's camera (the scene's first, frame 0).
-    let scene = valgi::scene::load_with(
-        "cornell",
-        &LoadParams {
-            max_edge: BuiltinParams::default().max_edge,
-            allow_external_paths: false,
-            emitter_lights: valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS,
-        },
-    )
-    .unwrap();
-    let world_from_node = scene.world_from_node_at(0.0);
-    let camera = scene.camera_view(None, 1.0, &world_from_node).unwrap();
+    let (scene, world_from_node, camera) = cornell_at_rest();
     let clip_from_world = camera.clip_from_world();
     let (points, _) = valgi::vals::points::scene_points(&scene, 200, 1);
     let mut projected = vec![];
@@ -408,7 +399,7 @@ fn debug_views_draw_splats_at_the_points_and_vals() {
         projected.len()
     );
 
-    let (vals_shot, vals_report) = sparse_view(&dir, "vals", &["vals"]).unwrap();
+    let (vals_shot, vals_report) = sparse_view(&dir, "vals", &["vals"], &[]).unwrap();
     assert_eq!(vals_report["debug"]["draws"], 1, "{vals_report}");
     let vals = vals_report["vals"].as_u64().unwrap() as usize;
     let changed = changed_in_view(&plain, &vals_shot, size);
@@ -418,6 +409,248 @@ fn debug_views_draw_splats_at_the_points_and_vals() {
         changed.len() <= 16 * vals,
         "{} pixels changed by {vals} VAL splats of 4×4",
         changed.len()
+    );
+}
+
+/// The scene, placed at frame 0, and the camera of the viewer's debug tests, as the viewer
+/// loads them.
+fn cornell_at_rest() -> (
+    valgi::scene::Scene,
+    Vec<glam::Mat4>,
+    valgi::scene::CameraView,
+) {
+    use valgi::scene::{builtin::BuiltinParams, LoadParams};
+    let scene = valgi::scene::load_with(
+        "cornell",
+        &LoadParams {
+            max_edge: BuiltinParams::default().max_edge,
+            allow_external_paths: false,
+            emitter_lights: valgi::scene::emitters::DEFAULT_EMITTER_LIGHTS,
+        },
+    )
+    .unwrap();
+    let world_from_node = scene.world_from_node_at(0.0);
+    let camera = scene.camera_view(None, 1.0, &world_from_node).unwrap();
+    (scene, world_from_node, camera)
+}
+
+fn vec3_of(value: &serde_json::Value) -> glam::Vec3 {
+    let a: Vec<f32> = value
+        .as_array()
+        .unwrap_or_else(|| panic!("not an array: {value}"))
+        .iter()
+        .map(|v| v.as_f64().unwrap() as f32)
+        .collect();
+    glam::Vec3::new(a[0], a[1], a[2])
+}
+
+/// `--debug links,occluders --pick X,Y`: the viewer picks the surface under the pixel and the
+/// sparse method answers with the vertex's links and the nearest point, exactly as the
+/// library computes them from the same camera ray, scene and point set; the screenshot shows
+/// the overlays' colours (the magenta cross on the vertex, the yellow diffuse sphere), which
+/// the plain view has nowhere.
+#[test]
+fn the_links_and_occluder_views_show_the_picked_vertex_and_point() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_pick");
+    let size: u32 = DEBUG_SIZE.parse().unwrap();
+    // On the tall block's front face.
+    let pixel = (size / 2, size * 9 / 16);
+    let pick_arg = format!("{},{}", pixel.0, pixel.1);
+    let Some((plain, _)) = sparse_view(&dir, "plain", &[], &[]) else {
+        return;
+    };
+    let (shot, report) = sparse_view(
+        &dir,
+        "pick",
+        &["links", "occluders"],
+        &["--pick", &pick_arg, "--opt", "occlusion=sum"],
+    )
+    .unwrap();
+    let shown = &report["debug"]["pick"];
+    assert_eq!(report["debug"]["draws"], 2, "{report}");
+
+    let (scene, world_from_node, camera) = cornell_at_rest();
+    let (origin, dir_ray) = valgi::reference::camera_ray(
+        &camera,
+        size,
+        size,
+        pixel.0 as f32 + 0.5,
+        pixel.1 as f32 + 0.5,
+    );
+    let hit = valgi::scene::pick::pick(&scene, &world_from_node, origin, dir_ray)
+        .expect("the pixel shows a surface");
+    let (points, _) = valgi::vals::points::scene_points(&scene, 200, 1);
+    let expected =
+        valgi::vals::points::debug_pick(&scene, &world_from_node, &points, &hit, camera.position())
+            .unwrap();
+    let close = |a: glam::Vec3, b: glam::Vec3| (a - b).length() < 1e-6;
+    assert!(
+        close(vec3_of(&shown["vertex"]), expected.vertex),
+        "viewer's vertex {} against {:?}",
+        shown["vertex"],
+        expected.vertex
+    );
+    let links = shown["links"].as_array().unwrap();
+    assert_eq!(links.len(), expected.links.len());
+    for (link, (point, weight)) in links.iter().zip(&expected.links) {
+        assert!(
+            close(vec3_of(&link["point"]), *point),
+            "{link} against {point:?}"
+        );
+        assert!((link["weight"].as_f64().unwrap() as f32 - weight).abs() < 1e-6);
+    }
+    let total: f32 = expected.links.iter().map(|l| l.1).sum();
+    assert!(
+        (total - 1.0).abs() < 1e-5,
+        "the picked vertex's weights sum to {total}"
+    );
+    let (index, position) = expected.point.unwrap();
+    assert_eq!(shown["point"]["index"], index, "{shown}");
+    assert!(close(vec3_of(&shown["point"]["position"]), position));
+
+    // The overlay colours (display values, written as they are into the non-sRGB window):
+    // the vertex cross (1, 0.2, 1) and the diffuse sphere (1, 0.9, 0.1).
+    let count = |image: &image::RgbImage, rgb: [u8; 3]| {
+        (0..size)
+            .flat_map(|y| (0..size).map(move |x| (x, y)))
+            .filter(|&(x, y)| image.get_pixel(x, y).0 == rgb)
+            .count()
+    };
+    let cross = [255, 51, 255];
+    let sphere = [255, 230, 26];
+    eprintln!(
+        "pick: {} cross pixels, {} sphere pixels",
+        count(&shot, cross),
+        count(&shot, sphere)
+    );
+    assert_eq!(count(&plain, cross) + count(&plain, sphere), 0);
+    assert!(count(&shot, cross) > 0, "no vertex cross drawn");
+    assert!(count(&shot, sphere) > 0, "no light sphere drawn");
+    // The cross is drawn around the vertex's projection.
+    let ndc = camera.clip_from_world().project_point3(expected.vertex);
+    let at = (
+        (ndc.x * 0.5 + 0.5) * size as f32,
+        (0.5 - ndc.y * 0.5) * size as f32,
+    );
+    let far_cross = (0..size)
+        .flat_map(|y| (0..size).map(move |x| (x, y)))
+        .filter(|&(x, y)| shot.get_pixel(x, y).0 == cross)
+        .filter(|&(x, y)| {
+            (x as f32 + 0.5 - at.0).abs() > 8.0 || (y as f32 + 0.5 - at.1).abs() > 8.0
+        })
+        .count();
+    assert_eq!(far_cross, 0, "cross pixels away from the vertex at {at:?}");
+}
+
+/// `--debug reference --reference DIR`: the view draws, per pixel, the luminance of its image
+/// minus that of the reference `valgi eval` cached for it (red brighter, blue darker, the PNG
+/// tone map), to the level of the same difference computed here from `valgi render`'s image
+/// and the cached EXRs; a view eval never rendered shows the plain image and says why.
+#[test]
+fn the_reference_view_draws_the_difference_to_the_cached_reference() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_reference");
+    let eval_dir = dir.join("eval");
+    let exe = env!("CARGO_BIN_EXE_valgi");
+    let size = "32";
+    let common_args = [
+        "--scene", "cornell", "--method", "direct", "--width", size, "--height", size,
+    ];
+    let mut eval = std::process::Command::new(exe);
+    eval.args([
+        "eval",
+        "--scenes",
+        "cornell",
+        "--methods",
+        "direct",
+        "--width",
+        size,
+        "--height",
+        size,
+    ])
+    .args(["--ref-spp", "4", "--out", eval_dir.to_str().unwrap()]);
+    run(eval);
+    let rendered = dir.join("render.exr");
+    let mut render = std::process::Command::new(exe);
+    render
+        .arg("render")
+        .args(common_args)
+        .args(["--out", rendered.to_str().unwrap()]);
+    run(render);
+    let shot = dir.join("difference.png");
+    let mut args = vec!["view"];
+    args.extend(common_args);
+    args.extend(["--frames", "1", "--screenshot", shot.to_str().unwrap()]);
+    args.extend([
+        "--debug",
+        "reference",
+        "--reference",
+        eval_dir.to_str().unwrap(),
+    ]);
+    let Some(command) = windowed(&args) else {
+        return;
+    };
+    let report = report_of(&run(command));
+    let key = report["debug"]["reference_key"]
+        .as_str()
+        .unwrap_or_else(|| panic!("{report}"));
+    assert!(
+        key.starts_with("v2 scene=cornell camera=- size=32x32 "),
+        "{key}"
+    );
+
+    let cache = eval_dir.join("cache");
+    let stem = format!("ref-{:016x}", valgi::eval::fnv1a(key));
+    let read = |path: &Path| valgi::image_io::Image::read_exr(path).unwrap();
+    let reference_direct = read(&cache.join(format!("{stem}.direct.exr")));
+    let reference_indirect = read(&cache.join(format!("{stem}.indirect.exr")));
+    let image = read(&rendered);
+    let luminance = |p: &[f32; 4]| 0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2];
+    let level = |v: f32| (valgi::image_io::srgb_oetf(v.clamp(0.0, 1.0)) * 255.0).round() as i32;
+    let shot_image = load(&shot);
+    let (mut worst, mut brighter, mut darker) = (0, 0, 0);
+    for y in 0..32u32 {
+        for x in 0..32u32 {
+            let i = (y * 32 + x) as usize;
+            let d = luminance(&image.pixels[i])
+                - luminance(&reference_direct.pixels[i])
+                - luminance(&reference_indirect.pixels[i]);
+            let expected = [level(d.max(0.0)), 0, level((-d).max(0.0))];
+            let got = shot_image.get_pixel(x, y).0;
+            for c in 0..3 {
+                worst = worst.max((got[c] as i32 - expected[c]).abs());
+            }
+            brighter += (expected[0] > 0) as u32;
+            darker += (expected[2] > 0) as u32;
+        }
+    }
+    eprintln!(
+        "reference difference: {brighter} pixels brighter, {darker} darker, worst level {worst}"
+    );
+    assert!(worst <= 1, "the difference is {worst} levels off the CPU's");
+    // A 4-spp reference is noisy: both signs show.
+    assert!(brighter > 0 && darker > 0);
+
+    // Another size: no cached reference, the plain image, and the note says why.
+    let mut args = vec!["view", "--scene", "cornell", "--method", "direct"];
+    args.extend(["--width", "40", "--height", "32", "--frames", "1"]);
+    args.extend([
+        "--debug",
+        "reference",
+        "--reference",
+        eval_dir.to_str().unwrap(),
+    ]);
+    let report = report_of(&run(windowed(&args).unwrap()));
+    assert!(report["debug"]["reference_key"].is_null(), "{report}");
+    let note = report["debug"]["reference_note"].as_str().unwrap();
+    assert!(
+        note.contains("holds no reference") && note.contains("40x32"),
+        "{note}"
     );
 }
 

@@ -10,6 +10,7 @@
 // skipped with one test (its bounds contain all its discs' centres, so the same test is safe),
 // which keeps the pass near-linear in the points when most of the scene is far.
 #include "vals_common.wgsl"
+#include "vals_occluder_share.wgsl"
 
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
@@ -25,12 +26,6 @@ const SUPER_TILE: u32 = 64u;
 // Per tile, then per super-tile: (centre of its disc centres, radius), (largest disc radius,
 // 0, 0, 0).
 @group(0) @binding(7) var<storage, read> occluder_bounds: array<vec4<f32>>;
-
-struct Disc {
-    // xyz: centre; w: radius.
-    center_radius: vec4<f32>,
-    normal: vec4<f32>,
-}
 
 var<workgroup> tile_discs: array<Disc, TILE_MAX>;
 // 1 when some invocation of the workgroup needs the current tile (super-tile).
@@ -70,35 +65,6 @@ fn tile_may_occlude(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, ligh
     let disc_area = PI * max_disc_radius * max_disc_radius / (max_disc_radius * max_disc_radius + nearest * nearest);
     let reach = 0.5 * sqrt(sphere_area) + 0.5 * sqrt(disc_area) + alpha + 1e-4;
     return abs(dot(wl - wc, t)) < reach && abs(dot(wl - wc, b)) < reach;
-}
-
-fn square_overlap(a: vec2<f32>, area_a: f32, b: vec2<f32>, area_b: f32) -> f32 {
-    let ha = 0.5 * sqrt(area_a);
-    let hb = 0.5 * sqrt(area_b);
-    let o = max(min(a + ha, b + hb) - max(a - ha, b - hb), vec2<f32>(0.0));
-    return o.x * o.y;
-}
-
-// One disc's share of the sphere (centre `light`, radius `sphere`) as seen from x.
-fn occluder_share(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, light: vec3<f32>, sphere: f32, disc: Disc) -> f32 {
-    let to_light = light - x;
-    let light_distance = length(to_light);
-    let to_disc = disc.center_radius.xyz - x;
-    let disc_distance = length(to_disc);
-    let radius = disc.center_radius.w;
-    if (sphere <= 0.0 || light_distance <= 0.0 || disc_distance <= 0.0 || radius <= 0.0) {
-        return 0.0;
-    }
-    let wl = to_light / light_distance;
-    let wd = to_disc / disc_distance;
-    if (dot(n, wd) <= 0.0 || disc_distance >= light_distance) {
-        return 0.0;
-    }
-    let ramp = min((light_distance - disc_distance) / sphere, 1.0);
-    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
-    let disc_area = PI * radius * radius / (radius * radius + disc_distance * disc_distance) * abs(dot(disc.normal.xyz, wd));
-    let overlap = square_overlap(vec2<f32>(dot(wl, t), dot(wl, b)), sphere_area, vec2<f32>(dot(wd, t), dot(wd, b)), disc_area);
-    return min(overlap / sphere_area, 1.0) * ramp;
 }
 
 // Running occlusion of one point's two lights: Σo and Π(1 − o) per channel.

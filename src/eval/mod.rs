@@ -219,6 +219,78 @@ pub fn reference_key(
     )
 }
 
+/// The scene part of a reference's cache key: the scene as named on the command line, and
+/// the edits made to it (a reference cached for the bare scene must not serve the edited one).
+pub fn reference_scene_key(scene_spec: &str, edits: &scene::edits::SceneEdits) -> String {
+    if edits.is_empty() {
+        scene_spec.to_string()
+    } else {
+        format!("{scene_spec} {edits:?}")
+    }
+}
+
+/// A reference in the cache that [`find_cached_reference`] chose.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CachedMatch {
+    pub key: String,
+    pub direct: PathBuf,
+    pub indirect: PathBuf,
+    pub spp: u32,
+}
+
+/// The reference `valgi eval` cached in `dir` (an eval output folder or its `cache`) for the
+/// view of `scene_key` (see [`reference_scene_key`]) from `camera` at `width`×`height` and
+/// `time`: of those, the one with the most samples per pixel (ties: the first key in order).
+/// Its bounces, seed, tessellation and specular setting are whatever eval used; the key says.
+pub fn find_cached_reference(
+    dir: &Path,
+    scene_key: &str,
+    camera: Option<&str>,
+    (width, height): (u32, u32),
+    time: f32,
+) -> Option<CachedMatch> {
+    let cache_dir = if dir.join("cache").is_dir() {
+        dir.join("cache")
+    } else {
+        dir.to_path_buf()
+    };
+    let prefix = format!(
+        "v2 scene={scene_key} camera={} size={width}x{height} ",
+        camera.unwrap_or("-")
+    );
+    let time_field = format!("time={time}");
+    let mut found: Vec<CachedMatch> = std::fs::read_dir(&cache_dir)
+        .ok()?
+        .filter_map(|entry| {
+            let path = entry.ok()?.path();
+            let stem = path
+                .file_name()?
+                .to_str()?
+                .strip_suffix(".txt")?
+                .to_string();
+            let key = std::fs::read_to_string(&path).ok()?.trim().to_string();
+            let rest = key.strip_prefix(&prefix)?;
+            let fields: Vec<&str> = rest.split(' ').collect();
+            if !fields.contains(&time_field.as_str()) {
+                return None;
+            }
+            let spp = fields
+                .iter()
+                .find_map(|f| f.strip_prefix("spp=")?.parse().ok())?;
+            let direct = cache_dir.join(format!("{stem}.direct.exr"));
+            let indirect = cache_dir.join(format!("{stem}.indirect.exr"));
+            (direct.is_file() && indirect.is_file()).then_some(CachedMatch {
+                key,
+                direct,
+                indirect,
+                spp,
+            })
+        })
+        .collect();
+    found.sort_by(|a, b| b.spp.cmp(&a.spp).then_with(|| a.key.cmp(&b.key)));
+    found.into_iter().next()
+}
+
 /// Loads the reference for `key` from `cache_dir`, or renders it with `render` and stores it
 /// (`ref-<hash>.direct.exr`, `.indirect.exr`, `.variance.exr` and the key in `.txt`).
 pub fn cached_reference(
@@ -432,12 +504,7 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         sweep_checks: vec![],
     };
     for (scene_spec, (scene, camera, max_edge)) in request.scenes.iter().zip(&scenes) {
-        // A reference cached for the bare scene must not serve the edited one.
-        let scene_key = if request.edits.is_empty() {
-            scene_spec.clone()
-        } else {
-            format!("{scene_spec} {:?}", request.edits)
-        };
+        let scene_key = reference_scene_key(scene_spec, &request.edits);
         for warning in &scene.warnings {
             log::warn!("{warning}");
         }
@@ -706,4 +773,75 @@ pub fn timed<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let start = Instant::now();
     let value = f();
     (value, start.elapsed().as_secs_f64())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_viewer_finds_the_cached_reference_of_its_view_with_the_most_samples() {
+        let dir = std::env::temp_dir().join(format!("valgi-refcache-{}", std::process::id()));
+        let cache = dir.join("cache");
+        std::fs::create_dir_all(&cache).unwrap();
+        let key = |spp: u32, size: u32, time: f32, scene: &str| {
+            reference_key(
+                scene,
+                None,
+                size,
+                size,
+                Bounces::Limited(1),
+                spp,
+                1,
+                0.05,
+                time,
+                true,
+            )
+        };
+        let store = |key: &str, files: bool| {
+            let stem = format!("ref-{:016x}", fnv1a(key));
+            std::fs::write(cache.join(format!("{stem}.txt")), format!("{key}\n")).unwrap();
+            if files {
+                for part in ["direct", "indirect"] {
+                    std::fs::write(cache.join(format!("{stem}.{part}.exr")), b"").unwrap();
+                }
+            }
+        };
+        // Candidates: the right view at 16 and 64 spp, one whose images are gone, and wrong
+        // sizes, times and scenes (a scene name that only starts like the right one too).
+        store(&key(16, 32, 0.0, "cornell"), true);
+        store(&key(64, 32, 0.0, "cornell"), true);
+        store(&key(256, 32, 0.0, "cornell"), false);
+        store(&key(512, 48, 0.0, "cornell"), true);
+        store(&key(512, 32, 0.5, "cornell"), true);
+        store(&key(512, 32, 0.0, "cornell-point"), true);
+        let found = find_cached_reference(&dir, "cornell", None, (32, 32), 0.0).unwrap();
+        assert_eq!(found.key, key(64, 32, 0.0, "cornell"));
+        assert_eq!(found.spp, 64);
+        assert!(found.direct.is_file() && found.indirect.is_file());
+        // The cache folder itself works as well as the eval folder above it.
+        assert_eq!(
+            find_cached_reference(&cache, "cornell", None, (32, 32), 0.0),
+            Some(found)
+        );
+        assert_eq!(
+            find_cached_reference(&dir, "cornell", None, (32, 32), 0.5)
+                .unwrap()
+                .spp,
+            512
+        );
+        assert_eq!(
+            find_cached_reference(&dir, "cornell", Some("top"), (32, 32), 0.0),
+            None
+        );
+        assert_eq!(
+            find_cached_reference(&dir, "cornell", None, (16, 16), 0.0),
+            None
+        );
+        assert_eq!(
+            find_cached_reference(&dir.join("none"), "cornell", None, (32, 32), 0.0),
+            None
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

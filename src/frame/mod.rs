@@ -439,6 +439,20 @@ pub trait Method: Send {
         None
     }
 
+    /// What the method's solution does at the surface under a viewer's cursor (`pick`, in
+    /// the scene placed by `world_from_node`, seen from `eye`): the picked vertex's links to
+    /// the points it interpolates, and the point whose light the occluder view shows. `None`
+    /// for methods without sparse points.
+    fn debug_pick(
+        &self,
+        _scene: &crate::scene::Scene,
+        _world_from_node: &[glam::Mat4],
+        _pick: &crate::scene::pick::ScenePick,
+        _eye: glam::Vec3,
+    ) -> Option<DebugPick> {
+        None
+    }
+
     /// Estimated variance of each pixel of the last frame (full or indirect image), for
     /// Monte Carlo methods; `None` for deterministic ones.
     fn variance(&self, _indirect_only: bool) -> Option<Image> {
@@ -486,9 +500,25 @@ pub struct DebugPointSource<'a> {
     pub points_meta: &'a wgpu::Buffer,
     /// `array<vec4<u32>>`: the diffuse light's intensity (f32 bits) and position offset.
     pub point_diffuse: &'a wgpu::Buffer,
+    /// `array<vec4<u32>>`: the glossy light's intensity and position offset.
+    pub point_glossy: &'a wgpu::Buffer,
     /// `array<vec2<u32>>`: the rest of the lights' position offsets and the spheres.
     pub point_extra: &'a wgpu::Buffer,
     pub count: u32,
+}
+
+/// The sparse-point structure at a picked surface, in world space, for the viewer's links and
+/// occluder views.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DebugPick {
+    /// The picked mesh vertex (world position).
+    pub vertex: glam::Vec3,
+    /// Its links: each linked point's world position and normalized interpolation weight
+    /// (the weights sum to 1, or are all 0 when no linked point faces the vertex's way).
+    pub links: Vec<(glam::Vec3, f32)>,
+    /// The sparse point nearest the pick on the surface's side: its index in the method's
+    /// point buffers (`DebugPointSource`) and its world position.
+    pub point: Option<(u32, glam::Vec3)>,
 }
 
 /// The GPU buffers of a method's VALs (`array<Val>` of `vals_common.wgsl` and the count the

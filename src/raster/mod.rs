@@ -821,31 +821,65 @@ pub fn unbuffered_pipeline(
     format: wgpu::TextureFormat,
     write_mask: wgpu::ColorWrites,
 ) -> wgpu::RenderPipeline {
+    overlay_pipeline(
+        device,
+        &OverlayPipeline {
+            label,
+            module,
+            vertex_entry,
+            groups,
+            format,
+            write_mask,
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            buffers: &[],
+        },
+    )
+}
+
+/// What [`overlay_pipeline`] builds: `vertex_entry` and `fs_main` of `module`, drawing
+/// `topology` from `buffers` (none: the vertex stage makes its vertices) into one colour
+/// target of `format`, with no depth and no blending.
+pub struct OverlayPipeline<'a> {
+    pub label: &'a str,
+    pub module: &'a wgpu::ShaderModule,
+    pub vertex_entry: &'a str,
+    pub groups: &'a [Option<&'a wgpu::BindGroupLayout>],
+    pub format: wgpu::TextureFormat,
+    pub write_mask: wgpu::ColorWrites,
+    pub topology: wgpu::PrimitiveTopology,
+    pub buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+}
+
+/// The render pipeline `desc` describes (full-target passes, the viewer's overlays).
+pub fn overlay_pipeline(device: &wgpu::Device, desc: &OverlayPipeline) -> wgpu::RenderPipeline {
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: Some(label),
-        bind_group_layouts: groups,
+        label: Some(desc.label),
+        bind_group_layouts: desc.groups,
         immediate_size: 0,
     });
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
+        label: Some(desc.label),
         layout: Some(&pipeline_layout),
         vertex: wgpu::VertexState {
-            module,
-            entry_point: Some(vertex_entry),
+            module: desc.module,
+            entry_point: Some(desc.vertex_entry),
             compilation_options: Default::default(),
-            buffers: &[],
+            buffers: desc.buffers,
         },
-        primitive: wgpu::PrimitiveState::default(),
+        primitive: wgpu::PrimitiveState {
+            topology: desc.topology,
+            ..Default::default()
+        },
         depth_stencil: None,
         multisample: wgpu::MultisampleState::default(),
         fragment: Some(wgpu::FragmentState {
-            module,
+            module: desc.module,
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
             targets: &[Some(wgpu::ColorTargetState {
-                format,
+                format: desc.format,
                 blend: None,
-                write_mask,
+                write_mask: desc.write_mask,
             })],
         }),
         multiview_mask: None,

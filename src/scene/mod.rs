@@ -16,6 +16,7 @@ pub mod mesh;
 pub mod mitsuba;
 mod mitsuba_xml;
 pub mod obj;
+pub mod pick;
 pub mod ply;
 pub mod sanitize;
 pub mod spectrum;

@@ -712,6 +712,16 @@ impl Method for SparseMethod {
         Some(self.rsm.debug_vals())
     }
 
+    fn debug_pick(
+        &self,
+        scene: &Scene,
+        world_from_node: &[glam::Mat4],
+        pick: &crate::scene::pick::ScenePick,
+        eye: glam::Vec3,
+    ) -> Option<crate::frame::DebugPick> {
+        points::debug_pick(scene, world_from_node, &self.points, pick, eye)
+    }
+
     fn gpu_bytes(&self) -> u64 {
         let layer = self.layer.as_ref().map_or(0, |l| l.gpu_bytes())
             + self.val_source.as_ref().map_or(0, |s| s.gpu_bytes());

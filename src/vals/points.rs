@@ -10,7 +10,7 @@ use std::hash::{Hash, Hasher};
 use std::num::NonZero;
 use std::sync::{Arc, Mutex, OnceLock};
 
-use glam::Vec3;
+use glam::{Mat3, Mat4, Vec3};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
 
@@ -400,6 +400,56 @@ pub fn scene_points(scene: &Scene, total: usize, seed: u64) -> (Vec<Arc<MeshPoin
     (points, computed)
 }
 
+/// The viewer's links and occluder views at a picked surface (`Method::debug_pick`): the
+/// picked vertex's link row (its back-face row for the back of a two-sided sheet, as the apply
+/// pass chooses by facing) placed in world space, and the instance's point nearest the pick
+/// among those facing the eye (the nearest of all when none does), with its index in the
+/// points as `SparseGpu` flattens them over instances.
+pub fn debug_pick(
+    scene: &Scene,
+    world_from_node: &[Mat4],
+    points: &[Arc<MeshPoints>],
+    pick: &crate::scene::pick::ScenePick,
+    eye: Vec3,
+) -> Option<crate::frame::DebugPick> {
+    let instance = scene.instances.get(pick.instance)?;
+    let mesh = scene.meshes.get(instance.mesh)?;
+    let mesh_points = points.get(instance.mesh)?;
+    let world_from_model = *world_from_node.get(instance.node)?;
+    let normal_from_model = Mat3::from_mat4(world_from_model).inverse().transpose();
+    let place = |i: usize| world_from_model.transform_point3(mesh_points.positions[i]);
+    let (vertex, vertex_normal) = pick.vertex_world(scene, world_from_node);
+    let n = mesh.positions.len();
+    let two_sided = n > 0 && mesh_points.links.len() == 2 * n;
+    let back = two_sided && vertex_normal.dot(eye - vertex) < 0.0;
+    let row = mesh_points
+        .links
+        .get(pick.vertex as usize + if back { n } else { 0 })?;
+    let links = row
+        .iter()
+        .filter(|l| (l.point as usize) < mesh_points.positions.len())
+        .map(|l| (place(l.point as usize), l.weight))
+        .collect();
+    let offset: usize = scene.instances[..pick.instance]
+        .iter()
+        .map(|i| points.get(i.mesh).map_or(0, |p| p.positions.len()))
+        .sum();
+    let distance = |i: usize| (place(i) - pick.position).length_squared();
+    let facing =
+        |i: usize| (normal_from_model * mesh_points.normals[i]).dot(eye - pick.position) >= 0.0;
+    let nearest = |candidates: &mut dyn Iterator<Item = usize>| {
+        candidates.min_by(|&a, &b| distance(a).total_cmp(&distance(b)))
+    };
+    let count = mesh_points.positions.len();
+    let point =
+        nearest(&mut (0..count).filter(|&i| facing(i))).or_else(|| nearest(&mut (0..count)));
+    Some(crate::frame::DebugPick {
+        vertex,
+        links,
+        point: point.map(|i| ((offset + i) as u32, place(i))),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -490,5 +540,68 @@ mod tests {
             assert_eq!(best.point as usize, nearest);
         }
         assert!(pts.disc_radius.iter().all(|&r| r > 0.0));
+    }
+
+    #[test]
+    fn a_pick_shows_the_vertex_s_links_and_the_nearest_point_of_its_instance() {
+        use crate::scene::Instance;
+        let mesh = plane(0.1);
+        let front = place(&mesh, 64, 5);
+        let sheet = two_sided(&front);
+        let scene = Scene {
+            meshes: vec![mesh.clone(), mesh],
+            instances: vec![Instance { mesh: 0, node: 0 }, Instance { mesh: 1, node: 1 }],
+            ..Default::default()
+        };
+        let shift = Vec3::new(5.0, 0.0, 0.0);
+        let world = vec![Mat4::IDENTITY, Mat4::from_translation(shift)];
+        let points = vec![Arc::new(front.clone()), Arc::new(sheet.clone())];
+
+        // From above, on the second instance: the front row, placed by its instance; the
+        // point index counts the first instance's 64 points first.
+        let eye = shift + Vec3::new(0.3, 2.0, 0.6);
+        let hit = crate::scene::pick::pick(
+            &scene,
+            &world,
+            eye,
+            shift + Vec3::new(0.31, 0.0, 0.42) - eye,
+        )
+        .expect("the ray hits the sheet");
+        assert_eq!(hit.instance, 1);
+        let shown = debug_pick(&scene, &world, &points, &hit, eye).unwrap();
+        let row = &sheet.links[hit.vertex as usize];
+        let expected: Vec<(Vec3, f32)> = row
+            .iter()
+            .map(|l| (sheet.positions[l.point as usize] + shift, l.weight))
+            .collect();
+        assert_eq!(shown.links, expected);
+        let total: f32 = shown.links.iter().map(|l| l.1).sum();
+        assert!((total - 1.0).abs() < 1e-5, "weights sum to {total}");
+        let (index, position) = shown.point.unwrap();
+        let local = index as usize - 64;
+        assert!(
+            local < 64,
+            "a front point (normal +y) faces the eye above: {local}"
+        );
+        let d = (position - hit.position).length();
+        for p in &front.positions {
+            assert!(d <= (*p + shift - hit.position).length() + 1e-6);
+        }
+
+        // From below, the back row and a flipped point: light that reaches the back.
+        let eye = shift + Vec3::new(0.3, -2.0, 0.6);
+        let hit = crate::scene::pick::pick(
+            &scene,
+            &world,
+            eye,
+            shift + Vec3::new(0.31, 0.0, 0.42) - eye,
+        )
+        .unwrap();
+        let shown = debug_pick(&scene, &world, &points, &hit, eye).unwrap();
+        let n = scene.meshes[1].positions.len();
+        let back = &sheet.links[hit.vertex as usize + n];
+        assert!(back.iter().all(|l| l.point as usize >= 64));
+        assert_eq!(shown.links.len(), back.len());
+        assert!(shown.point.unwrap().0 as usize >= 64 + 64);
     }
 }

@@ -876,6 +876,7 @@ impl SparseGpu {
             points_model: &self.points_model_buffer,
             points_meta: &self.points_meta_buffer,
             point_diffuse: &self.point_diffuse,
+            point_glossy: &self.point_glossy,
             point_extra: &self.point_extra,
             count: self.point_count,
         }

@@ -8,6 +8,7 @@
 //! [`state::ViewerState`], testable without a window.
 
 pub mod debug;
+pub mod reference;
 pub mod state;
 
 use std::collections::{BTreeMap, HashSet};
@@ -24,7 +25,7 @@ use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
 use crate::app::AppError;
-use crate::frame::{record_frame, Method, View, ViewResult, ViewRig};
+use crate::frame::{record_frame, DebugPick, Method, View, ViewResult, ViewRig};
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::timing::round3;
 use crate::gpu::{FrameTimings, GpuContext};
@@ -38,9 +39,15 @@ pub use state::{
 };
 use state::{ViewerState, FOV_RANGE_DEGREES};
 
-/// `present.wgsl` (fragment): the tone map's parameters and the view's direct and indirect
-/// radiance.
-const PRESENT_BINDINGS: &[Slot] = &[Slot::Uniform, Slot::Texture, Slot::Texture];
+/// `present.wgsl` (fragment): the tone map's parameters, the view's direct and indirect
+/// radiance, and the reference's (the reference debug view).
+const PRESENT_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+    Slot::Texture,
+];
 
 /// Width of the control panel, logical pixels.
 const PANEL_WIDTH: f32 = 280.0;
@@ -103,6 +110,12 @@ pub struct ViewerRequest {
     pub change_option: Option<(String, String)>,
     /// Debug views on from the start (`--debug`).
     pub debug: DebugViews,
+    /// The window pixel whose surface the links and occluder views show in a scripted run
+    /// (`--pick X,Y`); interactively, the cursor's.
+    pub pick: Option<(u32, u32)>,
+    /// Where `valgi eval` cached its references (its output folder or the `cache` in it):
+    /// the reference debug view draws the difference to the one of the view on screen.
+    pub reference: Option<PathBuf>,
 }
 
 #[repr(C)]
@@ -111,7 +124,7 @@ pub struct PresentParams {
     pub exposure_scale: f32,
     pub components: u32,
     pub encode_srgb: u32,
-    pub pad0: u32,
+    pub difference: u32,
     pub origin: [u32; 2],
     pub size: [u32; 2],
 }
@@ -123,7 +136,20 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
             "PresentParams",
             "present.wgsl",
             PresentParams,
-            [exposure_scale, components, encode_srgb, pad0, origin, size]
+            [
+                exposure_scale,
+                components,
+                encode_srgb,
+                difference,
+                origin,
+                size
+            ]
+        ),
+        shared_layout!(
+            "DebugOccluderParams",
+            "vals_debug_occluders.wgsl",
+            debug::DebugOccluderParams,
+            [point, point_count, segments, pad0]
         ),
         shared_layout!(
             "DebugSplatParams",
@@ -400,8 +426,15 @@ struct Running {
     present: PresentPipelines,
     present_targets: Vec<PresentTarget>,
     debug_overlay: debug::DebugOverlay,
-    /// This frame's debug splat draws, per view.
-    debug_draws: Vec<Vec<debug::SplatDraw>>,
+    /// This frame's debug draws, per view.
+    debug_draws: Vec<Vec<debug::DebugDraw>>,
+    /// What lies under the cursor (the links and occluder views), and the pixel, camera and
+    /// time it was picked for.
+    pick: Option<DebugPick>,
+    pick_for: Option<(u32, u32, [u32; 16], u32)>,
+    reference: reference::ReferenceOverlay,
+    /// Whether the first view draws its difference to the reference this frame.
+    reference_on: bool,
     egui_ctx: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
@@ -511,6 +544,7 @@ impl Running {
             ),
         };
         let debug_overlay = debug::DebugOverlay::new(&ctx, format);
+        let reference = reference::ReferenceOverlay::new(&ctx, request.reference.as_deref());
         let method_entry = method::entry(&request.method)?;
 
         let egui_ctx = egui::Context::default();
@@ -553,6 +587,10 @@ impl Running {
             present_targets: vec![],
             debug_overlay,
             debug_draws: vec![],
+            pick: None,
+            pick_for: None,
+            reference,
+            reference_on: false,
             egui_ctx,
             egui_state,
             egui_renderer,
@@ -606,14 +644,7 @@ impl Running {
                 usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                 mapped_at_creation: false,
             });
-            let direct = view.targets.output_direct.create_view(&Default::default());
-            let indirect = view
-                .targets
-                .output_indirect
-                .create_view(&Default::default());
-            let group = self
-                .present_layout
-                .bind(&self.ctx.device, &[&params, &direct, &indirect]);
+            let group = self.present_group(&params, &view, self.present_targets.is_empty());
             self.present_targets.push(PresentTarget {
                 params,
                 group,
@@ -624,6 +655,99 @@ impl Running {
             self.views.push(view);
         }
         Ok(())
+    }
+
+    /// The present pass's group of a view: its parameters, outputs, and (for the first view,
+    /// the only one a reference can match) the reference textures.
+    fn present_group(&self, params: &wgpu::Buffer, view: &View, first: bool) -> wgpu::BindGroup {
+        let direct = view.targets.output_direct.create_view(&Default::default());
+        let indirect = view
+            .targets
+            .output_indirect
+            .create_view(&Default::default());
+        let (ref_direct, ref_indirect) = match first {
+            true => self.reference.textures(),
+            false => {
+                let none = self.reference_none();
+                (none, none)
+            }
+        };
+        self.present_layout.bind(
+            &self.ctx.device,
+            &[params, &direct, &indirect, ref_direct, ref_indirect],
+        )
+    }
+
+    /// The 1×1 black texture bound where no reference is.
+    fn reference_none(&self) -> &wgpu::TextureView {
+        self.reference.empty()
+    }
+
+    /// The view on screen as the reference lookup sees it.
+    fn reference_view(&self, scene_time: f32) -> reference::ReferenceView {
+        let size = self.views.first().map_or((0, 0), |v| (v.width, v.height));
+        let unmatchable = if self.views.len() != 1 {
+            Some("a cached reference is a mono image: use --views mono")
+        } else if self.state.world_from_view().is_some() {
+            Some("the camera was moved: reset to the scene camera for the reference")
+        } else if self.state.yfov_degrees.is_some() {
+            Some("the field of view is overridden: reset to the scene camera for the reference")
+        } else {
+            None
+        };
+        reference::ReferenceView {
+            scene_key: crate::eval::reference_scene_key(&self.request.scene, &self.request.edits),
+            camera: self.request.camera.clone(),
+            size,
+            time: scene_time,
+            unmatchable,
+        }
+    }
+
+    /// Picks the surface under the cursor (or `--pick`) in the view it lies in and asks the
+    /// method what its solution does there; again only when the pixel, camera or time changed.
+    fn update_pick(&mut self, scene: &Scene, world_from_node: &[Mat4]) {
+        let Some((x, y)) = self.request.pick.or_else(|| {
+            self.cursor
+                .map(|(x, y)| (x.max(0.0) as u32, y.max(0.0) as u32))
+        }) else {
+            self.pick = None;
+            return;
+        };
+        let region = self.present_targets.iter().position(|t| {
+            (t.origin.0..t.origin.0 + t.size.0).contains(&x)
+                && (t.origin.1..t.origin.1 + t.size.1).contains(&y)
+        });
+        let (Some(i), Some(method)) = (region, self.method.as_ref()) else {
+            self.pick = None;
+            self.pick_for = None;
+            return;
+        };
+        let view = &self.views[i];
+        let key = (
+            x,
+            y,
+            view.camera
+                .world_from_view
+                .to_cols_array()
+                .map(f32::to_bits),
+            self.state.time.to_bits(),
+        );
+        if self.pick_for == Some(key) {
+            return;
+        }
+        self.pick_for = Some(key);
+        let t = &self.present_targets[i];
+        let (origin, dir) = crate::reference::camera_ray(
+            &view.camera,
+            view.width,
+            view.height,
+            (x - t.origin.0) as f32 + 0.5,
+            (y - t.origin.1) as f32 + 0.5,
+        );
+        self.pick = crate::scene::pick::pick(scene, world_from_node, origin, dir).and_then(|hit| {
+            method.debug_pick(scene, world_from_node, &hit, view.camera.position())
+        });
     }
 
     /// The scene's camera at this frame, or the flown or orbited one, with the field of
@@ -798,6 +922,24 @@ impl Running {
             self.pass_total_sum_ms += self.timings.merged().total_ms();
             self.figures = Figures::of(method.as_ref(), &self.views, &self.results);
         }
+        if self.state.debug.needs_pick() {
+            self.update_pick(scene, &world_from_node);
+        } else {
+            (self.pick, self.pick_for) = (None, None);
+        }
+        self.reference_on = false;
+        if self.state.debug.reference {
+            let wanted = self.reference_view(self.state.time);
+            if self.reference.update(&self.ctx, &wanted) {
+                if let (Some(target), Some(view)) =
+                    (self.present_targets.first(), self.views.first())
+                {
+                    let group = self.present_group(&target.params, view, true);
+                    self.present_targets[0].group = group;
+                }
+            }
+            self.reference_on = self.reference.key().is_some() && wanted.unmatchable.is_none();
+        }
 
         let raw_input = self.egui_state.take_egui_input(&self.window);
         let mut actions = std::mem::take(&mut self.pending_actions);
@@ -821,11 +963,21 @@ impl Running {
                 view_names: self.views.iter().map(|v| v.name.clone()).collect(),
                 screenshots: &self.screenshots_written,
                 debug_available: self.method.as_ref().map_or_else(DebugViews::default, |m| {
+                    let points = m.debug_points().is_some();
                     DebugViews {
-                        points: m.debug_points().is_some(),
+                        points,
                         vals: m.debug_vals().is_some(),
+                        links: points,
+                        occluders: points,
+                        reference: self.request.reference.is_some(),
                     }
                 }),
+                reference_note: if self.reference_on {
+                    format!("reference: {}", self.reference.key().unwrap_or_default())
+                } else {
+                    self.reference.note().to_string()
+                },
+                pick: self.pick.as_ref(),
             };
             self.egui_ctx
                 .run_ui(raw_input, |ui| panel.show(ui, &mut actions))
@@ -847,7 +999,7 @@ impl Running {
         };
         self.write_present_params();
         self.debug_draws = match &self.method {
-            Some(method) if self.state.debug.any() && !self.anaglyph() => self
+            Some(method) if self.state.debug.any_overlay() && !self.anaglyph() => self
                 .views
                 .iter()
                 .map(|view| {
@@ -856,6 +1008,7 @@ impl Running {
                         method.as_ref(),
                         view,
                         self.state.debug,
+                        self.pick.as_ref(),
                         2f32.powf(self.state.exposure),
                         !self.config.format.is_srgb(),
                     )
@@ -1002,7 +1155,7 @@ impl Running {
     fn write_present_params(&self) {
         let encode_srgb = !self.config.format.is_srgb() as u32;
         let anaglyph = self.anaglyph();
-        for target in &self.present_targets {
+        for (i, target) in self.present_targets.iter().enumerate() {
             // An anaglyph draws both eyes into the first region.
             let origin = if anaglyph {
                 self.present_targets[0].origin
@@ -1013,7 +1166,7 @@ impl Running {
                 exposure_scale: 2f32.powf(self.state.exposure),
                 components: self.state.components.bits(),
                 encode_srgb,
-                pad0: 0,
+                difference: (i == 0 && self.reference_on) as u32,
                 origin: [origin.0, origin.1],
                 size: [target.size.0, target.size.1],
             };
@@ -1135,11 +1288,28 @@ impl Running {
             "views": self.views.iter().map(|v| v.name.clone()).collect::<Vec<_>>(),
             "view_size": self.views.first().map(|v| [v.width, v.height]),
             "stereo_display": if self.anaglyph() { "anaglyph" } else { "side-by-side" },
-            // Debug views on, and the splat draws the last frame recorded (over all views).
+            // Debug views on, the overlay draws the last frame recorded (over all views), what
+            // was picked for the links and occluder views, and the reference on screen.
             "debug": {
                 "points": self.state.debug.points,
                 "vals": self.state.debug.vals,
+                "links": self.state.debug.links,
+                "occluders": self.state.debug.occluders,
+                "reference": self.state.debug.reference,
                 "draws": self.debug_draws.iter().map(Vec::len).sum::<usize>(),
+                "pick": self.pick.as_ref().map(|p| serde_json::json!({
+                    "vertex": p.vertex.to_array(),
+                    "links": p.links.iter().map(|(q, w)| serde_json::json!({
+                        "point": q.to_array(),
+                        "weight": w,
+                    })).collect::<Vec<_>>(),
+                    "point": p.point.map(|(i, q)| serde_json::json!({
+                        "index": i,
+                        "position": q.to_array(),
+                    })),
+                })),
+                "reference_key": if self.reference_on { self.reference.key() } else { None },
+                "reference_note": self.reference.note(),
             },
             "frames": self.frames_done,
             "surface_format": format!("{:?}", self.config.format),
@@ -1207,6 +1377,10 @@ struct PanelData<'a> {
     screenshots: &'a [PathBuf],
     /// The debug views the running method can draw.
     debug_available: DebugViews,
+    /// The reference on screen, or why there is none.
+    reference_note: String,
+    /// What the links and occluder views show.
+    pick: Option<&'a DebugPick>,
 }
 
 impl PanelData<'_> {
@@ -1247,22 +1421,55 @@ impl PanelData<'_> {
 
     /// The debug views' toggles; a method without points or VALs greys its box out.
     fn debug_ui(&mut self, ui: &mut egui::Ui) {
+        let available = self.debug_available;
+        let debug = &mut self.state.debug;
         ui.horizontal(|ui| {
             ui.label("debug:");
-            let debug = &mut self.state.debug;
             ui.add_enabled(
-                self.debug_available.points,
+                available.points,
                 egui::Checkbox::new(&mut debug.points, "sparse points"),
             )
             .on_hover_text(
                 "splats coloured by the first-bounce radiance E/π of the point's diffuse light",
             );
-            ui.add_enabled(
-                self.debug_available.vals,
-                egui::Checkbox::new(&mut debug.vals, "VALs"),
-            )
-            .on_hover_text("splats coloured by the disc radiance Φ/(π·A)");
+            ui.add_enabled(available.vals, egui::Checkbox::new(&mut debug.vals, "VALs"))
+                .on_hover_text("splats coloured by the disc radiance Φ/(π·A)");
         });
+        ui.horizontal(|ui| {
+            ui.add_enabled(available.links, egui::Checkbox::new(&mut debug.links, "links"))
+                .on_hover_text(
+                    "the vertex under the cursor and its 8 links, brighter with more weight (blue: weight 0)",
+                );
+            ui.add_enabled(
+                available.occluders,
+                egui::Checkbox::new(&mut debug.occluders, "occluders"),
+            )
+            .on_hover_text(
+                "the light spheres of the point under the cursor (yellow diffuse, cyan glossy) and the occluder discs that cover the diffuse one (redder: larger share)",
+            );
+            ui.add_enabled(
+                available.reference,
+                egui::Checkbox::new(&mut debug.reference, "reference diff"),
+            )
+            .on_hover_text(
+                "luminance of the image minus the cached path-traced reference's: red brighter, blue darker (--reference DIR)",
+            );
+        });
+        if debug.needs_pick() {
+            match self.pick {
+                Some(p) => ui.label(format!(
+                    "vertex {:.2?}: {} links{}",
+                    p.vertex.to_array(),
+                    p.links.len(),
+                    p.point
+                        .map_or(String::new(), |(i, _)| format!(", point {i}"))
+                )),
+                None => ui.label("point at a surface of a view"),
+            };
+        }
+        if debug.reference && !self.reference_note.is_empty() {
+            ui.label(egui::RichText::new(&self.reference_note).small());
+        }
     }
 
     /// Frame time with its history plot and the counts of the render JSON line.

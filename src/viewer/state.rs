@@ -268,25 +268,44 @@ pub struct DebugViews {
     pub points: bool,
     /// VALs, coloured by their disc radiance Φ/(π·A).
     pub vals: bool,
+    /// The links of the vertex under the cursor to the points it interpolates.
+    pub links: bool,
+    /// The light spheres of the point under the cursor and the occluder discs that cover them.
+    pub occluders: bool,
+    /// The difference to the path-traced reference `valgi eval` cached for this view.
+    pub reference: bool,
 }
 
+/// The debug views' names, as `--debug` takes them.
+pub const DEBUG_VIEW_NAMES: &str = "points, vals, links, occluders, reference";
+
 impl DebugViews {
-    /// Turns on the view `name` (`points` or `vals`), as `--debug` names it.
+    /// Turns on the view `name` (one of [`DEBUG_VIEW_NAMES`]), as `--debug` names it.
     pub fn enable(&mut self, name: &str) -> Result<(), String> {
         match name {
             "points" => self.points = true,
             "vals" => self.vals = true,
+            "links" => self.links = true,
+            "occluders" => self.occluders = true,
+            "reference" => self.reference = true,
             other => {
                 return Err(format!(
-                    "--debug {other}: unknown debug view (expected points or vals)"
+                    "--debug {other}: unknown debug view (expected one of {DEBUG_VIEW_NAMES})"
                 ))
             }
         }
         Ok(())
     }
 
-    pub fn any(self) -> bool {
-        self.points || self.vals
+    /// Whether a view drawn over the image is on (the reference difference replaces the
+    /// image instead).
+    pub fn any_overlay(self) -> bool {
+        self.points || self.vals || self.links || self.occluders
+    }
+
+    /// Whether a view needs what lies under the cursor.
+    pub fn needs_pick(self) -> bool {
+        self.links || self.occluders
     }
 }
 
@@ -689,20 +708,29 @@ mod tests {
     }
 
     #[test]
-    fn debug_views_are_named_points_and_vals() {
+    fn debug_views_are_named_as_the_command_line_names_them() {
         let mut debug = DebugViews::default();
-        assert!(!debug.any());
+        assert!(!debug.any_overlay() && !debug.needs_pick());
         debug.enable("vals").unwrap();
         assert_eq!(
             debug,
             DebugViews {
-                points: false,
-                vals: true
+                vals: true,
+                ..Default::default()
             }
         );
         debug.enable("points").unwrap();
-        assert!(debug.points && debug.vals);
-        let error = DebugViews::default().enable("links").unwrap_err();
-        assert!(error.contains("--debug links"), "{error}");
+        assert!(debug.points && debug.vals && debug.any_overlay() && !debug.needs_pick());
+        let mut picking = DebugViews::default();
+        picking.enable("occluders").unwrap();
+        assert!(picking.needs_pick() && picking.any_overlay() && !picking.links);
+        picking.enable("links").unwrap();
+        assert!(picking.links);
+        let mut reference = DebugViews::default();
+        reference.enable("reference").unwrap();
+        assert!(reference.reference && !reference.any_overlay() && !reference.needs_pick());
+        let error = DebugViews::default().enable("normals").unwrap_err();
+        assert!(error.contains("--debug normals"), "{error}");
+        assert!(error.contains(DEBUG_VIEW_NAMES), "{error}");
     }
 }
