@@ -654,6 +654,118 @@ fn the_reference_view_draws_the_difference_to_the_cached_reference() {
     );
 }
 
+/// `--debug atlas`: the atlas method draws its light-map texels as a checkerboard on each
+/// chart mesh's hue, so twice the atlas resolution gives about twice the checker squares
+/// across a wall; a clean bake has no coverage hole, and texels whose coverage flag is cleared
+/// (alpha 0) show magenta, as many as the view sees of them.
+#[test]
+fn the_atlas_view_shows_its_texels_and_coverage_holes() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_atlas");
+    let exe = env!("CARGO_BIN_EXE_valgi");
+    let bake = |res: u32| {
+        let out = dir.join(format!("atlas{res}.exr"));
+        let mut command = std::process::Command::new(exe);
+        command
+            .args([
+                "bake",
+                "--scene",
+                "cornell",
+                "--vpls",
+                "50",
+                "--bounces",
+                "1",
+            ])
+            .args([
+                "--atlas-res",
+                &res.to_string(),
+                "--out",
+                out.to_str().unwrap(),
+            ]);
+        run(command);
+        out
+    };
+    let size = 128u32;
+    let view = |atlas: &Path, name: &str| {
+        let shot = dir.join(format!("{name}.png"));
+        let option = format!("atlas={}", atlas.display());
+        let args = [
+            "view",
+            "--scene",
+            "cornell",
+            "--method",
+            "atlas",
+            "--opt",
+            &option,
+            "--width",
+            "128",
+            "--height",
+            "128",
+            "--frames",
+            "1",
+            "--screenshot",
+            shot.to_str().unwrap(),
+            "--debug",
+            "atlas",
+        ];
+        let report = report_of(&run(windowed(&args)?));
+        assert_eq!(report["debug"]["atlas"], true, "{report}");
+        Some(load(&shot))
+    };
+    let coarse = bake(64);
+    let fine = bake(128);
+    let Some(coarse_shot) = view(&coarse, "coarse") else {
+        return;
+    };
+    let fine_shot = view(&fine, "fine").unwrap();
+    // Colour changes along a row across the back wall, above the blocks.
+    let changes = |image: &image::RgbImage| {
+        let y = size * 3 / 10;
+        (size * 3 / 10..size * 7 / 10 - 1)
+            .filter(|&x| image.get_pixel(x, y) != image.get_pixel(x + 1, y))
+            .count()
+    };
+    let (c, f) = (changes(&coarse_shot), changes(&fine_shot));
+    eprintln!("atlas view: {c} checker edges across the wall at 64², {f} at 128²");
+    assert!(c >= 4, "{c} checker edges at 64²");
+    let ratio = f as f64 / c as f64;
+    assert!(
+        (1.5..=2.6).contains(&ratio),
+        "128² gives {f} edges, 64² {c}"
+    );
+    let magenta = |image: &image::RgbImage| {
+        (0..size)
+            .flat_map(|y| (0..size).map(move |x| (x, y)))
+            .filter(|&(x, y)| image.get_pixel(x, y).0 == [255, 0, 255])
+            .count()
+    };
+    assert_eq!(magenta(&fine_shot), 0, "a clean bake has no coverage hole");
+
+    // Clear the coverage flag of every 150th covered texel (under the 1 % the renderer
+    // accepts as missing), with the layout the bake stored beside it.
+    let mut holed = valgi::image_io::Image::read_exr(&fine).unwrap();
+    let mut cleared = 0;
+    for (i, p) in holed.pixels.iter_mut().filter(|p| p[3] > 0.0).enumerate() {
+        if i % 150 == 0 {
+            p[3] = 0.0;
+            cleared += 1;
+        }
+    }
+    let holed_path = dir.join("holed.exr");
+    holed.write_exr(&holed_path).unwrap();
+    std::fs::copy(
+        fine.with_extension("exr.layout"),
+        holed_path.with_extension("exr.layout"),
+    )
+    .unwrap();
+    let holed_shot = view(&holed_path, "holed").unwrap();
+    let holes = magenta(&holed_shot);
+    eprintln!("atlas view: {cleared} texels cleared, {holes} magenta pixels");
+    assert!(holes > 0, "no coverage hole shown");
+}
+
 /// A scripted run whose method cannot be built exits with the build's error instead of
 /// waiting for a method that never comes.
 #[test]

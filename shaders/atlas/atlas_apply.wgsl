@@ -4,7 +4,9 @@
 
 struct ApplyParams {
     render_size: vec2<u32>,
-    pad: vec2<u32>,
+    // 1: the lookup drew the atlas debug view's colours; they are written as they are.
+    debug: u32,
+    pad: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: ApplyParams;
@@ -20,6 +22,10 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let e = textureLoad(irradiance, id.xy, 0);
+    if (params.debug != 0u) {
+        textureStore(radiance_indirect, id.xy, vec4<f32>(e.rgb * e.a, 1.0));
+        return;
+    }
     let rho = textureLoad(gbuffer_diffuse, id.xy, 0).rgb;
     textureStore(radiance_indirect, id.xy, vec4<f32>(rho * INV_PI * e.rgb * e.a, 1.0));
 }
@@ -34,6 +40,10 @@ fn cs_add(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let e = textureLoad(irradiance, id.xy, 0);
+    if (params.debug != 0u) {
+        textureStore(radiance_indirect, id.xy, vec4<f32>(e.rgb * e.a, 1.0));
+        return;
+    }
     let rho = textureLoad(gbuffer_diffuse, id.xy, 0).rgb;
     let vals = textureLoad(vals_indirect, id.xy, 0).rgb;
     textureStore(radiance_indirect, id.xy, vec4<f32>(vals + rho * INV_PI * e.rgb * e.a, 1.0));

@@ -48,6 +48,11 @@ impl IndirectLayer for AtlasOnVals {
         self.name
     }
 
+    fn set_debug_atlas(&mut self, on: bool) -> bool {
+        self.layer.debug = on;
+        true
+    }
+
     fn update(&mut self, ctx: &GpuContext, frame: &FrameInput, views: &[&View]) {
         self.layer.update(ctx, frame.world_from_node, views);
         self.under.retain(views);

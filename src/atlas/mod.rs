@@ -170,7 +170,8 @@ pub struct AtlasFrame {
 #[derive(Clone, Copy, Debug, Pod, Zeroable)]
 pub struct ApplyParams {
     pub render_size: [u32; 2],
-    pub pad: [u32; 2],
+    pub debug: u32,
+    pub pad: u32,
 }
 
 /// The atlas's structs shared with WGSL, for the layout test (same form as
@@ -195,6 +196,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             size: size_of::<ApplyParams>(),
             fields: vec![
                 ("render_size", offset_of!(ApplyParams, render_size)),
+                ("debug", offset_of!(ApplyParams, debug)),
                 ("pad", offset_of!(ApplyParams, pad)),
             ],
         },
@@ -346,6 +348,12 @@ pub struct AtlasLayer {
     render_pipeline: wgpu::RenderPipeline,
     /// The same with back faces culled, for the two faces of sheets.
     sheet_pipeline: wgpu::RenderPipeline,
+    /// The two with `fs_debug`: the atlas debug view's colours.
+    debug_pipeline: wgpu::RenderPipeline,
+    debug_sheet_pipeline: wgpu::RenderPipeline,
+    /// Draw the debug view's colours (charts, texels, coverage holes, seams) instead of the
+    /// light (`valgi view --debug atlas`).
+    pub debug: bool,
     render_bgl: GroupLayout,
     apply_pipeline: wgpu::ComputePipeline,
     apply_bgl: GroupLayout,
@@ -558,7 +566,7 @@ impl AtlasLayer {
         });
         const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2];
-        let make_render_pipeline = |cull_mode| {
+        let make_render_pipeline = |cull_mode, fragment_entry| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("atlas lookup"),
                 layout: Some(&pipeline_layout),
@@ -586,7 +594,7 @@ impl AtlasLayer {
                 multisample: wgpu::MultisampleState::default(),
                 fragment: Some(wgpu::FragmentState {
                     module: &render_module,
-                    entry_point: Some("fs_main"),
+                    entry_point: Some(fragment_entry),
                     compilation_options: Default::default(),
                     targets: &[Some(wgpu::ColorTargetState {
                         format: RADIANCE_FORMAT,
@@ -598,8 +606,10 @@ impl AtlasLayer {
                 cache: None,
             })
         };
-        let render_pipeline = make_render_pipeline(None);
-        let sheet_pipeline = make_render_pipeline(Some(wgpu::Face::Back));
+        let render_pipeline = make_render_pipeline(None, "fs_main");
+        let sheet_pipeline = make_render_pipeline(Some(wgpu::Face::Back), "fs_main");
+        let debug_pipeline = make_render_pipeline(None, "fs_debug");
+        let debug_sheet_pipeline = make_render_pipeline(Some(wgpu::Face::Back), "fs_debug");
 
         let apply_module = ctx.shader("atlas_apply.wgsl");
         let apply_bgl = GroupLayout::new(
@@ -615,6 +625,9 @@ impl AtlasLayer {
             transforms,
             render_pipeline,
             sheet_pipeline,
+            debug_pipeline,
+            debug_sheet_pipeline,
+            debug: false,
             render_bgl,
             apply_pipeline,
             apply_bgl,
@@ -703,7 +716,8 @@ impl AtlasLayer {
             .write_buffer(&state.frame_buffer, 0, bytemuck::bytes_of(&frame));
         let apply = ApplyParams {
             render_size: state.render_size,
-            pad: [0; 2],
+            debug: self.debug as u32,
+            pad: 0,
         };
         ctx.queue
             .write_buffer(&state.apply_buffer, 0, bytemuck::bytes_of(&apply));
@@ -781,10 +795,11 @@ impl AtlasLayer {
             |pass| {
                 pass.set_bind_group(0, &state.render_group, &[]);
                 for (i, m) in self.meshes.iter().enumerate() {
-                    pass.set_pipeline(if m.sheet_face {
-                        &self.sheet_pipeline
-                    } else {
-                        &self.render_pipeline
+                    pass.set_pipeline(match (self.debug, m.sheet_face) {
+                        (false, false) => &self.render_pipeline,
+                        (false, true) => &self.sheet_pipeline,
+                        (true, false) => &self.debug_pipeline,
+                        (true, true) => &self.debug_sheet_pipeline,
                     });
                     pass.set_vertex_buffer(0, m.vertices.slice(..));
                     pass.set_index_buffer(m.indices.slice(..), wgpu::IndexFormat::Uint32);
@@ -917,6 +932,11 @@ impl Method for AtlasMethod {
 
     fn gpu_bytes(&self) -> u64 {
         self.raster.gpu_bytes() + self.layer.gpu_bytes()
+    }
+
+    fn set_debug_atlas(&mut self, on: bool) -> bool {
+        self.layer.debug = on;
+        true
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {

@@ -439,6 +439,13 @@ pub trait Method: Send {
         None
     }
 
+    /// Draws the light atlas's debug colours (charts, texel grid, coverage holes, seams) in
+    /// place of its indirect light while `on`; false for methods without an atlas (nothing
+    /// changes).
+    fn set_debug_atlas(&mut self, _on: bool) -> bool {
+        false
+    }
+
     /// What the method's solution does at the surface under a viewer's cursor (`pick`, in
     /// the scene placed by `world_from_node`, seen from `eye`): the picked vertex's links to
     /// the points it interpolates, and the point whose light the occluder view shows. `None`
@@ -537,6 +544,11 @@ pub struct DebugValSource<'a> {
 pub trait IndirectLayer: Send {
     /// The composed method's name (as given to `--method`).
     fn method_name(&self) -> &'static str;
+    /// Draws the layer's debug colours in place of the composed indirect light while `on`
+    /// (`Method::set_debug_atlas`); false for layers that have none.
+    fn set_debug_atlas(&mut self, _on: bool) -> bool {
+        false
+    }
     /// Per-frame uploads (transforms) and per-view state for this frame's views.
     fn update(&mut self, ctx: &GpuContext, frame: &FrameInput, views: &[&View]);
     /// Records the view's indirect light: `draw_under` draws the underlying method's light

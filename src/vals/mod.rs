@@ -712,6 +712,10 @@ impl Method for SparseMethod {
         Some(self.rsm.debug_vals())
     }
 
+    fn set_debug_atlas(&mut self, on: bool) -> bool {
+        self.layer.as_mut().is_some_and(|l| l.set_debug_atlas(on))
+    }
+
     fn debug_pick(
         &self,
         scene: &Scene,

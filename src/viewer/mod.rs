@@ -435,6 +435,9 @@ struct Running {
     reference: reference::ReferenceOverlay,
     /// Whether the first view draws its difference to the reference this frame.
     reference_on: bool,
+    /// Whether the running method has a light atlas, and draws its debug view this frame.
+    atlas_available: bool,
+    atlas_on: bool,
     egui_ctx: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
@@ -591,6 +594,8 @@ impl Running {
             pick_for: None,
             reference,
             reference_on: false,
+            atlas_available: false,
+            atlas_on: false,
             egui_ctx,
             egui_state,
             egui_renderer,
@@ -910,6 +915,9 @@ impl Running {
         let started = Instant::now();
         let drawing = self.method.is_some();
         if let Some(method) = self.method.as_mut() {
+            // Set every frame: a rebuilt method starts with it off.
+            self.atlas_available = method.set_debug_atlas(self.state.debug.atlas);
+            self.atlas_on = self.atlas_available && self.state.debug.atlas;
             let frame = record_frame(
                 method.as_mut(),
                 &self.ctx,
@@ -970,6 +978,7 @@ impl Running {
                         links: points,
                         occluders: points,
                         reference: self.request.reference.is_some(),
+                        atlas: self.atlas_available,
                     }
                 }),
                 reference_note: if self.reference_on {
@@ -1163,8 +1172,17 @@ impl Running {
                 target.origin
             };
             let params = PresentParams {
-                exposure_scale: 2f32.powf(self.state.exposure),
-                components: self.state.components.bits(),
+                // The atlas view's colours are display values in the indirect image.
+                exposure_scale: if self.atlas_on {
+                    1.0
+                } else {
+                    2f32.powf(self.state.exposure)
+                },
+                components: if self.atlas_on {
+                    Components::Indirect.bits()
+                } else {
+                    self.state.components.bits()
+                },
                 encode_srgb,
                 difference: (i == 0 && self.reference_on) as u32,
                 origin: [origin.0, origin.1],
@@ -1296,6 +1314,7 @@ impl Running {
                 "links": self.state.debug.links,
                 "occluders": self.state.debug.occluders,
                 "reference": self.state.debug.reference,
+                "atlas": self.atlas_on,
                 "draws": self.debug_draws.iter().map(Vec::len).sum::<usize>(),
                 "pick": self.pick.as_ref().map(|p| serde_json::json!({
                     "vertex": p.vertex.to_array(),
@@ -1455,6 +1474,10 @@ impl PanelData<'_> {
                 "luminance of the image minus the cached path-traced reference's: red brighter, blue darker (--reference DIR)",
             );
         });
+        ui.add_enabled(available.atlas, egui::Checkbox::new(&mut debug.atlas, "atlas"))
+            .on_hover_text(
+                "the light atlas in place of its light: a hue per chart, a checkerboard of its texels, magenta where the texel holds no surface, paler where the lookup crosses a seam or cut",
+            );
         if debug.needs_pick() {
             match self.pick {
                 Some(p) => ui.label(format!(

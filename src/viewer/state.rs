@@ -274,10 +274,12 @@ pub struct DebugViews {
     pub occluders: bool,
     /// The difference to the path-traced reference `valgi eval` cached for this view.
     pub reference: bool,
+    /// The light atlas's charts, texels, coverage holes and seams in place of its light.
+    pub atlas: bool,
 }
 
 /// The debug views' names, as `--debug` takes them.
-pub const DEBUG_VIEW_NAMES: &str = "points, vals, links, occluders, reference";
+pub const DEBUG_VIEW_NAMES: &str = "points, vals, links, occluders, reference, atlas";
 
 impl DebugViews {
     /// Turns on the view `name` (one of [`DEBUG_VIEW_NAMES`]), as `--debug` names it.
@@ -288,6 +290,7 @@ impl DebugViews {
             "links" => self.links = true,
             "occluders" => self.occluders = true,
             "reference" => self.reference = true,
+            "atlas" => self.atlas = true,
             other => {
                 return Err(format!(
                     "--debug {other}: unknown debug view (expected one of {DEBUG_VIEW_NAMES})"
@@ -297,8 +300,8 @@ impl DebugViews {
         Ok(())
     }
 
-    /// Whether a view drawn over the image is on (the reference difference replaces the
-    /// image instead).
+    /// Whether a view drawn over the image is on (the reference difference and the atlas view
+    /// replace the image instead).
     pub fn any_overlay(self) -> bool {
         self.points || self.vals || self.links || self.occluders
     }
@@ -729,6 +732,8 @@ mod tests {
         let mut reference = DebugViews::default();
         reference.enable("reference").unwrap();
         assert!(reference.reference && !reference.any_overlay() && !reference.needs_pick());
+        reference.enable("atlas").unwrap();
+        assert!(reference.atlas && !reference.any_overlay());
         let error = DebugViews::default().enable("normals").unwrap_err();
         assert!(error.contains("--debug normals"), "{error}");
         assert!(error.contains(DEBUG_VIEW_NAMES), "{error}");
