@@ -302,9 +302,21 @@ struct ViewArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
     #[arg(long, default_value = "cornell")]
     scene: String,
-    /// Rendering method (see `valgi methods`); switchable in the panel.
-    #[arg(long, default_value = "direct")]
-    method: String,
+    /// Rendering method (see `valgi methods`); switchable in the panel. Default: direct, or
+    /// sparse with --preview.
+    #[arg(long)]
+    method: Option<String>,
+    /// The material preview room of `valgi preview` instead of --scene, with the ball's base
+    /// colour, roughness, metallic and specular factor as knobs in the panel.
+    #[arg(long)]
+    preview: bool,
+    /// With --preview: the ball's starting material, FILE.glb[#NAME|#INDEX] (default a grey
+    /// dielectric of roughness 0.5).
+    #[arg(long, requires = "preview")]
+    material: Option<String>,
+    /// With --preview: sphere, or bunny (the shared data's Stanford bunny).
+    #[arg(long, requires = "preview", default_value = "sphere")]
+    ball: valgi::preview::BallShape,
     /// Width of each view's region of the window, pixels.
     #[arg(long, default_value_t = 512)]
     width: u32,
@@ -907,9 +919,33 @@ fn main() -> ExitCode {
                 }
             };
             let request = (|| {
+                let preview = match (args.preview, &args.material) {
+                    (false, _) => None,
+                    (true, None) => Some(valgi::preview::PreviewMaterial::plain(
+                        "preview",
+                        valgi::preview::default_material(),
+                    )),
+                    (true, Some(spec)) => Some(
+                        valgi::preview::load_materials(spec)
+                            .map_err(|e| valgi::raster::RenderError::Settings(e.to_string()))?
+                            .into_iter()
+                            .next()
+                            .ok_or_else(|| {
+                                valgi::raster::RenderError::Settings(format!(
+                                    "--material {spec}: the file has no material"
+                                ))
+                            })?,
+                    ),
+                };
                 Ok::<_, valgi::raster::RenderError>(valgi::viewer::ViewerRequest {
                     scene: args.scene,
-                    method: args.method,
+                    method: args.method.unwrap_or_else(|| {
+                        if args.preview { "sparse" } else { "direct" }.to_string()
+                    }),
+                    preview: preview.map(|material| valgi::viewer::ViewerPreview {
+                        material,
+                        ball: args.ball,
+                    }),
                     options,
                     settings: RenderSettings {
                         width: args.width,

@@ -766,6 +766,92 @@ fn the_atlas_view_shows_its_texels_and_coverage_holes() {
     assert!(holes > 0, "no coverage hole shown");
 }
 
+/// `valgi view --preview`: the material preview room with `valgi preview`'s method defaults;
+/// a material knob (`--change-option material.roughness=0.2`, as the panel's slider does)
+/// rebuilds the method for the edited material, and the window then shows exactly what
+/// `valgi render` shows of the built-in scene with that roughness, not the starting one.
+#[test]
+fn the_preview_material_knobs_rebuild_for_the_edited_material() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_preview");
+    let exe = env!("CARGO_BIN_EXE_valgi");
+    let shot = dir.join("preview.png");
+    let args = [
+        "view",
+        "--preview",
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--frames",
+        "2",
+        "--screenshot",
+        shot.to_str().unwrap(),
+        "--change-option",
+        "material.roughness=0.2",
+    ];
+    let Some(command) = windowed(&args) else {
+        return;
+    };
+    let report = report_of(&run(command));
+    assert_eq!(report["method"], "sparse", "{report}");
+    assert_eq!(
+        report["options"], "rsm=32,visibility-rays=adaptive",
+        "{report}"
+    );
+    assert_eq!(report["rebuild"]["ok"], true, "{report}");
+    let render = |scene: &str| {
+        let out = dir.join(format!("{scene}.png"));
+        let mut command = std::process::Command::new(exe);
+        command
+            .args([
+                "render", "--scene", scene, "--method", "sparse", "--opt", "rsm=32",
+            ])
+            .args([
+                "--opt",
+                "visibility-rays=adaptive",
+                "--width",
+                "48",
+                "--height",
+                "48",
+            ])
+            .args(["--out", out.to_str().unwrap()]);
+        run(command);
+        load(&out)
+    };
+    let window = load(&shot);
+    let (edited, _) = compare(&window, 0, &render("preview-r20"));
+    let (starting, _) = compare(&window, 0, &render("preview"));
+    eprintln!("preview: {edited} levels from roughness 0.2, {starting} from 0.5");
+    assert!(
+        edited <= 1,
+        "the edited material's view is {edited} levels off render"
+    );
+    assert!(
+        starting > 8,
+        "roughness 0.5 differs by only {starting} levels"
+    );
+
+    // A material knob needs the preview.
+    let args = [
+        "view",
+        "--frames",
+        "2",
+        "--width",
+        "32",
+        "--height",
+        "32",
+        "--change-option",
+        "material.roughness=0.2",
+    ];
+    let output = windowed(&args).unwrap().output().unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("needs --preview"), "{stderr}");
+}
+
 /// A scripted run whose method cannot be built exits with the build's error instead of
 /// waiting for a method that never comes.
 #[test]

@@ -116,6 +116,52 @@ pub struct ViewerRequest {
     /// Where `valgi eval` cached its references (its output folder or the `cache` in it):
     /// the reference debug view draws the difference to the one of the view on screen.
     pub reference: Option<PathBuf>,
+    /// `--preview`: the material preview room instead of `scene`, its ball's material edited
+    /// live in the panel.
+    pub preview: Option<ViewerPreview>,
+}
+
+/// The material preview of `valgi view --preview`: the room of `valgi preview` with one ball.
+#[derive(Clone, Debug)]
+pub struct ViewerPreview {
+    pub material: crate::preview::PreviewMaterial,
+    pub ball: crate::preview::BallShape,
+}
+
+/// Longest triangle edge of the preview room and ball unless `--max-edge` is given, metres
+/// (`valgi preview`'s).
+pub const PREVIEW_MAX_EDGE: f32 = 0.05;
+
+/// The live preview: the ball's mesh (made once) and the material on it now.
+struct PreviewLive {
+    ball: crate::scene::Mesh,
+    material: crate::preview::PreviewMaterial,
+    max_edge: f32,
+}
+
+impl PreviewLive {
+    fn scene(&self) -> Scene {
+        crate::preview::preview_scene("preview", &self.material, &self.ball, self.max_edge)
+    }
+}
+
+/// The preview material with `key` (`roughness`, `metallic`, `specular`, `base`) set to
+/// `value` as `valgi preview --sweep` reads it (a number in 0..=1; `base`: R/G/B or a grey).
+pub fn edit_preview_material(
+    material: &crate::scene::Material,
+    key: &str,
+    value: &str,
+) -> Result<crate::scene::Material, String> {
+    let sweep = crate::preview::Sweep::parse(&format!("{key}={value}"))
+        .map_err(|e| format!("material.{key}={value}: {e}"))?;
+    let base = crate::preview::PreviewMaterial::plain("preview", material.clone());
+    match sweep.materials(&base).as_slice() {
+        [one] => Ok(one.material.clone()),
+        many => Err(format!(
+            "material.{key}={value}: one value expected, got {}",
+            many.len()
+        )),
+    }
 }
 
 #[repr(C)]
@@ -170,6 +216,8 @@ pub fn shared_layouts() -> Vec<SharedLayout> {
 /// What the panel changes; applied after the UI pass.
 enum Action {
     SetMethod(&'static str),
+    /// The preview ball's new material.
+    SetMaterial(crate::scene::Material),
     SetOption(&'static str, String),
     /// Back to a scene camera (`None`: the first).
     ResetCamera(Option<String>),
@@ -177,8 +225,8 @@ enum Action {
     Screenshot,
 }
 
-/// A method built on a worker thread, or why it could not be.
-type Built = Result<Box<dyn Method>, String>;
+/// A method built on a worker thread with the scene it was built for, or why it could not be.
+type Built = Result<(Box<dyn Method>, Arc<Scene>), String>;
 
 /// The worker of the rebuild in flight: its generation and where its method arrives.
 struct Worker {
@@ -247,18 +295,58 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
         crate::image_io::prepare_output(path).map_err(AppError::from)?;
     }
     let aspect = request.settings.width as f32 / request.settings.height as f32;
-    let (scene, tessellation, camera) = crate::app::load_scene_edited(
-        &request.scene,
-        &[(request.method.as_str(), &request.options)],
-        request.max_edge,
-        request.allow_external_paths,
-        request.emitter_lights,
-        (&request.edits, request.camera.as_deref(), aspect),
-    )
-    .map_err(ViewerError::App)?;
-    // From here on the request names the camera the edits chose.
+    let (scene, tessellation, camera, preview) = match &request.preview {
+        Some(p) => {
+            if !request.edits.is_empty() {
+                return Err(RenderError::Settings(
+                    "--preview builds its own room: --light, --camera-eye and the other scene edits do not apply".into(),
+                )
+                .into());
+            }
+            let max_edge = request.max_edge.unwrap_or(PREVIEW_MAX_EDGE);
+            let live = PreviewLive {
+                ball: crate::preview::ball_mesh(p.ball, max_edge)
+                    .map_err(|e| ViewerError::App(e.into()))?,
+                material: p.material.clone(),
+                max_edge,
+            };
+            let tessellation = crate::app::Tessellation {
+                max_edge,
+                source: if request.max_edge.is_some() {
+                    "option"
+                } else {
+                    "default"
+                },
+                used_max_edge: Some(max_edge),
+            };
+            (
+                live.scene(),
+                tessellation,
+                request.camera.clone(),
+                Some(live),
+            )
+        }
+        None => {
+            let (scene, tessellation, camera) = crate::app::load_scene_edited(
+                &request.scene,
+                &[(request.method.as_str(), &request.options)],
+                request.max_edge,
+                request.allow_external_paths,
+                request.emitter_lights,
+                (&request.edits, request.camera.as_deref(), aspect),
+            )
+            .map_err(ViewerError::App)?;
+            (scene, tessellation, camera, None)
+        }
+    };
+    // From here on the request names the camera the edits chose; the preview's methods get
+    // `valgi preview`'s defaults (RSM 32², adaptive visibility rays) unless given.
     let request = &ViewerRequest {
         camera,
+        options: match &preview {
+            Some(_) => crate::preview::preview_options(&request.method, &request.options),
+            None => request.options.clone(),
+        },
         ..request.clone()
     };
     for warning in &scene.warnings {
@@ -272,6 +360,7 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
     let mut app = App {
         request: request.clone(),
         scene: Arc::new(scene),
+        preview,
         tessellation,
         running: None,
         error: None,
@@ -288,8 +377,11 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
 
 struct App {
     request: ViewerRequest,
-    /// Shared with the rebuild workers.
+    /// Shared with the rebuild workers; a preview's material edit replaces it when the
+    /// method built for the edited scene lands.
     scene: Arc<Scene>,
+    /// `--preview`: handed to the window's state when it opens.
+    preview: Option<PreviewLive>,
     /// How the scene was tessellated when it was loaded (reported as `render` reports it).
     tessellation: crate::app::Tessellation,
     running: Option<Running>,
@@ -302,7 +394,7 @@ impl ApplicationHandler for App {
         if self.running.is_some() {
             return;
         }
-        match Running::new(event_loop, &self.request, &self.scene) {
+        match Running::new(event_loop, &self.request, &self.scene, self.preview.take()) {
             Ok(running) => {
                 running.window.request_redraw();
                 self.running = Some(running);
@@ -371,7 +463,7 @@ impl ApplicationHandler for App {
                 }
                 running.cursor = Some(now);
             }
-            WindowEvent::RedrawRequested => match running.redraw(&self.scene) {
+            WindowEvent::RedrawRequested => match running.redraw(&mut self.scene) {
                 Ok(done) => {
                     if done {
                         self.report = Some(running.report(&self.scene, &self.tessellation));
@@ -433,6 +525,8 @@ struct Running {
     pick: Option<DebugPick>,
     pick_for: Option<(u32, u32, [u32; 16], u32)>,
     reference: reference::ReferenceOverlay,
+    /// `--preview`: the ball and the material on screen (or on its way, with a rebuild).
+    preview: Option<PreviewLive>,
     /// Whether the first view draws its difference to the reference this frame.
     reference_on: bool,
     /// Whether the running method has a light atlas, and draws its debug view this frame.
@@ -471,6 +565,7 @@ impl Running {
         event_loop: &ActiveEventLoop,
         request: &ViewerRequest,
         scene: &Arc<Scene>,
+        preview: Option<PreviewLive>,
     ) -> Result<Self, ViewerError> {
         let s = request.settings;
         let view_count = request
@@ -571,6 +666,7 @@ impl Running {
             state.stereo_display = StereoDisplay::Anaglyph;
         }
         state.debug = request.debug;
+        state.material = preview.as_ref().map(|p| p.material.material.clone());
         let mut running = Self {
             request: request.clone(),
             window,
@@ -593,6 +689,7 @@ impl Running {
             pick: None,
             pick_for: None,
             reference,
+            preview,
             reference_on: false,
             atlas_available: false,
             atlas_on: false,
@@ -812,6 +909,7 @@ impl Running {
             .name("valgi-rebuild".into())
             .spawn(move || {
                 let built = method::create(name, &ctx, &scene, settings, &options)
+                    .map(|m| (m, scene))
                     .map_err(|e| e.to_string());
                 // The window may have closed, or a newer rebuild superseded this one.
                 let _ = sender.send(built);
@@ -830,34 +928,35 @@ impl Running {
         }
     }
 
-    /// Installs the worker's method when it is in; on failure the running method stays and
-    /// the panel shows why.
-    fn poll_rebuild(&mut self) {
-        let Some(worker) = &self.worker else {
-            return;
-        };
+    /// Installs the worker's method when it is in, and returns the scene it was built for;
+    /// on failure the running method stays and the panel shows why.
+    fn poll_rebuild(&mut self) -> Option<Arc<Scene>> {
+        let worker = self.worker.as_ref()?;
         let built = match worker.receiver.try_recv() {
             Ok(built) => built,
-            Err(mpsc::TryRecvError::Empty) => return,
+            Err(mpsc::TryRecvError::Empty) => return None,
             Err(mpsc::TryRecvError::Disconnected) => {
                 Err("the rebuild stopped without a result (see the log)".to_string())
             }
         };
         let generation = worker.generation;
         self.worker = None;
-        let Some(done) = self.state.rebuilds.finish(generation, built.is_ok()) else {
-            return;
-        };
-        match built {
-            Ok(m) => {
+        let done = self.state.rebuilds.finish(generation, built.is_ok())?;
+        let landed = match built {
+            Ok((m, scene)) => {
                 self.method = Some(m);
                 self.method_name = done.method;
                 self.options = done.options;
                 self.method_error = None;
+                Some(scene)
             }
-            Err(e) => self.method_error = Some(e),
-        }
+            Err(e) => {
+                self.method_error = Some(e);
+                None
+            }
+        };
         self.reset_edits();
+        landed
     }
 
     /// The panel's option texts: the explicit options, else the registry's defaults.
@@ -876,7 +975,7 @@ impl Running {
 
     /// One frame: camera and animation step, the frame's record, the present and panel
     /// passes. Returns true when a scripted run is done.
-    fn redraw(&mut self, scene: &Arc<Scene>) -> Result<bool, ViewerError> {
+    fn redraw(&mut self, scene: &mut Arc<Scene>) -> Result<bool, ViewerError> {
         let now = Instant::now();
         let scripted = self.request.frames.is_some();
         self.frame_interval_ms = (now - self.last_redraw).as_secs_f64() * 1000.0;
@@ -889,7 +988,11 @@ impl Running {
         // Charged before the poll: the interval in which the rebuild landed was waited
         // through while it ran. The first build counts too (the panel is drawn meanwhile).
         self.state.rebuilds.note_frame(previous, now);
-        self.poll_rebuild();
+        if let Some(landed) = self.poll_rebuild() {
+            // The method was built for this scene (a preview's edited material).
+            *scene = landed;
+        }
+        let scene: &Arc<Scene> = scene;
         // A scripted run whose method never built has nothing to draw: it would wait forever.
         if scripted && self.method.is_none() && self.state.rebuilds.pending().is_none() {
             if let Some(e) = &self.method_error {
@@ -1094,6 +1197,14 @@ impl Running {
                 if key == "method" {
                     // The panel's method menu: a new method with its default options.
                     actions.push(Action::SetMethod(method::entry(&value)?.name));
+                } else if let Some(field) = key.strip_prefix("material.") {
+                    // The preview panel's material knobs.
+                    let preview = self.preview.as_ref().ok_or_else(|| {
+                        RenderError::Settings(format!("--change-option {key}: needs --preview"))
+                    })?;
+                    let material = edit_preview_material(&preview.material.material, field, &value)
+                        .map_err(RenderError::Settings)?;
+                    actions.push(Action::SetMaterial(material));
                 } else {
                     let spec = method::entry(self.method_name)?
                         .options
@@ -1116,16 +1227,37 @@ impl Running {
     }
 
     fn apply(&mut self, action: Action, scene: &Arc<Scene>) {
+        // A preview builds every method for its newest material, which a rebuild in flight
+        // may not have landed yet.
+        let scene = match &self.preview {
+            Some(p) => &Arc::new(p.scene()),
+            None => scene,
+        };
+        // Options of the newest request, so quick successive edits accumulate.
+        let (newest_method, newest_options) = match self.state.rebuilds.pending() {
+            Some(p) => (p.method, p.options.clone()),
+            None => (self.method_name, self.options.clone()),
+        };
         match action {
-            Action::SetMethod(name) => self.start_rebuild(name, MethodOptions::default(), scene),
-            Action::SetOption(key, value) => {
-                // Options of the newest request, so quick successive edits accumulate.
-                let (name, mut options) = match self.state.rebuilds.pending() {
-                    Some(p) => (p.method, p.options.clone()),
-                    None => (self.method_name, self.options.clone()),
+            Action::SetMethod(name) => {
+                let options = match self.preview {
+                    Some(_) => crate::preview::preview_options(name, &MethodOptions::default()),
+                    None => MethodOptions::default(),
                 };
+                self.start_rebuild(name, options, scene)
+            }
+            Action::SetOption(key, value) => {
+                let mut options = newest_options;
                 options.set(key, value);
-                self.start_rebuild(name, options, scene);
+                self.start_rebuild(newest_method, options, scene);
+            }
+            Action::SetMaterial(material) => {
+                if let Some(p) = &mut self.preview {
+                    self.state.material = Some(material.clone());
+                    p.material.material = material;
+                    let edited = Arc::new(p.scene());
+                    self.start_rebuild(newest_method, newest_options, &edited);
+                }
             }
             Action::ResetCamera(selector) => self.state.reset_to(selector),
             Action::SetDragMode(mode) => {
@@ -1417,6 +1549,7 @@ impl PanelData<'_> {
         ui.separator();
         self.method_ui(ui, actions);
         ui.separator();
+        self.material_ui(ui, actions);
         ui.add(egui::Slider::new(&mut self.state.exposure, -8.0..=8.0).text("exposure (stops)"));
         ui.horizontal(|ui| {
             let c = &mut self.state.components;
@@ -1523,6 +1656,34 @@ impl PanelData<'_> {
         } else {
             ui.label("F12: screenshot");
         }
+    }
+
+    /// `--preview`: the ball's base colour, roughness, metallic and specular factor. A knob
+    /// let go (or changed by a click or the keyboard) rebuilds the method for the edited
+    /// material off the UI thread; dragging only moves the knob.
+    fn material_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
+        let Some(material) = &mut self.state.material else {
+            return;
+        };
+        ui.label("material");
+        let mut commit = false;
+        let mut knob = |ui: &mut egui::Ui, value: &mut f32, label: &str| {
+            let r = ui.add(egui::Slider::new(value, 0.0..=1.0).text(label));
+            commit |= r.drag_stopped() || (r.changed() && !r.dragged());
+        };
+        let base = &mut material.base_color;
+        let mut rgb = [base.x, base.y, base.z];
+        for (value, label) in rgb.iter_mut().zip(["base red", "base green", "base blue"]) {
+            knob(ui, value, label);
+        }
+        (base.x, base.y, base.z) = (rgb[0], rgb[1], rgb[2]);
+        knob(ui, &mut material.roughness, "roughness");
+        knob(ui, &mut material.metallic, "metallic");
+        knob(ui, &mut material.specular_factor, "specular");
+        if commit {
+            actions.push(Action::SetMaterial(material.clone()));
+        }
+        ui.separator();
     }
 
     fn method_ui(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
@@ -1747,5 +1908,25 @@ fn dummy_camera() -> CameraView {
         znear: 0.1,
         zfar: 10.0,
         off_axis: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_preview_knob_edits_one_field_of_the_material() {
+        let start = crate::preview::default_material();
+        let rough = edit_preview_material(&start, "roughness", "0.2").unwrap();
+        assert_eq!(rough.roughness, 0.2);
+        assert_eq!((rough.metallic, rough.base_color), (start.metallic, start.base_color));
+        let base = edit_preview_material(&start, "base", "0.1/0.2/0.3").unwrap();
+        assert_eq!(base.base_color, glam::Vec4::new(0.1, 0.2, 0.3, start.base_color.w));
+        assert_eq!(base.roughness, start.roughness);
+        for (key, value) in [("gloss", "0.3"), ("roughness", "1.5"), ("roughness", "0..1:3")] {
+            let error = edit_preview_material(&start, key, value).unwrap_err();
+            assert!(error.contains(&format!("material.{key}={value}")), "{error}");
+        }
     }
 }

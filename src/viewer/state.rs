@@ -335,8 +335,10 @@ pub struct ViewerState {
     pub frame_ms_history: VecDeque<f32>,
     screenshots: u32,
     pub rebuilds: Rebuilds,
-    /// Splat overlays drawn over the views.
+    /// The debug views on.
     pub debug: DebugViews,
+    /// `--preview`: the material knobs as the panel shows them (applied when a knob is let go).
+    pub material: Option<crate::scene::Material>,
 }
 
 impl ViewerState {
@@ -357,6 +359,7 @@ impl ViewerState {
             screenshots: 0,
             rebuilds: Rebuilds::default(),
             debug: DebugViews::default(),
+            material: None,
         }
     }
 
