@@ -544,6 +544,10 @@ struct BakeArgs {
     /// Add a light (repeatable; the formats of `render --light`); render with the same ones.
     #[arg(long = "light", value_name = "SPEC", value_parser = parse_light, allow_hyphen_values = true)]
     added_lights: Vec<valgi::scene::edits::LightSpec>,
+    /// Drop the scene's own lights and emissive surfaces, so that only the --light options
+    /// light the bake (render with the same flag).
+    #[arg(long)]
+    no_scene_lights: bool,
     /// Virtual lights: patches (seed 000: --vpls patches) or polygons (seed 001: --vpls
     /// photon paths, each leaving a VPL per bounce, clustered into polygon and sphere lights).
     #[arg(long, default_value = "patches")]
@@ -1178,6 +1182,7 @@ fn bake(args: BakeArgs) -> ExitCode {
         max_edge: args.max_edge,
         edits: valgi::scene::edits::SceneEdits {
             lights: args.added_lights,
+            drop_scene_lights: args.no_scene_lights,
             ..Default::default()
         },
         settings: valgi::atlas::BakeSettings {

@@ -65,6 +65,15 @@ fn bake_writes_an_atlas_and_render_uses_it() {
     }
     assert!(report["energy"]["relative_residual"].as_f64().unwrap() < 1e-6);
     assert_eq!(report["from_bounce"], 2);
+    // The light-map pre-pass figures of seed 001 §4.
+    let prepass = &report["prepass"];
+    let count = |key: &str| prepass[key].as_u64().unwrap_or_else(|| panic!("{report}"));
+    assert_eq!(count("used_texels"), report["texels"].as_u64().unwrap());
+    assert!(
+        0 < count("t_uv") && count("t_uv") <= count("triangles"),
+        "{prepass}"
+    );
+    assert!(count("p_uv") < count("used_texels"), "{prepass}");
     assert!(atlas.is_file());
     let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -98,6 +107,57 @@ fn bake_writes_an_atlas_and_render_uses_it() {
     assert_eq!(report["atlas_layout"], "stored", "{report}");
     let indirect = valgi::image_io::Image::read_exr(&image).unwrap();
     assert!(indirect.mean_rgb()[1] > 0.0);
+}
+
+/// `bake --no-scene-lights` bakes with the `--light` options alone, as `render` and `eval`
+/// light with them: the emitted power is the added point light's 4π·I, and the scene's own
+/// light's power is what the added light adds to it.
+#[test]
+fn bake_without_the_scene_s_lights_emits_the_added_light_alone() {
+    let dir = common::temp_dir("cli-bake-lights");
+    let emitted = |extra: &[&str]| {
+        let output = valgi()
+            .args([
+                "bake",
+                "--scene",
+                "box-point",
+                "--max-edge",
+                "0.25",
+                "--vpls",
+                "50",
+            ])
+            .args(["--bounces", "1", "--atlas-res", "32", "--out"])
+            .arg(dir.join("lights.exr"))
+            .args(extra)
+            .output()
+            .expect("run valgi");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "bake {extra:?} failed: {stderr}");
+        json_line(&output.stdout)["energy"]["emitted"][0]
+            .as_f64()
+            .unwrap()
+    };
+    let added = ["--light", "point:0.1,0.5,0.1,2"];
+    let scene_only = emitted(&[]);
+    let both = emitted(&added);
+    let added_only = emitted(&["--light", "point:0.1,0.5,0.1,2", "--no-scene-lights"]);
+    let point_power = 4.0 * std::f64::consts::PI * 2.0;
+    assert!(
+        (added_only - point_power).abs() < 1e-3 * point_power,
+        "{added_only} W emitted, the point light has {point_power}"
+    );
+    assert!(
+        (both - scene_only - added_only).abs() < 1e-3 * both,
+        "{both} W with both, {scene_only} + {added_only} apart"
+    );
+    let output = valgi()
+        .args(["bake", "--scene", "box-point", "--no-scene-lights", "--out"])
+        .arg(dir.join("dark.exr"))
+        .output()
+        .expect("run valgi");
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("light"), "{stderr}");
 }
 
 #[test]

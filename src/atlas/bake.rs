@@ -625,6 +625,7 @@ impl Bake {
             "stages_ms": stages,
             "total_ms": (self.stage_ms.iter().map(|(_, v)| v).sum::<f64>() * 1000.0).round() / 1000.0,
             "energy": self.energy.to_json(),
+            "prepass": layout::PrepassFigures::of(&self.layout).to_json(),
         });
         if let (Some(stats), Some(obj)) = (&self.polygon, summary.as_object_mut()) {
             obj.insert("polygon".into(), stats.to_json());

@@ -610,6 +610,83 @@ fn barycentric(p: Vec2, a: Vec2, b: Vec2, c: Vec2) -> Option<Vec3> {
     Some(Vec3::new(1.0 - w1 - w2, w1, w2))
 }
 
+/// Calls `visit(texel index, barycentrics)` for every texel whose centre the triangle (in
+/// texel units) covers, in row order, until `visit` returns false. The barycentrics are
+/// clamped to the triangle and normalized.
+fn for_each_covered_centre(
+    t: &[Vec2; 3],
+    resolution: u32,
+    mut visit: impl FnMut(usize, Vec3) -> bool,
+) {
+    let r = resolution as i64;
+    let lo = t[0].min(t[1]).min(t[2]);
+    let hi = t[0].max(t[1]).max(t[2]);
+    let clamp = |v: f32| (v.floor() as i64).clamp(0, r - 1);
+    for y in clamp(lo.y)..=clamp(hi.y) {
+        for x in clamp(lo.x)..=clamp(hi.x) {
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            if let Some(w) = barycentric(p, t[0], t[1], t[2]) {
+                if w.min_element() >= -1e-6 {
+                    let w = w.max(Vec3::ZERO);
+                    if !visit((y * r + x) as usize, w / w.element_sum()) {
+                        return;
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The figures of seed 001's light-map pre-pass (§4 and its table) for a layout. The paper
+/// rasterizes the uv triangles and keeps T_uv, the triangles that produce at least one texel
+/// (at texel centres); texels that only its point and line passes reach become the point list
+/// P_uv. Here the same texels come from the conservative coverage of
+/// [`rasterize_uv_triangles`]: P_uv are the used texels no triangle covers at the centre
+/// (filled from the nearest triangle point, [`Texel::centre`] false).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PrepassFigures {
+    /// Triangles of the layout's meshes (a two-sided sheet's back face counted again).
+    pub triangles: usize,
+    pub t_uv: usize,
+    pub p_uv: usize,
+    pub used_texels: usize,
+}
+
+impl PrepassFigures {
+    pub fn of(layout: &AtlasLayout) -> Self {
+        let scale = layout.resolution as f32;
+        let mut triangles = 0;
+        let mut t_uv = 0;
+        for m in &layout.meshes {
+            for tri in m.indices.chunks_exact(3) {
+                let uv = [0, 1, 2].map(|k| m.uvs[tri[k] as usize] * scale);
+                let mut produces = false;
+                for_each_covered_centre(&uv, layout.resolution, |_, _| {
+                    produces = true;
+                    false
+                });
+                triangles += 1;
+                t_uv += produces as usize;
+            }
+        }
+        Self {
+            triangles,
+            t_uv,
+            p_uv: layout.texels.iter().filter(|t| !t.centre).count(),
+            used_texels: layout.texels.len(),
+        }
+    }
+
+    pub fn to_json(self) -> serde_json::Value {
+        serde_json::json!({
+            "triangles": self.triangles,
+            "t_uv": self.t_uv,
+            "p_uv": self.p_uv,
+            "used_texels": self.used_texels,
+        })
+    }
+}
+
 /// Texels of triangles given in texel units: first the texels whose centre a triangle covers,
 /// then the touched ones no triangle covers, each standing for the closest triangle point.
 /// Returns (texel index, triangle index, barycentrics, covers centre).
@@ -631,24 +708,13 @@ pub fn rasterize_uv_triangles(
     };
     // Pass 1: centres covered.
     for (ti, t) in triangles.iter().enumerate() {
-        let (x0, y0, x1, y1) = bbox(t);
-        for y in y0..=y1 {
-            for x in x0..=x1 {
-                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                if let Some(w) = barycentric(p, t[0], t[1], t[2]) {
-                    if w.min_element() >= -1e-6 {
-                        let slot = &mut owner[(y * r + x) as usize];
-                        if slot.is_none() {
-                            *slot = Some((
-                                ti,
-                                w.max(Vec3::ZERO) / w.max(Vec3::ZERO).element_sum(),
-                                true,
-                            ));
-                        }
-                    }
-                }
+        for_each_covered_centre(t, resolution, |i, w| {
+            let slot = &mut owner[i];
+            if slot.is_none() {
+                *slot = Some((ti, w, true));
             }
-        }
+            true
+        });
     }
     // Pass 2: touched but not covered (edges, vertices, slivers).
     for (ti, t) in triangles.iter().enumerate() {
@@ -794,6 +860,54 @@ mod tests {
             assert_eq!(f.0 / 16, 2, "only row 2 is touched");
             assert!((f.2.element_sum() - 1.0).abs() < 1e-5 && f.2.min_element() >= 0.0);
         }
+    }
+
+    #[test]
+    fn prepass_figures_count_the_triangles_that_make_texels_and_the_texels_they_miss() {
+        // In a 16² atlas: a quad of two triangles over [2.1, 5.9]² (texel units), inside
+        // texels 2..=5 and over their centres, and a micro triangle inside texel (10, 10)
+        // that covers no centre.
+        let uv = |x: f32, y: f32| Vec2::new(x, y) / 16.0;
+        let positions = vec![Vec3::ZERO; 7];
+        let mesh = ChartMesh {
+            instance: 0,
+            material: 0,
+            model_positions: positions.clone(),
+            world_positions: positions,
+            world_normals: vec![Vec3::Y; 7],
+            uvs: vec![
+                uv(2.1, 2.1),
+                uv(5.9, 2.1),
+                uv(5.9, 5.9),
+                uv(2.1, 5.9),
+                uv(10.1, 10.1),
+                uv(10.3, 10.1),
+                uv(10.1, 10.3),
+            ],
+            material_uvs: vec![],
+            indices: vec![0, 1, 2, 0, 2, 3, 4, 5, 6],
+            sheet_face: false,
+        };
+        let meshes = vec![mesh];
+        let layout = AtlasLayout {
+            resolution: 16,
+            source: "texcoord1",
+            texels: find_texels(&meshes, 16),
+            meshes,
+            cuts: Default::default(),
+        };
+        let figures = PrepassFigures::of(&layout);
+        // The quad covers the 16 centres of its texels and reaches no other texel; the micro
+        // triangle produces no centre, only its one touched texel.
+        assert_eq!(
+            figures,
+            PrepassFigures {
+                triangles: 3,
+                t_uv: 2,
+                p_uv: 1,
+                used_texels: 17,
+            }
+        );
     }
 
     #[test]

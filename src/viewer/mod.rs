@@ -769,20 +769,12 @@ impl Running {
             .create_view(&Default::default());
         let (ref_direct, ref_indirect) = match first {
             true => self.reference.textures(),
-            false => {
-                let none = self.reference_none();
-                (none, none)
-            }
+            false => (self.reference.empty(), self.reference.empty()),
         };
         self.present_layout.bind(
             &self.ctx.device,
             &[params, &direct, &indirect, ref_direct, ref_indirect],
         )
-    }
-
-    /// The 1×1 black texture bound where no reference is.
-    fn reference_none(&self) -> &wgpu::TextureView {
-        self.reference.empty()
     }
 
     /// The view on screen as the reference lookup sees it.
@@ -1920,13 +1912,26 @@ mod tests {
         let start = crate::preview::default_material();
         let rough = edit_preview_material(&start, "roughness", "0.2").unwrap();
         assert_eq!(rough.roughness, 0.2);
-        assert_eq!((rough.metallic, rough.base_color), (start.metallic, start.base_color));
+        assert_eq!(
+            (rough.metallic, rough.base_color),
+            (start.metallic, start.base_color)
+        );
         let base = edit_preview_material(&start, "base", "0.1/0.2/0.3").unwrap();
-        assert_eq!(base.base_color, glam::Vec4::new(0.1, 0.2, 0.3, start.base_color.w));
+        assert_eq!(
+            base.base_color,
+            glam::Vec4::new(0.1, 0.2, 0.3, start.base_color.w)
+        );
         assert_eq!(base.roughness, start.roughness);
-        for (key, value) in [("gloss", "0.3"), ("roughness", "1.5"), ("roughness", "0..1:3")] {
+        for (key, value) in [
+            ("gloss", "0.3"),
+            ("roughness", "1.5"),
+            ("roughness", "0..1:3"),
+        ] {
             let error = edit_preview_material(&start, key, value).unwrap_err();
-            assert!(error.contains(&format!("material.{key}={value}")), "{error}");
+            assert!(
+                error.contains(&format!("material.{key}={value}")),
+                "{error}"
+            );
         }
     }
 }
