@@ -157,7 +157,7 @@ fn bake_without_the_scene_s_lights_emits_the_added_light_alone() {
         .expect("run valgi");
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("light"), "{stderr}");
+    assert!(stderr.contains("has no lights"), "{stderr}");
 }
 
 #[test]

@@ -198,7 +198,7 @@ impl Default for BakeSettings {
 
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
-    #[error("scene '{0}' has no punctual lights: nothing to bake (the baker distributes light from KHR_lights_punctual lights; emissive surfaces are not light sources here)")]
+    #[error("scene '{0}' has no lights (no point, spot or directional light and no emissive surface): nothing to bake; add one with --light")]
     NoLights(String),
     #[error("{0}")]
     Settings(String),
