@@ -232,7 +232,10 @@ fn bad_input_fails_with_a_clear_error() {
     .err()
     .unwrap()
     .to_string();
-    assert!(err.contains("has no lights") && err.contains("--light"), "{err}");
+    assert!(
+        err.contains("has no lights") && err.contains("--light"),
+        "{err}"
+    );
 
     let request = |out: &str, from_bounce: u32| valgi::atlas::BakeRequest {
         edits: Default::default(),

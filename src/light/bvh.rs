@@ -145,52 +145,21 @@ fn flat_nodes(bvh: &obvhs::bvh2::Bvh2) -> Vec<BvhNode> {
 }
 
 /// Möller–Trumbore: the ray parameter of the hit, if the segment's line hits the triangle
-/// (both faces) at t in (0, t_max).
+/// (both faces) at t in (0, t_max) ([`crate::scene::pick::ray_triangle`]).
 pub fn ray_triangle(origin: Vec3, dir: Vec3, t_max: f32, tri: &BvhTriangle) -> Option<f32> {
-    let v0 = Vec3::from_slice(&tri.v0[..3]);
-    let e1 = Vec3::from_slice(&tri.e1[..3]);
-    let e2 = Vec3::from_slice(&tri.e2[..3]);
-    let p = dir.cross(e2);
-    let det = e1.dot(p);
-    if det.abs() < 1e-12 {
-        return None;
-    }
-    let inv = 1.0 / det;
-    let s = origin - v0;
-    let u = s.dot(p) * inv;
-    if !(0.0..=1.0).contains(&u) {
-        return None;
-    }
-    let q = s.cross(e1);
-    let v = dir.dot(q) * inv;
-    if v < 0.0 || u + v > 1.0 {
-        return None;
-    }
-    let t = e2.dot(q) * inv;
-    (t > 0.0 && t < t_max).then_some(t)
+    let corner = |v: &[f32; 4]| Vec3::from_slice(&v[..3]);
+    crate::scene::pick::ray_triangle(
+        origin,
+        dir,
+        corner(&tri.v0),
+        corner(&tri.e1),
+        corner(&tri.e2),
+    )
+    .map(|(t, _, _)| t)
+    .filter(|&t| t < t_max)
 }
 
-/// Slab test of a ray against a box: true when [0, t_max] overlaps the box's span.
-pub fn ray_box(origin: Vec3, inv_dir: Vec3, t_max: f32, min: Vec3, max: Vec3) -> bool {
-    let t0 = (min - origin) * inv_dir;
-    let t1 = (max - origin) * inv_dir;
-    let near = t0.min(t1).max_element().max(0.0);
-    let far = t0.max(t1).min_element().min(t_max);
-    near <= far
-}
-
-/// `1/d` per axis with zeros replaced by a huge value of the same sign, so the slab test
-/// never meets 0·∞ (the shader does the same).
-pub fn safe_inverse(d: Vec3) -> Vec3 {
-    let f = |x: f32| {
-        if x.abs() < 1e-20 {
-            1e20f32.copysign(x)
-        } else {
-            1.0 / x
-        }
-    };
-    Vec3::new(f(d.x), f(d.y), f(d.z))
-}
+pub use crate::scene::pick::{ray_box, safe_inverse};
 
 /// The deepest BVH the shader's traversal stack holds.
 pub const STACK_DEPTH: usize = 64;

@@ -37,16 +37,23 @@ impl ScenePick {
     }
 }
 
-/// Möller–Trumbore: distance and barycentrics (of vertices 1 and 2) of a two-sided hit.
-fn hit_triangle(origin: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(f32, f32, f32)> {
-    let (e1, e2) = (b - a, c - a);
+/// Möller–Trumbore against the triangle (v0, v0 + e1, v0 + e2), both faces: the ray
+/// parameter and the barycentrics (u, v) of vertices 1 and 2 of a hit at t > 0. The CPU
+/// BVH's ray test ([`crate::light::bvh::ray_triangle`], the shader's twin) is this one.
+pub fn ray_triangle(
+    origin: Vec3,
+    dir: Vec3,
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+) -> Option<(f32, f32, f32)> {
     let p = dir.cross(e2);
     let det = e1.dot(p);
     if det.abs() < 1e-12 {
         return None;
     }
     let inv = 1.0 / det;
-    let s = origin - a;
+    let s = origin - v0;
     let u = s.dot(p) * inv;
     if !(0.0..=1.0).contains(&u) {
         return None;
@@ -60,13 +67,27 @@ fn hit_triangle(origin: Vec3, dir: Vec3, [a, b, c]: [Vec3; 3]) -> Option<(f32, f
     (t > 0.0).then_some((t, u, v))
 }
 
-/// Whether the ray meets the box within `t_max` (slab test).
-fn hits_box(origin: Vec3, inv_dir: Vec3, lo: Vec3, hi: Vec3, t_max: f32) -> bool {
-    let t0 = (lo - origin) * inv_dir;
-    let t1 = (hi - origin) * inv_dir;
-    let near = t0.min(t1).max_element();
-    let far = t0.max(t1).min_element();
-    near <= far && far >= 0.0 && near <= t_max
+/// Slab test of a ray against a box: true when [0, t_max] overlaps the box's span
+/// (`inv_dir` from [`safe_inverse`]).
+pub fn ray_box(origin: Vec3, inv_dir: Vec3, t_max: f32, min: Vec3, max: Vec3) -> bool {
+    let t0 = (min - origin) * inv_dir;
+    let t1 = (max - origin) * inv_dir;
+    let near = t0.min(t1).max_element().max(0.0);
+    let far = t0.max(t1).min_element().min(t_max);
+    near <= far
+}
+
+/// `1/d` per axis with zeros replaced by a huge value of the same sign, so the slab test
+/// never meets 0·∞ (the BVH shader does the same).
+pub fn safe_inverse(d: Vec3) -> Vec3 {
+    let f = |x: f32| {
+        if x.abs() < 1e-20 {
+            1e20f32.copysign(x)
+        } else {
+            1.0 / x
+        }
+    };
+    Vec3::new(f(d.x), f(d.y), f(d.z))
 }
 
 /// The first surface along the ray from `origin` in direction `dir` (normalized here), with
@@ -76,7 +97,7 @@ pub fn pick(scene: &Scene, world_from_node: &[Mat4], origin: Vec3, dir: Vec3) ->
     if dir == Vec3::ZERO || !origin.is_finite() {
         return None;
     }
-    let inv_dir = dir.recip();
+    let inv_dir = safe_inverse(dir);
     let mut best: Option<ScenePick> = None;
     for (instance_index, instance) in scene.instances.iter().enumerate() {
         let (Some(mesh), Some(world_from_model)) = (
@@ -95,7 +116,7 @@ pub fn pick(scene: &Scene, world_from_node: &[Mat4], origin: Vec3, dir: Vec3) ->
             |(lo, hi), p| (lo.min(*p), hi.max(*p)),
         );
         let t_max = best.map_or(f32::MAX, |b| b.t);
-        if world.is_empty() || !hits_box(origin, inv_dir, lo, hi, t_max) {
+        if world.is_empty() || !ray_box(origin, inv_dir, t_max, lo, hi) {
             continue;
         }
         for (triangle, corners) in mesh.indices.chunks_exact(3).enumerate() {
@@ -104,7 +125,7 @@ pub fn pick(scene: &Scene, world_from_node: &[Mat4], origin: Vec3, dir: Vec3) ->
             else {
                 continue;
             };
-            let Some((t, u, v)) = hit_triangle(origin, dir, [a, b, c]) else {
+            let Some((t, u, v)) = ray_triangle(origin, dir, a, b - a, c - a) else {
                 continue;
             };
             if best.is_some_and(|best| best.t <= t) {
