@@ -300,7 +300,7 @@ struct RenderArgs {
 #[command(allow_negative_numbers = true)]
 struct ViewArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
-    #[arg(long, default_value = "cornell")]
+    #[arg(long, default_value = "cornell", conflicts_with = "preview")]
     scene: String,
     /// Rendering method (see `valgi methods`); switchable in the panel. Default: direct, or
     /// sparse with --preview.

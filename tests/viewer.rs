@@ -927,3 +927,34 @@ fn the_viewer_tessellates_an_imported_scene_as_render_does() {
     assert_eq!(direct["max_edge_source"], "default", "{direct}");
     assert!((direct["max_edge"].as_f64().unwrap() - 0.05).abs() < 1e-6);
 }
+
+/// Arguments that cannot work together are refused before any window opens: the preview
+/// builds its own room (no `--scene`), a material needs the preview, a pick is two pixel
+/// coordinates.
+#[test]
+fn view_arguments_that_cannot_work_together_are_refused() {
+    let exe = env!("CARGO_BIN_EXE_valgi");
+    for (args, expected) in [
+        (
+            vec!["--preview", "--scene", "sponza"],
+            "cannot be used with",
+        ),
+        (vec!["--material", "x.glb"], "--preview"),
+        (
+            vec!["--pick", "1,2,3"],
+            "--pick 1,2,3: expected two whole pixel coordinates",
+        ),
+        (vec!["--pick=-1,2"], "expected two whole pixel coordinates"),
+        (vec!["--debug", "normals"], "unknown debug view"),
+    ] {
+        let output = std::process::Command::new(exe)
+            .arg("view")
+            .args(&args)
+            .args(["--frames", "1"])
+            .output()
+            .expect("run valgi");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{args:?} was accepted");
+        assert!(stderr.contains(expected), "{args:?}: {stderr}");
+    }
+}
