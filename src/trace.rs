@@ -275,6 +275,33 @@ impl<'a> Tracer<'a> {
         })
     }
 
+    /// [`Tracer::unoccluded`] with the triangles of every instance `skip` names left out
+    /// (indices into `Scene::instances`).
+    pub fn unoccluded_except(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        skip: impl Fn(usize) -> bool,
+    ) -> bool {
+        let Some(bvh) = self.bvh.as_ref() else {
+            return true;
+        };
+        if t_max <= 0.0 {
+            return true;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        bvh.ray_traverse_miss(ray, |ray, id| {
+            let tri = bvh.primitive_indices[id] as usize;
+            // Every instance is placed, in order: the placed index is the instance's.
+            if skip(self.triangle_source[tri].0 as usize) {
+                f32::INFINITY
+            } else {
+                self.triangles[tri].intersect(ray)
+            }
+        })
+    }
+
     /// Irradiance from the punctual lights (emitter proxies included) at `x` on the side of
     /// the unit normal `n`, with ray-traced visibility (the shadow ray starts `epsilon` off the
     /// surface).

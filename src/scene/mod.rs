@@ -533,6 +533,23 @@ impl Scene {
         world
     }
 
+    /// Per node, whether an animation channel moves it or one of its ancestors.
+    pub fn moving_nodes(&self) -> Vec<bool> {
+        let mut moving = vec![false; self.nodes.len()];
+        for channel in self.animations.iter().flat_map(|a| &a.channels) {
+            if let Some(m) = moving.get_mut(channel.node) {
+                *m = true;
+            }
+        }
+        // Parents come before their children.
+        for i in 0..self.nodes.len() {
+            if let Some(p) = self.nodes[i].parent {
+                moving[i] |= moving.get(p).copied().unwrap_or(false);
+            }
+        }
+        moving
+    }
+
     /// World transforms in the rest pose.
     pub fn world_from_node(&self) -> Vec<Mat4> {
         self.world_from_node_at(0.0)

@@ -38,6 +38,9 @@ pub struct SparseSettings {
     pub seed: u64,
     pub options: SparseOptions,
     pub glossy_eye: GlossyEye,
+    /// Drop the links that pass through other (static) geometry
+    /// (`points::cut_links_through_walls`).
+    pub link_test: bool,
 }
 
 impl Default for SparseSettings {
@@ -57,6 +60,7 @@ impl Default for SparseSettings {
                 gather_slices: 0,
             },
             glossy_eye: GlossyEye::Mid,
+            link_test: true,
         }
     }
 }
@@ -109,6 +113,7 @@ impl SparseSettings {
                 "per-view" => GlossyEye::PerView,
                 _ => GlossyEye::Mid,
             },
+            link_test: options.choice("link-test", &["on", "off"])? == "on",
         })
     }
 }
@@ -298,6 +303,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Choice(&["mid", "per-view"]),
         default: "mid",
         help: "the eye of the glossy gather: one solution at the views' mid-eye, or the glossy half per view",
+    },
+    OptionSpec {
+        name: "link-test",
+        kind: OptionKind::Choice(&["on", "off"]),
+        default: "on",
+        help: "drop the vertex links that pass through other geometry that never moves (a room's wall running under a thin partition would otherwise carry one room's light into the other), renormalizing the rest",
     },
     OptionSpec {
         name: "occlusion",
@@ -505,6 +516,8 @@ pub struct SparseMethod {
     pub preprocess_ms: f64,
     /// Meshes whose points were computed rather than taken from the cache.
     pub meshes_computed: usize,
+    /// What the link test dropped.
+    pub link_cut: points::LinkCut,
     /// Further indirect light added after the apply pass (`None` for `--method sparse`).
     pub layer: Option<Box<dyn IndirectLayer>>,
     /// VALs from outside the RSM (a depth sensor's surfels), appended to the RSM's.
@@ -554,6 +567,11 @@ impl SparseMethod {
         let started = Instant::now();
         let (points, meshes_computed) =
             points::scene_points(scene, settings.sparse_points, settings.seed);
+        let (points, link_cut) = if settings.link_test {
+            points::cut_links_through_walls(scene, &points)
+        } else {
+            (points, points::LinkCut::default())
+        };
         let preprocess_ms = started.elapsed().as_secs_f64() * 1000.0;
         let sparse = SparseGpu::new(ctx, scene, &raster.scene_gpu, &points, &rsm)?;
         Ok(Self {
@@ -565,6 +583,7 @@ impl SparseMethod {
             last_stage: Stage::Apply,
             preprocess_ms,
             meshes_computed,
+            link_cut,
             layer: None,
             val_source,
             per_view: ViewCache::default(),
@@ -686,6 +705,9 @@ impl Method for SparseMethod {
             "visibility_rays": if opts.adaptive_rays { "adaptive" } else { "all" },
             "preprocess_ms": crate::gpu::timing::round3(self.preprocess_ms),
             "preprocess_meshes_computed": self.meshes_computed,
+            "link_test": if self.settings.link_test { "on" } else { "off" },
+            "links_cut": self.link_cut.links,
+            "link_rows_kept": self.link_cut.kept_rows,
             "renormalize_clamped": [clamped_d, clamped_s],
             "solution_gpu_bytes": solution,
             "bytes_per_point": per_point,

@@ -400,6 +400,137 @@ pub fn scene_points(scene: &Scene, total: usize, seed: u64) -> (Vec<Arc<MeshPoin
     (points, computed)
 }
 
+/// The part of a link's segment at either end, in tracer epsilons, where other geometry does
+/// not count as a wall between the vertex and the point (see [`cut_links_through_walls`]).
+const JUNCTION_MARGIN: f32 = 8.0;
+
+/// What [`cut_links_through_walls`] did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LinkCut {
+    /// Meshes whose links were tested (placed once, never moving).
+    pub meshes: usize,
+    /// Links (of positive weight) dropped because other geometry stands between the vertex
+    /// and the point.
+    pub links: usize,
+    /// Vertex rows whose every link was blocked, kept as they were.
+    pub kept_rows: usize,
+}
+
+/// Drops the links that pass through other geometry, and renormalizes the rest of each row.
+/// Links join a vertex to the nearest points of its own mesh, and a mesh that runs past a
+/// thin wall (a room's back wall under a partition) links vertices on one side to points on
+/// the other, leaking the light of one room into the other at the junction. Tested are the
+/// meshes placed once whose node never moves, against the other instances that never move
+/// (the links stay in model space and stay right for the whole animation); a segment runs
+/// between the vertex and the point, each lifted off its surface along its normal by the
+/// tracer's epsilon. The mesh's own triangles are not blockers: on a curved surface the chord
+/// between two of its points dips under it.
+pub fn cut_links_through_walls(
+    scene: &Scene,
+    points: &[Arc<MeshPoints>],
+) -> (Vec<Arc<MeshPoints>>, LinkCut) {
+    let moving = scene.moving_nodes();
+    let mut uses = vec![0usize; scene.meshes.len()];
+    for inst in &scene.instances {
+        if let Some(u) = uses.get_mut(inst.mesh) {
+            *u += 1;
+        }
+    }
+    let still = |instance: usize| !moving[scene.instances[instance].node];
+    let testable: Vec<usize> = (0..scene.instances.len())
+        .filter(|&i| still(i) && uses[scene.instances[i].mesh] == 1)
+        .filter(|&i| {
+            points
+                .get(scene.instances[i].mesh)
+                .is_some_and(|p| !p.positions.is_empty())
+        })
+        .collect();
+    let mut out = points.to_vec();
+    let mut cut = LinkCut::default();
+    if testable.is_empty() {
+        return (out, cut);
+    }
+    let world_from_node = scene.world_from_node_at(0.0);
+    let tracer = crate::trace::Tracer::new(scene, &world_from_node);
+    let eps = tracer.epsilon;
+    for instance in testable {
+        let mesh_index = scene.instances[instance].mesh;
+        let mesh = &scene.meshes[mesh_index];
+        let mesh_points = &points[mesh_index];
+        let world_from_model = world_from_node[scene.instances[instance].node];
+        let normal_from_model = Mat3::from_mat4(world_from_model).inverse().transpose();
+        let to_world = |p: Vec3, n: Vec3| {
+            let n = (normal_from_model * n).normalize_or_zero();
+            world_from_model.transform_point3(p) + n * eps
+        };
+        let vertex_count = mesh.positions.len();
+        let skip = |other: usize| other == instance || !still(other);
+        let mut links = mesh_points.links.clone();
+        let mut changed = false;
+        for (row_index, row) in links.iter_mut().enumerate() {
+            let original_row = *row;
+            let v = row_index % vertex_count.max(1);
+            let (Some(&position), Some(&normal)) = (mesh.positions.get(v), mesh.normals.get(v))
+            else {
+                continue;
+            };
+            // The back rows of a two-sided sheet face the other way.
+            let side = if row_index >= vertex_count { -1.0 } else { 1.0 };
+            let from = to_world(position, side * normal);
+            let mut dropped = 0;
+            for link in row.iter_mut().filter(|l| l.weight > 0.0) {
+                let j = link.point as usize;
+                let (Some(&p), Some(&n)) =
+                    (mesh_points.positions.get(j), mesh_points.normals.get(j))
+                else {
+                    continue;
+                };
+                let to = to_world(p, n);
+                let d = to - from;
+                let length = d.length();
+                // A vertex or point on the seam with another mesh (a ceiling's edge against a
+                // wall) sits on that mesh's surface: the segment leaves it at t = 0, which is
+                // no wall between them. Walls thinner than `margin` are not seen.
+                let margin = JUNCTION_MARGIN * eps;
+                if length <= 2.0 * margin {
+                    continue;
+                }
+                let dir = d / length;
+                if !tracer.unoccluded_except(from + dir * margin, dir, length - 2.0 * margin, skip)
+                {
+                    link.weight = 0.0;
+                    dropped += 1;
+                }
+            }
+            if dropped == 0 {
+                continue;
+            }
+            let total: f32 = row.iter().map(|l| l.weight).sum();
+            if total <= 0.0 {
+                // Every link blocked: a vertex inside other geometry (a column's foot sunk
+                // into the floor) rather than behind a wall. Darkening it would smear dark
+                // into the visible triangles it shares, so it keeps its links.
+                *row = original_row;
+                cut.kept_rows += 1;
+                continue;
+            }
+            for l in row.iter_mut() {
+                l.weight /= total;
+            }
+            changed = true;
+            cut.links += dropped;
+        }
+        cut.meshes += 1;
+        if changed {
+            out[mesh_index] = Arc::new(MeshPoints {
+                links,
+                ..(**mesh_points).clone()
+            });
+        }
+    }
+    (out, cut)
+}
+
 /// The viewer's links and occluder views at a picked surface (`Method::debug_pick`): the
 /// picked vertex's link row (its back-face row for the back of a two-sided sheet, as the apply
 /// pass chooses by facing) placed in world space, and the instance's point nearest the pick
@@ -603,5 +734,108 @@ mod tests {
         assert!(back.iter().all(|l| l.point as usize >= 64));
         assert_eq!(shown.links.len(), back.len());
         assert!(shown.point.unwrap().0 as usize >= 64 + 64);
+    }
+
+    /// The thin-wall room: the 2 cm wall at x ∈ [1.99, 2.01] stands on the floor and meets the
+    /// back and front walls, which run through both halves of the room.
+    fn thin_wall_scene(name: &str) -> Scene {
+        crate::scene::load_with(name, &crate::scene::LoadParams::default()).unwrap()
+    }
+
+    /// Positive-weight links of the meshes' vertices on one side of the thin wall (more than
+    /// `clear` from it) to points on the other side, through the wall (not over its top).
+    fn links_across(scene: &Scene, points: &[Arc<MeshPoints>], clear: f32) -> usize {
+        let world = scene.world_from_node_at(0.0);
+        let mut across = 0;
+        for inst in &scene.instances {
+            let (mesh, mp) = (&scene.meshes[inst.mesh], &points[inst.mesh]);
+            let m = world[inst.node];
+            for (row_index, row) in mp.links.iter().enumerate() {
+                let v = m.transform_point3(mesh.positions[row_index % mesh.positions.len()]);
+                for l in row.iter().filter(|l| l.weight > 0.0) {
+                    let p = m.transform_point3(mp.positions[l.point as usize]);
+                    let sides = (v.x > 2.01 + clear && p.x < 1.99 - clear)
+                        || (v.x < 1.99 - clear && p.x > 2.01 + clear);
+                    // Where the segment meets the wall's mid-plane: below its 1.8 m top.
+                    let t = (2.0 - v.x) / (p.x - v.x);
+                    let through = (v + t * (p - v)).y < 1.8 - clear;
+                    across += (sides && through) as usize;
+                }
+            }
+        }
+        across
+    }
+
+    #[test]
+    fn links_through_a_thin_wall_are_cut_and_the_rest_renormalized() {
+        let scene = thin_wall_scene("thin-wall");
+        let (points, _) = scene_points(&scene, 4096, 1);
+        let before = links_across(&scene, &points, 0.0);
+        let (cut_points, cut) = cut_links_through_walls(&scene, &points);
+        let after = links_across(&scene, &cut_points, 0.0);
+        eprintln!("links across the thin wall: {before} → {after}; {cut:?}");
+        assert!(
+            before > 100,
+            "the room's walls link across the thin wall: {before}"
+        );
+        // What is left belongs to rows whose every link was blocked (kept whole).
+        assert!(
+            after <= 8 * cut.kept_rows,
+            "{after} of {before} links still cross"
+        );
+        assert_eq!(
+            cut.meshes,
+            scene.instances.len(),
+            "every mesh is placed once and still"
+        );
+        assert!(cut.links > 0);
+        for (a, b) in points.iter().zip(&cut_points) {
+            for (ra, rb) in a.links.iter().zip(&b.links) {
+                let total: f32 = rb.iter().map(|l| l.weight).sum();
+                let was: f32 = ra.iter().map(|l| l.weight).sum();
+                assert!(
+                    (total - was).abs() < 1e-4,
+                    "a row's weights sum to {total}, were {was}"
+                );
+                for (la, lb) in ra.iter().zip(rb) {
+                    assert_eq!(la.point, lb.point, "a cut keeps the points, zeroes weights");
+                    assert!(lb.weight == 0.0 || la.weight > 0.0);
+                }
+            }
+        }
+        // Nothing is cut where nothing stands between: one lone quad.
+        let open = Scene {
+            meshes: vec![plane(0.1)],
+            instances: vec![crate::scene::Instance { mesh: 0, node: 0 }],
+            nodes: scene.nodes[..1].to_vec(),
+            ..Default::default()
+        };
+        let (open_points, _) = scene_points(&open, 64, 1);
+        let (_, open_cut) = cut_links_through_walls(&open, &open_points);
+        assert_eq!((open_cut.meshes, open_cut.links), (1, 0));
+    }
+
+    #[test]
+    fn moving_geometry_neither_blocks_nor_is_tested() {
+        // The door of door-room-moving swings: its links are not tested, and it blocks no
+        // link of the still walls, so every cut is one the still door-room (door at 30°)
+        // makes too, and the door itself is never cut.
+        let moving = thin_wall_scene("door-room-moving");
+        let flags = moving.moving_nodes();
+        assert!(flags.iter().any(|&m| m) && !flags.iter().all(|&m| m));
+        let door: Vec<usize> = (0..moving.instances.len())
+            .filter(|&i| flags[moving.instances[i].node])
+            .collect();
+        assert!(!door.is_empty(), "the door's instances move");
+        let (points, _) = scene_points(&moving, 4096, 1);
+        let (cut_points, cut) = cut_links_through_walls(&moving, &points);
+        assert_eq!(cut.meshes, moving.instances.len() - door.len());
+        for &i in &door {
+            let mesh = moving.instances[i].mesh;
+            assert_eq!(
+                points[mesh].links, cut_points[mesh].links,
+                "a moving mesh is not cut"
+            );
+        }
     }
 }
