@@ -263,16 +263,7 @@ impl<'a> Tracer<'a> {
 
     /// True when nothing blocks the segment `origin + t·dir`, t in (0, `t_max`).
     pub fn unoccluded(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        let Some(bvh) = self.bvh.as_ref() else {
-            return true;
-        };
-        if t_max <= 0.0 {
-            return true;
-        }
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
-        bvh.ray_traverse_miss(ray, |ray, id| {
-            self.triangles[bvh.primitive_indices[id] as usize].intersect(ray)
-        })
+        self.unoccluded_by(origin, dir, t_max, |_| true)
     }
 
     /// [`Tracer::unoccluded`] with the triangles of every instance `skip` names left out
@@ -284,6 +275,20 @@ impl<'a> Tracer<'a> {
         t_max: f32,
         skip: impl Fn(usize) -> bool,
     ) -> bool {
+        // Every instance is placed, in order: the placed index is the instance's.
+        self.unoccluded_by(origin, dir, t_max, |tri| {
+            !skip(self.triangle_source[tri].0 as usize)
+        })
+    }
+
+    /// The segment test over the triangles `blocks` accepts (indices into `triangles`).
+    fn unoccluded_by(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        blocks: impl Fn(usize) -> bool,
+    ) -> bool {
         let Some(bvh) = self.bvh.as_ref() else {
             return true;
         };
@@ -293,11 +298,10 @@ impl<'a> Tracer<'a> {
         let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
         bvh.ray_traverse_miss(ray, |ray, id| {
             let tri = bvh.primitive_indices[id] as usize;
-            // Every instance is placed, in order: the placed index is the instance's.
-            if skip(self.triangle_source[tri].0 as usize) {
-                f32::INFINITY
-            } else {
+            if blocks(tri) {
                 self.triangles[tri].intersect(ray)
+            } else {
+                f32::INFINITY
             }
         })
     }
