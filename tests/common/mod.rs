@@ -35,6 +35,11 @@ pub fn gpu() -> Option<GpuContext> {
 /// A fresh folder for one test's files.
 pub fn temp_dir(test: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("valgi-{test}-{}", std::process::id()));
+    // A folder of the same name is left over from an earlier run whose process had this id
+    // (every test names its own folder): start empty, so listings see only this run's files.
+    if dir.exists() {
+        std::fs::remove_dir_all(&dir).expect("clear a leftover temp dir");
+    }
     std::fs::create_dir_all(&dir).expect("create temp dir");
     dir
 }
