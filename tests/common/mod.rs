@@ -34,11 +34,17 @@ pub fn gpu() -> Option<GpuContext> {
 
 /// A fresh folder for one test's files.
 pub fn temp_dir(test: &str) -> std::path::PathBuf {
+    static MADE: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
     let dir = std::env::temp_dir().join(format!("valgi-{test}-{}", std::process::id()));
-    // A folder of the same name is left over from an earlier run whose process had this id
-    // (every test names its own folder): start empty, so listings see only this run's files.
-    if dir.exists() {
-        std::fs::remove_dir_all(&dir).expect("clear a leftover temp dir");
+    // The first call in this process finds any folder of this name left over from an earlier
+    // run whose process had the same id, and starts it empty, so listings see only this run's
+    // files; later calls (a test asking again for its folder) keep what it wrote.
+    let mut made = MADE.lock().unwrap_or_else(|e| e.into_inner());
+    if !made.iter().any(|m| m == test) {
+        made.push(test.to_string());
+        if dir.exists() {
+            std::fs::remove_dir_all(&dir).expect("clear a leftover temp dir");
+        }
     }
     std::fs::create_dir_all(&dir).expect("create temp dir");
     dir
