@@ -444,6 +444,14 @@ fn vec3_of(value: &serde_json::Value) -> glam::Vec3 {
     glam::Vec3::new(a[0], a[1], a[2])
 }
 
+/// The pixels of the top-left `size`² (the first view's region) that have exactly colour `rgb`.
+fn pixels_of(image: &image::RgbImage, size: u32, rgb: [u8; 3]) -> Vec<(u32, u32)> {
+    (0..size)
+        .flat_map(|y| (0..size).map(move |x| (x, y)))
+        .filter(|&(x, y)| image.get_pixel(x, y).0 == rgb)
+        .collect()
+}
+
 /// `--debug links,occluders --pick X,Y`: the viewer picks the surface under the pixel and the
 /// sparse method answers with the vertex's links and the nearest point, exactly as the
 /// library computes them from the same camera ray, scene and point set; the screenshot shows
@@ -513,12 +521,7 @@ fn the_links_and_occluder_views_show_the_picked_vertex_and_point() {
 
     // The overlay colours (display values, written as they are into the non-sRGB window):
     // the vertex cross (1, 0.2, 1) and the diffuse sphere (1, 0.9, 0.1).
-    let count = |image: &image::RgbImage, rgb: [u8; 3]| {
-        (0..size)
-            .flat_map(|y| (0..size).map(move |x| (x, y)))
-            .filter(|&(x, y)| image.get_pixel(x, y).0 == rgb)
-            .count()
-    };
+    let count = |image: &image::RgbImage, rgb: [u8; 3]| pixels_of(image, size, rgb).len();
     let cross = [255, 51, 255];
     let sphere = [255, 230, 26];
     eprintln!(
@@ -535,9 +538,8 @@ fn the_links_and_occluder_views_show_the_picked_vertex_and_point() {
         (ndc.x * 0.5 + 0.5) * size as f32,
         (0.5 - ndc.y * 0.5) * size as f32,
     );
-    let far_cross = (0..size)
-        .flat_map(|y| (0..size).map(move |x| (x, y)))
-        .filter(|&(x, y)| shot.get_pixel(x, y).0 == cross)
+    let far_cross = pixels_of(&shot, size, cross)
+        .into_iter()
         .filter(|&(x, y)| {
             (x as f32 + 0.5 - at.0).abs() > 8.0 || (y as f32 + 0.5 - at.1).abs() > 8.0
         })
@@ -735,12 +737,7 @@ fn the_atlas_view_shows_its_texels_and_coverage_holes() {
         (1.5..=2.6).contains(&ratio),
         "128² gives {f} edges, 64² {c}"
     );
-    let magenta = |image: &image::RgbImage| {
-        (0..size)
-            .flat_map(|y| (0..size).map(move |x| (x, y)))
-            .filter(|&(x, y)| image.get_pixel(x, y).0 == [255, 0, 255])
-            .count()
-    };
+    let magenta = |image: &image::RgbImage| pixels_of(image, size, [255, 0, 255]).len();
     assert_eq!(magenta(&fine_shot), 0, "a clean bake has no coverage hole");
 
     // Clear the coverage flag of every 150th covered texel (under the 1 % the renderer

@@ -453,6 +453,10 @@ pub fn cut_links_through_walls(
     let world_from_node = scene.world_from_node_at(0.0);
     let tracer = crate::trace::Tracer::new(scene, &world_from_node);
     let eps = tracer.epsilon;
+    // A vertex or point on the seam with another mesh (a ceiling's edge against a wall) sits
+    // on that mesh's surface: the segment leaves it at t = 0, which is no wall between them.
+    // Walls thinner than `margin` are not seen.
+    let margin = JUNCTION_MARGIN * eps;
     for instance in testable {
         let mesh_index = scene.instances[instance].mesh;
         let mesh = &scene.meshes[mesh_index];
@@ -464,6 +468,12 @@ pub fn cut_links_through_walls(
             world_from_model.transform_point3(p) + n * eps
         };
         let vertex_count = mesh.positions.len();
+        let lifted_points: Vec<Vec3> = mesh_points
+            .positions
+            .iter()
+            .zip(&mesh_points.normals)
+            .map(|(&p, &n)| to_world(p, n))
+            .collect();
         let skip = |other: usize| other == instance || !still(other);
         let mut links = mesh_points.links.clone();
         let mut changed = false;
@@ -479,19 +489,11 @@ pub fn cut_links_through_walls(
             let from = to_world(position, side * normal);
             let mut dropped = 0;
             for link in row.iter_mut().filter(|l| l.weight > 0.0) {
-                let j = link.point as usize;
-                let (Some(&p), Some(&n)) =
-                    (mesh_points.positions.get(j), mesh_points.normals.get(j))
-                else {
+                let Some(&to) = lifted_points.get(link.point as usize) else {
                     continue;
                 };
-                let to = to_world(p, n);
                 let d = to - from;
                 let length = d.length();
-                // A vertex or point on the seam with another mesh (a ceiling's edge against a
-                // wall) sits on that mesh's surface: the segment leaves it at t = 0, which is
-                // no wall between them. Walls thinner than `margin` are not seen.
-                let margin = JUNCTION_MARGIN * eps;
                 if length <= 2.0 * margin {
                     continue;
                 }
@@ -742,9 +744,9 @@ mod tests {
         crate::scene::load_with(name, &crate::scene::LoadParams::default()).unwrap()
     }
 
-    /// Positive-weight links of the meshes' vertices on one side of the thin wall (more than
-    /// `clear` from it) to points on the other side, through the wall (not over its top).
-    fn links_across(scene: &Scene, points: &[Arc<MeshPoints>], clear: f32) -> usize {
+    /// Positive-weight links of the meshes' vertices on one side of the thin wall to points on
+    /// the other side, through the wall (not over its top).
+    fn links_across(scene: &Scene, points: &[Arc<MeshPoints>]) -> usize {
         let world = scene.world_from_node_at(0.0);
         let mut across = 0;
         for inst in &scene.instances {
@@ -754,11 +756,10 @@ mod tests {
                 let v = m.transform_point3(mesh.positions[row_index % mesh.positions.len()]);
                 for l in row.iter().filter(|l| l.weight > 0.0) {
                     let p = m.transform_point3(mp.positions[l.point as usize]);
-                    let sides = (v.x > 2.01 + clear && p.x < 1.99 - clear)
-                        || (v.x < 1.99 - clear && p.x > 2.01 + clear);
+                    let sides = (v.x > 2.01 && p.x < 1.99) || (v.x < 1.99 && p.x > 2.01);
                     // Where the segment meets the wall's mid-plane: below its 1.8 m top.
                     let t = (2.0 - v.x) / (p.x - v.x);
-                    let through = (v + t * (p - v)).y < 1.8 - clear;
+                    let through = (v + t * (p - v)).y < 1.8;
                     across += (sides && through) as usize;
                 }
             }
@@ -770,9 +771,9 @@ mod tests {
     fn links_through_a_thin_wall_are_cut_and_the_rest_renormalized() {
         let scene = thin_wall_scene("thin-wall");
         let (points, _) = scene_points(&scene, 4096, 1);
-        let before = links_across(&scene, &points, 0.0);
+        let before = links_across(&scene, &points);
         let (cut_points, cut) = cut_links_through_walls(&scene, &points);
-        let after = links_across(&scene, &cut_points, 0.0);
+        let after = links_across(&scene, &cut_points);
         eprintln!("links across the thin wall: {before} → {after}; {cut:?}");
         assert!(
             before > 100,

@@ -246,110 +246,130 @@ impl DebugOverlay {
         }
     }
 
-    /// This frame's draws of `view` for the views that are on and that the method has
-    /// (`pick`: what lies under the cursor, for the links and occluder views). The groups and
-    /// the small parameter blocks are made per frame, only while a debug view is on.
+    /// This frame's draws, per view of `views`, for the debug views that are on and that the
+    /// method has (`pick`: what lies under the cursor, for the links and occluder views). The
+    /// groups and the small parameter blocks are made per frame, only while a debug view is
+    /// on; what no view changes (the point group, the occluder parameters, the link lines)
+    /// once for all views.
     #[allow(clippy::too_many_arguments)]
     pub fn prepare(
         &self,
         ctx: &GpuContext,
         method: &dyn Method,
-        view: &View,
+        views: &[View],
         on: DebugViews,
         pick: Option<&DebugPick>,
         exposure_scale: f32,
         encode_srgb: bool,
-    ) -> Vec<DebugDraw> {
+    ) -> Vec<Vec<DebugDraw>> {
         let device = &ctx.device;
-        let view_group = |instances: u32| {
-            let params = DebugSplatParams {
-                exposure_scale,
-                encode_srgb: encode_srgb as u32,
-                splat_pixels: SPLAT_PIXELS,
-                instance_count: instances,
-                size: [view.width, view.height],
-                pad0: [0; 2],
-            };
-            let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("debug splat params"),
-                contents: bytemuck::bytes_of(&params),
+        let uniform = |label, contents: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
                 usage: wgpu::BufferUsages::UNIFORM,
-            });
-            self.view_layout
-                .bind(device, &[&view.frame_buffer, &buffer, &view.targets.depth])
+            })
         };
-        let mut draws = vec![];
         let points = method.debug_points().filter(|p| p.count > 0);
-        let point_group = |p: &crate::frame::DebugPointSource| {
-            self.point_layout.bind(
-                device,
-                &[
-                    p.instances,
-                    p.points_model,
-                    p.points_meta,
-                    p.point_diffuse,
-                    p.point_extra,
-                    p.point_glossy,
-                ],
-            )
-        };
-        if on.points {
-            if let Some(p) = &points {
-                draws.push(DebugDraw::Splats {
-                    points: true,
-                    view_group: view_group(p.count),
-                    source_group: point_group(p),
-                    instances: p.count,
-                });
-            }
-        }
-        if on.occluders {
-            if let (Some(p), Some((point, _))) = (&points, pick.and_then(|k| k.point)) {
+        let point_group = points
+            .as_ref()
+            .filter(|_| on.points || on.occluders)
+            .map(|p| {
+                self.point_layout.bind(
+                    device,
+                    &[
+                        p.instances,
+                        p.points_model,
+                        p.points_meta,
+                        p.point_diffuse,
+                        p.point_extra,
+                        p.point_glossy,
+                    ],
+                )
+            });
+        let occluder_params = match (&points, pick.and_then(|k| k.point)) {
+            (Some(p), Some((point, _))) if on.occluders => {
                 let params = DebugOccluderParams {
                     point,
                     point_count: p.count,
                     segments: CIRCLE_SEGMENTS,
                     pad0: 0,
                 };
-                let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("debug occluder params"),
-                    contents: bytemuck::bytes_of(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                draws.push(DebugDraw::Occluders {
-                    view_group: self
-                        .occluder_view_layout
-                        .bind(device, &[&view.frame_buffer, &buffer]),
-                    point_group: point_group(p),
-                    point_count: p.count,
-                });
+                Some((
+                    uniform("debug occluder params", bytemuck::bytes_of(&params)),
+                    p.count,
+                ))
             }
-        }
-        if on.links {
-            if let Some(pick) = pick.filter(|k| !k.links.is_empty()) {
+            _ => None,
+        };
+        let link_vertices = pick
+            .filter(|k| on.links && !k.links.is_empty())
+            .map(|pick| {
                 let lines = link_lines(pick);
-                draws.push(DebugDraw::Lines {
-                    view_group: self.line_view_layout.bind(device, &[&view.frame_buffer]),
-                    vertices: device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some("debug link lines"),
-                        contents: bytemuck::cast_slice(&lines),
-                        usage: wgpu::BufferUsages::VERTEX,
-                    }),
-                    count: lines.len() as u32,
+                let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("debug link lines"),
+                    contents: bytemuck::cast_slice(&lines),
+                    usage: wgpu::BufferUsages::VERTEX,
                 });
-            }
-        }
-        if on.vals {
-            if let Some(v) = method.debug_vals().filter(|v| v.capacity > 0) {
-                draws.push(DebugDraw::Splats {
-                    points: false,
-                    view_group: view_group(v.capacity),
-                    source_group: self.val_layout.bind(device, &[v.vals, v.val_count]),
-                    instances: v.capacity,
-                });
-            }
-        }
-        draws
+                (buffer, lines.len() as u32)
+            });
+        let vals = method.debug_vals().filter(|v| on.vals && v.capacity > 0);
+        let val_group = vals
+            .as_ref()
+            .map(|v| self.val_layout.bind(device, &[v.vals, v.val_count]));
+        views
+            .iter()
+            .map(|view| {
+                let splat_group = |instances: u32| {
+                    let params = DebugSplatParams {
+                        exposure_scale,
+                        encode_srgb: encode_srgb as u32,
+                        splat_pixels: SPLAT_PIXELS,
+                        instance_count: instances,
+                        size: [view.width, view.height],
+                        pad0: [0; 2],
+                    };
+                    let buffer = uniform("debug splat params", bytemuck::bytes_of(&params));
+                    self.view_layout
+                        .bind(device, &[&view.frame_buffer, &buffer, &view.targets.depth])
+                };
+                let mut draws = vec![];
+                if let (true, Some(p), Some(group)) = (on.points, &points, &point_group) {
+                    draws.push(DebugDraw::Splats {
+                        points: true,
+                        view_group: splat_group(p.count),
+                        source_group: group.clone(),
+                        instances: p.count,
+                    });
+                }
+                if let (Some((params, point_count)), Some(group)) = (&occluder_params, &point_group)
+                {
+                    draws.push(DebugDraw::Occluders {
+                        view_group: self
+                            .occluder_view_layout
+                            .bind(device, &[&view.frame_buffer, params]),
+                        point_group: group.clone(),
+                        point_count: *point_count,
+                    });
+                }
+                if let Some((vertices, count)) = &link_vertices {
+                    draws.push(DebugDraw::Lines {
+                        view_group: self.line_view_layout.bind(device, &[&view.frame_buffer]),
+                        vertices: vertices.clone(),
+                        count: *count,
+                    });
+                }
+                if let (Some(v), Some(group)) = (&vals, &val_group) {
+                    draws.push(DebugDraw::Splats {
+                        points: false,
+                        view_group: splat_group(v.capacity),
+                        source_group: group.clone(),
+                        instances: v.capacity,
+                    });
+                }
+                draws
+            })
+            .collect()
     }
 
     /// Records `draws` into `pass`, whose viewport is the view's region.

@@ -1041,7 +1041,8 @@ impl Running {
                     self.present_targets[0].group = group;
                 }
             }
-            self.reference_on = self.reference.key().is_some() && wanted.unmatchable.is_none();
+            // An unmatchable view has nothing loaded (`ReferenceOverlay::update`).
+            self.reference_on = self.reference.key().is_some();
         }
 
         let raw_input = self.egui_state.take_egui_input(&self.window);
@@ -1103,21 +1104,17 @@ impl Running {
         };
         self.write_present_params();
         self.debug_draws = match &self.method {
-            Some(method) if self.state.debug.any_overlay() && !self.anaglyph() => self
-                .views
-                .iter()
-                .map(|view| {
-                    self.debug_overlay.prepare(
-                        &self.ctx,
-                        method.as_ref(),
-                        view,
-                        self.state.debug,
-                        self.pick.as_ref(),
-                        2f32.powf(self.state.exposure),
-                        !self.config.format.is_srgb(),
-                    )
-                })
-                .collect(),
+            Some(method) if self.state.debug.any_overlay() && !self.anaglyph() => {
+                self.debug_overlay.prepare(
+                    &self.ctx,
+                    method.as_ref(),
+                    &self.views,
+                    self.state.debug,
+                    self.pick.as_ref(),
+                    2f32.powf(self.state.exposure),
+                    !self.config.format.is_srgb(),
+                )
+            }
             _ => vec![],
         };
 

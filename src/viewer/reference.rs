@@ -42,30 +42,15 @@ pub struct ReferenceOverlay {
 }
 
 fn upload(ctx: &GpuContext, label: &str, image: &Image) -> wgpu::TextureView {
-    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some(label),
-        size: wgpu::Extent3d {
-            width: image.width,
-            height: image.height,
-            depth_or_array_layers: 1,
-        },
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: wgpu::TextureFormat::Rgba32Float,
-        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-        view_formats: &[],
-    });
-    ctx.queue.write_texture(
-        texture.as_image_copy(),
-        bytemuck::cast_slice(&image.pixels),
-        wgpu::TexelCopyBufferLayout {
-            offset: 0,
-            bytes_per_row: Some(16 * image.width),
-            rows_per_image: None,
-        },
-        texture.size(),
+    let size = (image.width, image.height);
+    let texture = crate::gpu::GpuBytes::default().texture_2d(
+        &ctx.device,
+        label,
+        size,
+        wgpu::TextureFormat::Rgba32Float,
+        wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
     );
+    ctx.write_texture_2d(&texture, 0, bytemuck::cast_slice(&image.pixels), size, 16);
     texture.create_view(&Default::default())
 }
 
