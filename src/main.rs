@@ -117,6 +117,17 @@ struct MrArgs {
     /// Voxel edge of --accumulate, metres.
     #[arg(long, default_value_t = 0.02)]
     voxel: f32,
+    /// The sparse method's indirect occlusion: visibility rays to VAL clusters (the sensor's
+    /// image tiles among them), or the paper's sparse-point discs (sum, union).
+    #[arg(long, default_value = "rays", value_parser = ["rays", "sum", "union", "off"])]
+    occlusion: String,
+    /// The real surfaces (the filtered depth) block the virtual object's indirect light (with
+    /// --occlusion rays).
+    #[arg(long, default_value = "on", value_parser = ["on", "off"])]
+    real_occluders: String,
+    /// Metres of matter assumed behind every surface the sensor sees (for --real-occluders).
+    #[arg(long, default_value_t = valgi::mixed_reality::depth_vals::DEFAULT_REAL_THICKNESS)]
+    real_thickness: f32,
     /// Bilateral filter half-width in pixels (0: off).
     #[arg(long, default_value_t = 2)]
     bilateral_radius: u32,
@@ -1409,6 +1420,8 @@ fn mr_request(
         real_vals: args.real_vals,
         accumulate: args.accumulate,
         voxel: args.voxel,
+        real_occluders: args.real_occluders == "on",
+        real_thickness: args.real_thickness,
         ..Default::default()
     };
     depth.check()?;
@@ -1418,10 +1431,20 @@ fn mr_request(
             args.sparse_points
         )));
     }
+    let defaults = valgi::vals::SparseSettings::default();
     let sparse = valgi::vals::SparseSettings {
         rsm: args.rsm,
         sparse_points: args.sparse_points,
-        ..Default::default()
+        options: valgi::vals::sparse::SparseOptions {
+            occlusion: match args.occlusion.as_str() {
+                "sum" => valgi::vals::math::OcclusionMode::Sum,
+                "union" => valgi::vals::math::OcclusionMode::Union,
+                "off" => valgi::vals::math::OcclusionMode::Off,
+                _ => valgi::vals::math::OcclusionMode::Rays,
+            },
+            ..defaults.options
+        },
+        ..defaults
     };
     Ok(run::MrRequest {
         source,

@@ -41,6 +41,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/light/vals_append.wgsl"),
     ),
     (
+        "sensor_occluder.wgsl",
+        include_str!("../shaders/light/sensor_occluder.wgsl"),
+    ),
+    (
         "depth_vals.wgsl",
         include_str!("../shaders/mixed_reality/depth_vals.wgsl"),
     ),

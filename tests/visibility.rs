@@ -80,6 +80,7 @@ fn assert_visibility_matches_the_cpu_twin(
                 tiles,
                 samples,
                 &gpu_vals,
+                None,
                 method.settings.options.adaptive_rays,
             );
             let gpu = gpu_visibility[i * per_point + c];
@@ -474,6 +475,7 @@ fn visibility_history_blends_last_frames_bytes_like_the_cpu_twin() {
                 tiles,
                 &samples,
                 &gpu_vals,
+                None,
                 method.settings.options.adaptive_rays,
             );
             let k = i * per_point + c;

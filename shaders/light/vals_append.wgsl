@@ -14,7 +14,9 @@ struct AppendSize {
     row_length: u32,
     // Slots of the whole VAL buffer (RSM + external).
     capacity: u32,
-    pad: u32,
+    // The tile of the candidates' tile 0 (`flux.w` holds a candidate's tile), after the RSM's
+    // tiles; NO_EXTERNAL_TILES: the candidates are in no cluster.
+    first_tile: u32,
 }
 
 @group(0) @binding(0) var<uniform> size: AppendSize;
@@ -24,8 +26,10 @@ struct AppendSize {
 // Per row its valid-candidate count; slot `rows` holds the VAL count before the append.
 @group(0) @binding(4) var<storage, read_write> row_counts: array<u32>;
 
-// The cluster id of VALs that come from no RSM tile (`light::rsm::UNCLUSTERED`).
+// The cluster id of VALs in no cluster (`light::rsm::UNCLUSTERED`).
 const UNCLUSTERED: u32 = 32u;
+const MAX_CLUSTERS: u32 = 32u;
+const NO_EXTERNAL_TILES: u32 = 0xffffffffu;
 
 fn valid(c: Val) -> bool {
     return c.position_area.w > 0.0;
@@ -118,9 +122,14 @@ fn append_rows(@builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) g
             if (!valid(c) || at >= size.capacity) {
                 continue;
             }
-            // Outside every RSM cluster (w = MAX_CLUSTERS): no cluster visibility scales it.
+            // A sensor tile becomes the cluster of its tile after the RSM's (folded into
+            // MAX_CLUSTERS like theirs); without tiles, no cluster visibility scales it.
             var appended = c;
-            appended.flux.w = f32(UNCLUSTERED);
+            var cluster = UNCLUSTERED;
+            if (size.first_tile != NO_EXTERNAL_TILES) {
+                cluster = (size.first_tile + u32(c.flux.w)) % MAX_CLUSTERS;
+            }
+            appended.flux.w = f32(cluster);
             vals[at] = appended;
             at += 1u;
         }

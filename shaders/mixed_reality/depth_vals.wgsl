@@ -26,7 +26,8 @@ struct DepthValParams {
     radius: u32,
     // 0: the VAL's area is the facing footprint; 1: the true (tilted) area.
     area_mode: u32,
-    pad0: u32,
+    // Cluster tiles per image side: a candidate's `flux.w` is its block's tile.
+    cluster_tiles: u32,
     pad1: u32,
 }
 
@@ -192,10 +193,13 @@ fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
     out.position_area = vec4<f32>(0.0);
     out.normal = vec4<f32>(0.0);
     out.flux = vec4<f32>(0.0);
+    // The tile of the block's first pixel (`light::sensor::pixel_tile`).
+    let tiles = params.cluster_tiles;
+    let tile = (y0 * tiles / params.height) * tiles + x0 * tiles / params.width;
     if (weights > 0.0 && max(flux.r, max(flux.g, flux.b)) > 0.0 && length(normal) > 1e-6 * weights) {
         out.position_area = vec4<f32>(position / weights, area);
         out.normal = vec4<f32>(normalize(normal), 0.0);
-        out.flux = vec4<f32>(flux, 0.0);
+        out.flux = vec4<f32>(flux, f32(tile));
     }
     candidates[block] = out;
 }

@@ -3,12 +3,16 @@
 // weighted by what each would contribute (flux · disc geometry), give the visible fraction
 // V ∈ [0, 1], stored as one byte. The gather then scales every VAL by its cluster's V, so a
 // point sees the light that reaches it through a doorway and not the light behind the wall.
+// A depth sensor's VALs (mixed reality) add their image's tiles as clusters after the RSM's,
+// and the sensor's depth blocks rays too (group 2; without a sensor it has no tiles and no
+// frame).
 // CPU twin: `vals::visibility::cluster_visibility`.
 #include "vals_common.wgsl"
 #include "bvh.wgsl"
 
 const MAX_CLUSTERS: u32 = 32u;
-const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+// Also CLUSTER_SAMPLE_SIDE, the strata per tile side.
+#include "sensor_occluder.wgsl"
 // Ray ends are pulled off both surfaces by this fraction of the segment's length.
 const RAY_OFFSET: f32 = 2e-3;
 // Most RSM tiles a cluster shoots at (each CLUSTER_SAMPLE_SIDE² rays): with more tiles than
@@ -43,13 +47,23 @@ struct StratumSample {
     end: vec3<f32>,
 }
 
-fn stratum_sample(point: WorldPoint, slot_index: u32) -> StratumSample {
+// Stratum `s` of tile `tile`: an RSM tile's sample slot, or past the RSM's tiles a sensor
+// tile's surfel.
+fn stratum_sample(point: WorldPoint, tile: u32, s: u32) -> StratumSample {
     var out: StratumSample;
-    let slot = cluster_samples[slot_index];
-    if (slot == 0u) {
-        return out;
+    var val: Val;
+    if (tile < params.rsm_tiles) {
+        let slot = cluster_samples[tile * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE + s];
+        if (slot == 0u) {
+            return out;
+        }
+        val = vals[slot - 1u];
+    } else {
+        val = sensor_stratum_surfel(tile - params.rsm_tiles, s);
+        if (val.position_area.w <= 0.0) {
+            return out;
+        }
     }
-    let val = vals[slot - 1u];
     let g = disc_geometry(point.position, point.normal, val).x;
     let l = val.position_area.xyz;
     out.weight = max(g * (val.flux.r + val.flux.g + val.flux.b), 0.0);
@@ -59,20 +73,22 @@ fn stratum_sample(point: WorldPoint, slot_index: u32) -> StratumSample {
 }
 
 fn sample_visible(point: WorldPoint, sample: StratumSample) -> bool {
-    return !segment_occluded(point.position + point.normal * sample.offset, sample.end);
+    let start = point.position + point.normal * sample.offset;
+    return !segment_occluded(start, sample.end) && !sensor_blocks(start, sample.end);
 }
 
 fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     var seen = 0.0;
     var total = 0.0;
+    let all_tiles = params.rsm_tiles + sensor_tile_count();
     var tiles_in_cluster = 0u;
-    if (cluster < params.rsm_tiles) {
-        tiles_in_cluster = (params.rsm_tiles - cluster + MAX_CLUSTERS - 1u) / MAX_CLUSTERS;
+    if (cluster < all_tiles) {
+        tiles_in_cluster = (all_tiles - cluster + MAX_CLUSTERS - 1u) / MAX_CLUSTERS;
     }
     let stride = max(1u, (tiles_in_cluster + MAX_RAY_TILES - 1u) / MAX_RAY_TILES) * MAX_CLUSTERS;
     let adaptive = (params.flags & FLAG_ADAPTIVE_RAYS) != 0u;
-    for (var tile = cluster; tile < params.rsm_tiles; tile += stride) {
+    for (var tile = cluster; tile < all_tiles; tile += stride) {
         // Adaptive: the 2×2 coarse strata (even row and column) first; when every one of them
         // that reaches the point gives the same answer, the other strata are taken to give it
         // too (their weights still count), else they get their own rays.
@@ -82,7 +98,7 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
             if (adaptive && !is_coarse_stratum(s)) {
                 continue;
             }
-            let sample = stratum_sample(point, tile * per_tile + s);
+            let sample = stratum_sample(point, tile, s);
             if (sample.weight <= 0.0) {
                 continue;
             }
@@ -102,7 +118,7 @@ fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
             if (is_coarse_stratum(s)) {
                 continue;
             }
-            let sample = stratum_sample(point, tile * per_tile + s);
+            let sample = stratum_sample(point, tile, s);
             if (sample.weight <= 0.0) {
                 continue;
             }

@@ -4,6 +4,7 @@
 
 pub mod bvh;
 pub mod rsm;
+pub mod sensor;
 
 use std::f32::consts::PI;
 
@@ -53,10 +54,23 @@ pub struct ValParams {
 /// and never becomes a VAL. [`rsm::Rsm::with_external`] reserves the slots and its `record`
 /// appends the valid candidates after the RSM's, in row order; [`append_vals`] is the CPU
 /// twin of that pass.
+///
+/// With a `sensor`, each candidate's `flux.w` is its tile of the sensor's image
+/// ([`sensor::pixel_tile`]); the append makes those tiles clusters of the visibility pass
+/// after the RSM's tiles, and the visibility pass also tests its rays against the sensor's
+/// depth. Without one the appended VALs are in no cluster.
 pub struct ExternalVals {
     pub candidates: wgpu::Buffer,
     pub rows: u32,
     pub row_length: u32,
+    pub sensor: Option<sensor::SensorBuffers>,
+}
+
+impl ExternalVals {
+    /// Clusters the candidates make (0: none).
+    pub fn cluster_tiles(&self) -> u32 {
+        self.sensor.as_ref().map_or(0, |s| s.tiles * s.tiles)
+    }
 }
 
 /// Something that makes [`ExternalVals`] every frame (a depth sensor's frame turned into
@@ -129,7 +143,26 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             "AppendSize",
             "vals_append.wgsl",
             rsm::AppendSize,
-            [rows, row_length, capacity, pad]
+            [rows, row_length, capacity, first_tile]
+        ),
+        shared_layout!(
+            "SensorParams",
+            "sensor_occluder.wgsl",
+            sensor::SensorParams,
+            [
+                camera_from_world,
+                fx,
+                fy,
+                cx,
+                cy,
+                width,
+                height,
+                tiles,
+                occludes,
+                thickness,
+                has_frame,
+                pad
+            ]
         ),
         shared_layout!(
             "RsmSize",

@@ -103,7 +103,13 @@ pub const CLUSTER_SAMPLE_SIDE: u32 = 4;
 /// light's one layer is cut 5×5, a point light's six layers 2×2), and at least one sample
 /// stratum a texel wide.
 pub fn cluster_tiles(resolution: u32, layers: u32) -> u32 {
-    let by_budget = ((CLUSTER_BUDGET / layers.max(1)) as f32).sqrt().floor() as u32;
+    cluster_tiles_within(resolution, layers, CLUSTER_BUDGET)
+}
+
+/// [`cluster_tiles`] with `budget` clusters for the RSM (the rest go to external VALs'
+/// clusters, [`ExternalVals::cluster_tiles`]).
+pub fn cluster_tiles_within(resolution: u32, layers: u32, budget: u32) -> u32 {
+    let by_budget = ((budget / layers.max(1)) as f32).sqrt().floor() as u32;
     by_budget.clamp(1, (resolution / CLUSTER_SAMPLE_SIDE).max(1))
 }
 
@@ -477,8 +483,13 @@ pub struct AppendSize {
     pub rows: u32,
     pub row_length: u32,
     pub capacity: u32,
-    pub pad: u32,
+    /// The tile index of the candidates' tile 0 (after the RSM's tiles), or
+    /// [`NO_EXTERNAL_TILES`]: the candidates are in no cluster.
+    pub first_tile: u32,
 }
+
+/// `AppendSize::first_tile` of candidates without clusters.
+pub const NO_EXTERNAL_TILES: u32 = u32::MAX;
 
 impl Rsm {
     /// The VAL buffer and its GPU-side count, for a viewer's debug view: every slot, the
@@ -776,7 +787,13 @@ impl Rsm {
         let cs = wgpu::ShaderStages::COMPUTE;
         let compact_bgl = GroupLayout::new(device, "vals from rsm", cs, COMPACT_BINDINGS);
         let smallest = view_sides.iter().copied().min().unwrap_or(resolution);
-        let tiles = cluster_tiles(smallest, layer_count);
+        // External clusters come after the RSM's and take their share of the budget.
+        let external_tiles = external.map_or(0, ExternalVals::cluster_tiles);
+        let tiles = cluster_tiles_within(
+            smallest,
+            layer_count,
+            CLUSTER_BUDGET.saturating_sub(external_tiles).max(1),
+        );
         let cluster_samples = bytes.buffer(
             device,
             &wgpu::BufferDescriptor {
@@ -863,7 +880,11 @@ impl Rsm {
                     rows: e.rows,
                     row_length: e.row_length,
                     capacity: slots as u32,
-                    pad: 0,
+                    first_tile: if e.cluster_tiles() > 0 {
+                        layer_count * tiles * tiles
+                    } else {
+                        NO_EXTERNAL_TILES
+                    },
                 }),
                 wgpu::BufferUsages::UNIFORM,
             );

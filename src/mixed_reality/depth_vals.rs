@@ -14,6 +14,7 @@ use crate::frame::PIXEL_TILE;
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::GpuVal;
+use crate::light::sensor::{world_tile, SensorBuffers, SensorParams, SENSOR_TILES};
 use crate::light::{ExternalVals, Val, ValSource};
 use crate::raster::RenderError;
 
@@ -50,7 +51,7 @@ pub struct DepthValParams {
     pub max_jump: f32,
     pub radius: u32,
     pub area_mode: u32,
-    pub pad0: u32,
+    pub cluster_tiles: u32,
     pub pad1: u32,
 }
 
@@ -72,7 +73,7 @@ impl From<&KernelParams> for DepthValParams {
             max_jump: p.max_jump,
             radius: p.radius,
             area_mode: p.true_area as u32,
-            pad0: 0,
+            cluster_tiles: SENSOR_TILES,
             pad1: 0,
         }
     }
@@ -97,6 +98,10 @@ pub struct DepthValSettings {
     pub accumulate: u32,
     /// Voxel edge of the fusion, metres.
     pub voxel: f32,
+    /// The filtered depth blocks the virtual object's shadow rays (`--real-occluders`).
+    pub real_occluders: bool,
+    /// Metres of matter assumed behind every seen surface (`--real-thickness`).
+    pub real_thickness: f32,
 }
 
 impl Default for DepthValSettings {
@@ -112,6 +117,8 @@ impl Default for DepthValSettings {
             real_vals: None,
             accumulate: 1,
             voxel: 0.02,
+            real_occluders: true,
+            real_thickness: DEFAULT_REAL_THICKNESS,
         }
     }
 }
@@ -141,7 +148,29 @@ impl DepthValSettings {
         if self.real_vals == Some(0) {
             return bad("--real-vals must be at least 1");
         }
+        if !(self.real_thickness > 0.0 && self.real_thickness <= 100.0) {
+            return bad("--real-thickness must be a length in metres in (0, 100]");
+        }
         Ok(())
+    }
+
+    /// What the visibility pass is told of a frame of `intrinsics` seen from
+    /// `world_from_camera` (`light::sensor`).
+    pub fn sensor_params(&self, k: &Intrinsics, world_from_camera: Mat4) -> SensorParams {
+        SensorParams {
+            camera_from_world: world_from_camera.inverse().to_cols_array_2d(),
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            width: k.width,
+            height: k.height,
+            tiles: SENSOR_TILES,
+            occludes: self.real_occluders as u32,
+            thickness: self.real_thickness,
+            has_frame: 1,
+            pad: [0; 2],
+        }
     }
 
     /// The kernels' parameters for a frame of `intrinsics` seen from `world_from_camera`.
@@ -174,6 +203,13 @@ pub fn depth_vals_cpu(frame: &RgbdFrame, p: &KernelParams) -> Vec<Val> {
     math::reduce(&math::surfels(&filtered, &frame.color, p), p)
 }
 
+/// `--real-thickness`: metres of matter assumed behind a seen surface. A thick prior blocks
+/// the rays that pass just behind a thin thing (a partition, a chair's back seen edge-on); a
+/// thin one lets rays through a bulky thing seen at a grazing angle. Against exact visibility
+/// of the same VALs, on a bulky block and on a thin partition (`tests/mixed_reality.rs`,
+/// table in `src/mixed_reality/README.md`), the summed error was smallest at 0.15 m.
+pub const DEFAULT_REAL_THICKNESS: f32 = 0.15;
+
 /// The latest sensor frame and its camera-to-world pose, waiting for upload.
 pub type FrameSlot = Arc<Mutex<Option<(RgbdFrame, Mat4)>>>;
 
@@ -187,6 +223,8 @@ pub struct DepthVals {
     color: wgpu::Buffer,
     depth_filtered: wgpu::Buffer,
     surfels: wgpu::Buffer,
+    /// The latest frame's `SensorParams` for the visibility pass (also in `external.sensor`).
+    sensor_params: wgpu::Buffer,
     /// bilateral, surfel, reduce.
     pipelines: [wgpu::ComputePipeline; 3],
     group: wgpu::BindGroup,
@@ -246,6 +284,7 @@ impl DepthVals {
         let surfels = storage("mr surfels", pixels * val);
         let candidates = storage("mr candidates", blocks * val);
         let params_buffer = bytes.uniform::<DepthValParams>(device, "mr params");
+        let sensor_params = bytes.uniform::<SensorParams>(device, "mr sensor");
         let cs = wgpu::ShaderStages::COMPUTE;
         let bgl = GroupLayout::new(device, "depth vals", cs, BINDINGS);
         let group = bgl.bind(
@@ -271,12 +310,19 @@ impl DepthVals {
                 candidates,
                 rows: p.grid_height,
                 row_length: p.grid_width,
+                sensor: Some(SensorBuffers {
+                    params: sensor_params.clone(),
+                    depth: depth_filtered.clone(),
+                    surfels: surfels.clone(),
+                    tiles: SENSOR_TILES,
+                }),
             },
             params_buffer,
             depth_raw,
             color,
             depth_filtered,
             surfels,
+            sensor_params,
             pipelines,
             group,
             bytes,
@@ -315,6 +361,8 @@ impl DepthVals {
             .collect();
         let q = &ctx.queue;
         q.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+        let sensor = self.sensor_params(world_from_camera);
+        q.write_buffer(&self.sensor_params, 0, bytemuck::bytes_of(&sensor));
         q.write_buffer(&self.depth_raw, 0, bytemuck::cast_slice(&frame.depth));
         q.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
         self.has_frame = true;
@@ -329,7 +377,15 @@ impl DepthVals {
             let capacity = (self.external.rows * self.external.row_length) as usize;
             let fused = fusion.push(surfels, capacity);
             self.last_fused = fused.len();
-            let mut records: Vec<GpuVal> = fused.iter().map(GpuVal::from_val).collect();
+            // Each fused VAL's cluster is the tile it projects to in this frame.
+            let mut records: Vec<GpuVal> = fused
+                .iter()
+                .map(|val| {
+                    let mut record = GpuVal::from_val(val);
+                    record.flux[3] = world_tile(&sensor, val.position) as f32;
+                    record
+                })
+                .collect();
             records.resize(capacity, GpuVal::default());
             q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
         }
@@ -341,14 +397,29 @@ impl DepthVals {
             .kernel_params(&self.intrinsics, world_from_camera)
     }
 
-    /// The three passes ("mr bilateral", "mr surfels", "mr reduce").
-    pub fn record_passes(&self, passes: &mut Passes) -> Result<(), GpuError> {
+    /// What the visibility pass is told of a frame seen from `world_from_camera`.
+    pub fn sensor_params(&self, world_from_camera: Mat4) -> SensorParams {
+        self.settings
+            .sensor_params(&self.intrinsics, world_from_camera)
+    }
+
+    /// The three passes ("mr bilateral", "mr surfels", "mr reduce"); without `reduce` the
+    /// first two only (the fusion makes the candidates, the visibility pass still reads the
+    /// frame's filtered depth and surfels).
+    pub fn record_passes(&self, passes: &mut Passes, reduce: bool) -> Result<(), GpuError> {
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
         let blocks = self.external.rows * self.external.row_length;
         let tiles = (w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
         let sizes = [tiles, tiles, (blocks.div_ceil(REDUCE_GROUP), 1, 1)];
         let labels = ["mr bilateral", "mr surfels", "mr reduce"];
-        for ((pipeline, (x, y, z)), label) in self.pipelines.iter().zip(sizes).zip(labels) {
+        let passes_run = if reduce { 3 } else { 2 };
+        for ((pipeline, (x, y, z)), label) in self
+            .pipelines
+            .iter()
+            .zip(sizes)
+            .zip(labels)
+            .take(passes_run)
+        {
             passes.compute(label, |pass| {
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &self.group, &[]);
@@ -373,6 +444,12 @@ impl DepthVals {
             .collect())
     }
 
+    /// Each candidate's cluster tile (`flux.w`).
+    pub fn read_candidate_tiles(&self, ctx: &GpuContext) -> Result<Vec<u32>, GpuError> {
+        let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.external.candidates)?;
+        Ok(raw.iter().map(GpuVal::cluster).collect())
+    }
+
     pub fn read_candidates(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {
         let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.external.candidates)?;
         Ok(raw.iter().map(GpuVal::to_val).collect())
@@ -394,9 +471,9 @@ impl ValSource for DepthVals {
             self.upload(ctx, &frame, pose)?;
         }
         match (self.has_frame, self.fusion.is_some()) {
-            (true, false) => self.record_passes(passes)?,
+            (true, false) => self.record_passes(passes, true)?,
             // `upload` wrote the fused VALs as the candidates.
-            (true, true) => {}
+            (true, true) => self.record_passes(passes, false)?,
             (false, _) => passes
                 .encoder()
                 .clear_buffer(&self.external.candidates, 0, None),

@@ -203,6 +203,14 @@ pub fn reduce(surfels: &[Surfel], p: &KernelParams) -> Vec<Val> {
     out
 }
 
+/// The cluster tile (of `tiles × tiles` over the image, `light::sensor::pixel_tile`) of block
+/// (bx, by): its first pixel's. The reduce pass writes it into each candidate's `flux.w`.
+pub fn block_tile(bx: u32, by: u32, p: &KernelParams, tiles: u32) -> u32 {
+    let (x0, _) = block_range(bx, p.grid_width, p.width);
+    let (y0, _) = block_range(by, p.grid_height, p.height);
+    crate::light::sensor::pixel_tile(p.width, p.height, tiles, x0, y0)
+}
+
 /// The stratified grid for at most `target` VALs from a `width × height` frame: blocks of
 /// near-square shape, every pixel its own block when `target` covers the frame.
 pub fn grid_for(width: u32, height: u32, target: Option<u32>) -> (u32, u32) {

@@ -45,7 +45,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             max_jump,
             radius,
             area_mode,
-            pad0,
+            cluster_tiles,
             pad1
         ]
     )]

@@ -175,15 +175,9 @@ impl Default for MrSettings {
     fn default() -> Self {
         Self {
             depth: DepthValSettings::default(),
-            // The paper's disc occlusion: the sensor's VALs come from no RSM tile, so the
-            // cluster rays (the sparse default) would leave them unoccluded.
-            sparse: SparseSettings {
-                options: crate::vals::sparse::SparseOptions {
-                    occlusion: crate::vals::math::OcclusionMode::Sum,
-                    ..SparseSettings::default().options
-                },
-                ..SparseSettings::default()
-            },
+            // The sparse default, cluster rays: the sensor's image tiles are clusters too,
+            // and its depth blocks the rays (`light::sensor`).
+            sparse: SparseSettings::default(),
             shadow_resolution: 1024,
             differential_rays: 16,
             depth_bias: 0.01,

@@ -573,7 +573,10 @@ impl SparseMethod {
             (points, points::LinkCut::default())
         };
         let preprocess_ms = started.elapsed().as_secs_f64() * 1000.0;
-        let sparse = SparseGpu::new(ctx, scene, &raster.scene_gpu, &points, &rsm)?;
+        let sensor = val_source
+            .as_ref()
+            .and_then(|source| source.external().sensor.as_ref());
+        let sparse = SparseGpu::new(ctx, scene, &raster.scene_gpu, &points, &rsm, sensor)?;
         Ok(Self {
             settings,
             raster,

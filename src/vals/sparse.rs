@@ -21,6 +21,7 @@ use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{compute_pipeline_groups, linear_groups, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
+use crate::light::sensor::SensorBuffers;
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
     buffer_binding, cleared, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
@@ -275,8 +276,12 @@ pub struct SparseGpu {
     /// Solutions recorded so far: the first has no history to blend.
     solutions_recorded: std::cell::Cell<u64>,
     visibility_group: wgpu::BindGroup,
+    /// The visibility pass's group 2: a depth sensor's image (or the shared empty one).
+    sensor_group: wgpu::BindGroup,
     /// RSM cluster tiles over all layers.
     rsm_tiles: u32,
+    /// A depth sensor's tiles, clusters after the RSM's (0 without a sensor).
+    sensor_tiles: u32,
 }
 
 /// Bytes of cluster visibility per sparse point: one per cluster.
@@ -311,6 +316,9 @@ const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R];
 const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, W];
 /// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
 const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
+/// Group 2 of the visibility pass (`sensor_occluder.wgsl`): a depth sensor's parameters,
+/// filtered depth and per-pixel surfels ([`crate::light::sensor::SensorBuffers`]).
+const SENSOR_BINDINGS: &[Slot] = &[Slot::Uniform, R, R];
 
 /// The sparse passes' layouts and pipelines, compiled once per device and shared by every
 /// solution on it (a preview's balls, a viewer's rebuilds, an eval sweep's settings): each
@@ -323,8 +331,11 @@ struct SparsePipelines {
     occluder_bounds: (GroupLayout, wgpu::ComputePipeline),
     occlusion: (GroupLayout, wgpu::ComputePipeline),
     interpolate: (GroupLayout, wgpu::ComputePipeline),
-    /// Group 1 is the scene BVH's ([`SceneBvh::layout`]).
+    /// Group 1 is the scene BVH's ([`SceneBvh::layout`]), group 2 a depth sensor's.
     visibility: (GroupLayout, wgpu::ComputePipeline),
+    sensor: GroupLayout,
+    /// Group 2 for solutions without a sensor: no tiles, no frame.
+    no_sensor: wgpu::BindGroup,
     apply: (GroupLayout, wgpu::RenderPipeline),
 }
 
@@ -365,11 +376,35 @@ impl SparsePipelines {
         let gather_reduce = compute("gather reduce", "vals_gather_reduce.wgsl", &groups)?;
         let bvh = SceneBvh::layout(ctx);
         let visibility_layout = GroupLayout::new(device, "visibility", cs, VISIBILITY_BINDINGS);
+        let sensor = GroupLayout::new(device, "visibility sensor", cs, SENSOR_BINDINGS);
         let visibility = compute(
             "visibility",
             "vals_visibility.wgsl",
-            &[&visibility_layout.layout, &bvh.layout],
+            &[&visibility_layout.layout, &bvh.layout, &sensor.layout],
         )?;
+        let no_sensor = {
+            use wgpu::util::DeviceExt;
+            let zeros = |label: &str, size: usize, usage: wgpu::BufferUsages| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: &vec![0u8; size],
+                    usage,
+                })
+            };
+            let params = zeros(
+                "no sensor",
+                std::mem::size_of::<crate::light::sensor::SensorParams>(),
+                wgpu::BufferUsages::UNIFORM,
+            );
+            let storage = wgpu::BufferUsages::STORAGE;
+            let depth = zeros("no sensor depth", 16, storage);
+            let surfels = zeros(
+                "no sensor surfels",
+                std::mem::size_of::<crate::light::rsm::GpuVal>(),
+                storage,
+            );
+            sensor.bind(device, &[&params, &depth, &surfels])
+        };
         // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
         let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
         let apply_layout = GroupLayout::new(device, "apply", vs_fs, APPLY_BINDINGS);
@@ -410,6 +445,8 @@ impl SparsePipelines {
                 INTERPOLATE_BINDINGS,
             )?,
             visibility: (visibility_layout, visibility),
+            sensor,
+            no_sensor,
             apply: (apply_layout, apply),
         })
     }
@@ -461,6 +498,7 @@ impl SparseGpu {
         scene_gpu: &SceneGpu,
         points: &[Arc<MeshPoints>],
         rsm: &Rsm,
+        sensor: Option<&SensorBuffers>,
     ) -> Result<Self, RenderError> {
         let (vals_buffer, val_count_buffer) = (&rsm.vals_buffer, &rsm.val_count_buffer);
         let device = &ctx.device;
@@ -704,6 +742,12 @@ impl SparseGpu {
             )));
         }
         bytes.add(GpuBytes(bvh.bytes.0));
+        let sensor_group = match sensor {
+            Some(sensor) => pipelines
+                .sensor
+                .bind(device, &[&sensor.params, &sensor.depth, &sensor.surfels]),
+            None => pipelines.no_sensor.clone(),
+        };
         let visibility_group = pipelines.visibility.0.bind(
             device,
             &[
@@ -756,7 +800,9 @@ impl SparseGpu {
             solutions_recorded: std::cell::Cell::new(0),
             pipelines,
             visibility_group,
+            sensor_group,
             rsm_tiles: rsm.tile_count(),
+            sensor_tiles: sensor.map_or(0, |s| s.tiles * s.tiles),
         })
     }
 
@@ -1003,7 +1049,7 @@ impl SparseGpu {
                 .clear_buffer(&self.visibility_buffer, 0, None);
             self.solutions_recorded
                 .set(self.solutions_recorded.get() + 1);
-            let clusters = self.rsm_tiles.clamp(1, MAX_CLUSTERS);
+            let clusters = (self.rsm_tiles + self.sensor_tiles).clamp(1, MAX_CLUSTERS);
             let (x, chunks) = linear_groups(
                 self.point_count.div_ceil(POINT_GROUP),
                 self.max_groups_per_dimension,
@@ -1012,6 +1058,7 @@ impl SparseGpu {
                 pass.set_pipeline(&self.pipelines.visibility.1);
                 pass.set_bind_group(0, &self.visibility_group, &[]);
                 pass.set_bind_group(1, &self.bvh.group, &[]);
+                pass.set_bind_group(2, &self.sensor_group, &[]);
                 pass.dispatch_workgroups(x, clusters, chunks);
             })?;
         }

@@ -18,6 +18,7 @@ use glam::Vec3;
 
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{GpuVal, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+use crate::light::sensor::{depth_blocks, stratum_surfel, SensorImage};
 use crate::vals::math::disc_geometry;
 
 /// Ray ends are pulled off both surfaces by this fraction of the segment's length.
@@ -30,9 +31,9 @@ pub const MAX_RAY_TILES: u32 = 4;
 
 /// Step between the tiles cluster `cluster` shoots at: every one of its tiles while it has
 /// at most [`MAX_RAY_TILES`], else an even stride that visits that many.
-pub fn ray_tile_stride(cluster: u32, rsm_tiles: u32) -> u32 {
-    let tiles_in_cluster = if cluster < rsm_tiles {
-        (rsm_tiles - cluster).div_ceil(MAX_CLUSTERS)
+pub fn ray_tile_stride(cluster: u32, all_tiles: u32) -> u32 {
+    let tiles_in_cluster = if cluster < all_tiles {
+        (all_tiles - cluster).div_ceil(MAX_CLUSTERS)
     } else {
         0
     };
@@ -48,7 +49,8 @@ pub fn is_coarse_stratum(s: u32) -> bool {
 /// `V_c(x)` for cluster `cluster` at the point (x, n), from the rays to the sampled VALs of
 /// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles
 /// over all layers, `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals`
-/// as the GPU holds them.
+/// as the GPU holds them. A depth `sensor`'s tiles follow the RSM's, sampled at their strata's
+/// surfels, and its depth blocks rays too ([`crate::light::sensor`]).
 ///
 /// `adaptive` (`--visibility-rays adaptive`): per tile, rays go to the coarse strata
 /// ([`is_coarse_stratum`]) first; when all of those that reach x agree (all seen or all
@@ -64,19 +66,27 @@ pub fn cluster_visibility(
     rsm_tiles: u32,
     samples: &[u32],
     vals: &[GpuVal],
+    sensor: Option<&SensorImage>,
     adaptive: bool,
 ) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+    let sensor_tiles = sensor.map_or(0, |s| s.params.tile_count());
     // (Φ·g at x, ray start, ray end) of a stratum's sample, None when it does not reach x.
     let sample = |tile: u32, s: u32| {
-        let slot = samples
-            .get((tile * per_tile + s) as usize)
-            .copied()
-            .unwrap_or(0);
-        let val = slot
-            .checked_sub(1)
-            .and_then(|i| vals.get(i as usize))?
-            .to_val();
+        let val = match sensor {
+            Some(image) if tile >= rsm_tiles => {
+                stratum_surfel(&image.params, &image.surfels, tile - rsm_tiles, s)?
+            }
+            _ => {
+                let slot = samples
+                    .get((tile * per_tile + s) as usize)
+                    .copied()
+                    .unwrap_or(0);
+                slot.checked_sub(1)
+                    .and_then(|i| vals.get(i as usize))?
+                    .to_val()
+            }
+        };
         let (g, _) = disc_geometry(x, n, &val);
         let weight = g * (val.flux.x + val.flux.y + val.flux.z);
         if weight.is_nan() || weight <= 0.0 {
@@ -85,18 +95,23 @@ pub fn cluster_visibility(
         let offset = RAY_OFFSET * (val.position - x).length();
         Some((weight, x + n * offset, val.position + val.normal * offset))
     };
+    let blocked = |from: Vec3, to: Vec3| {
+        bvh.occluded(from, to)
+            || sensor.is_some_and(|image| depth_blocks(&image.params, &image.depth, from, to))
+    };
     let mut seen = 0.0f32;
     let mut total = 0.0f32;
     let mut tile = cluster;
-    let stride = ray_tile_stride(cluster, rsm_tiles);
-    while tile < rsm_tiles {
+    let all_tiles = rsm_tiles + sensor_tiles;
+    let stride = ray_tile_stride(cluster, all_tiles);
+    while tile < all_tiles {
         let (mut coarse_seen, mut coarse_hidden) = (false, false);
         for s in (0..per_tile).filter(|&s| !adaptive || is_coarse_stratum(s)) {
             let Some((weight, from, to)) = sample(tile, s) else {
                 continue;
             };
             total += weight;
-            if bvh.occluded(from, to) {
+            if blocked(from, to) {
                 coarse_hidden = true;
             } else {
                 seen += weight;
@@ -113,7 +128,7 @@ pub fn cluster_visibility(
                 let visible = if unanimous {
                     coarse_seen
                 } else {
-                    !bvh.occluded(from, to)
+                    !blocked(from, to)
                 };
                 if visible {
                     seen += weight;

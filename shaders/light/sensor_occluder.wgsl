@@ -1,0 +1,111 @@
+// A depth sensor's image for the visibility pass: the clusters its VALs form (tiles of the
+// image, whose ray samples are the surfels at the strata's centre pixels) and its depth as an
+// occluder of shadow rays (a height field with a thickness prior). Bind group 2 of its
+// includer (`light::sensor::SensorBuffers`); `src/light/sensor.rs` is the CPU twin and
+// explains the rules.
+#include "vals_common.wgsl"
+
+// Strata per tile side, as the RSM's tiles have (`light::rsm::CLUSTER_SAMPLE_SIDE`).
+const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+
+struct SensorParams {
+    camera_from_world: mat4x4<f32>,
+    fx: f32,
+    fy: f32,
+    cx: f32,
+    cy: f32,
+    width: u32,
+    height: u32,
+    // Tiles per image side (0: no sensor).
+    tiles: u32,
+    // 1: the depth blocks shadow rays.
+    occludes: u32,
+    // Metres of matter assumed behind every seen surface.
+    thickness: f32,
+    // 1: a frame has been uploaded.
+    has_frame: u32,
+    pad: vec2<u32>,
+}
+
+@group(2) @binding(0) var<uniform> sensor: SensorParams;
+// Filtered depth per pixel (m along the optical axis, 0 a hole).
+@group(2) @binding(1) var<storage, read> sensor_depth: array<f32>;
+// Per pixel its surfel (area ≤ 0: none).
+@group(2) @binding(2) var<storage, read> sensor_surfels: array<Val>;
+
+const SENSOR_MAX_STEPS: u32 = 48u;
+const SENSOR_NEAR: f32 = 0.05;
+const SENSOR_TOLERANCE_ABS: f32 = 0.02;
+const SENSOR_TOLERANCE_REL: f32 = 0.02;
+
+fn sensor_tile_count() -> u32 {
+    return sensor.tiles * sensor.tiles;
+}
+
+fn sensor_project(p: vec3<f32>) -> vec2<f32> {
+    return vec2<f32>(sensor.fx * p.x / p.z + sensor.cx, sensor.fy * p.y / p.z + sensor.cy);
+}
+
+// The surfel at the centre pixel of stratum `s` of sensor tile `tile` (area 0: none).
+fn sensor_stratum_surfel(tile: u32, s: u32) -> Val {
+    let side = sensor.tiles * CLUSTER_SAMPLE_SIDE;
+    let gx = (tile % sensor.tiles) * CLUSTER_SAMPLE_SIDE + s % CLUSTER_SAMPLE_SIDE;
+    let gy = (tile / sensor.tiles) * CLUSTER_SAMPLE_SIDE + s / CLUSTER_SAMPLE_SIDE;
+    let x = (2u * gx + 1u) * sensor.width / (2u * side);
+    let y = (2u * gy + 1u) * sensor.height / (2u * side);
+    var surfel = sensor_surfels[y * sensor.width + x];
+    if (!(surfel.position_area.w > 0.0)) {
+        surfel.position_area.w = 0.0;
+    }
+    return surfel;
+}
+
+// Whether the seen surfaces block the world segment from `start` to `end`: a run of samples
+// inside matter with free space on both sides.
+fn sensor_blocks(start: vec3<f32>, end: vec3<f32>) -> bool {
+    if (sensor.occludes == 0u || sensor.has_frame == 0u) {
+        return false;
+    }
+    var a = (sensor.camera_from_world * vec4<f32>(start, 1.0)).xyz;
+    var b = (sensor.camera_from_world * vec4<f32>(end, 1.0)).xyz;
+    if (a.z <= SENSOR_NEAR && b.z <= SENSOR_NEAR) {
+        return false;
+    }
+    if (a.z < SENSOR_NEAR) {
+        a = mix(a, b, (SENSOR_NEAR - a.z) / (b.z - a.z));
+    } else if (b.z < SENSOR_NEAR) {
+        b = mix(b, a, (SENSOR_NEAR - b.z) / (a.z - b.z));
+    }
+    let ua = sensor_project(a);
+    let ub = sensor_project(b);
+    let pixels = max(abs(ub.x - ua.x), abs(ub.y - ua.y));
+    var steps = SENSOR_MAX_STEPS;
+    // `pixels` is finite here unless the projection overflowed.
+    if (pixels < f32(SENSOR_MAX_STEPS)) {
+        steps = max(u32(ceil(pixels)), 1u);
+    }
+    var left_start = false;
+    var inside_run = false;
+    for (var i = 0u; i < steps; i++) {
+        let t = (f32(i) + 0.5) / f32(steps);
+        let p = mix(a, b, t);
+        let uv = floor(sensor_project(p) + vec2<f32>(0.5));
+        var inside = false;
+        if (uv.x >= 0.0 && uv.y >= 0.0 && uv.x < f32(sensor.width) && uv.y < f32(sensor.height)) {
+            let d = sensor_depth[u32(uv.y) * sensor.width + u32(uv.x)];
+            if (d > 0.0) {
+                let tolerance = max(SENSOR_TOLERANCE_ABS, SENSOR_TOLERANCE_REL * d);
+                inside = p.z > d + tolerance && p.z < d + sensor.thickness;
+            }
+        }
+        if (!inside) {
+            if (inside_run) {
+                return true;
+            }
+            left_start = true;
+        } else if (left_start) {
+            inside_run = true;
+        }
+    }
+    return false;
+}
