@@ -21,6 +21,10 @@ pub const FILES: &[(&str, &str)] = &[
     ("bvh.wgsl", include_str!("../shaders/base/bvh.wgsl")),
     ("present.wgsl", include_str!("../shaders/base/present.wgsl")),
     (
+        "panel_layer.wgsl",
+        include_str!("../shaders/base/panel_layer.wgsl"),
+    ),
+    (
         "vals_visibility.wgsl",
         include_str!("../shaders/vals/vals_visibility.wgsl"),
     ),

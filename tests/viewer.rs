@@ -955,3 +955,48 @@ fn view_arguments_that_cannot_work_together_are_refused() {
         assert!(stderr.contains(expected), "{args:?}: {stderr}");
     }
 }
+
+/// The panel is drawn into a cached layer only when egui's output changes (its readouts
+/// refresh four times a second), and composited every frame: an idle panel is reused, and
+/// the screenshot shows it beside the view.
+#[test]
+fn the_panel_layer_is_reused_while_the_panel_is_unchanged_and_shown_every_frame() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_panel");
+    let shot = dir.join("panel.png");
+    let mut args = vec!["view"];
+    args.extend(direct_cornell("mono"));
+    args.extend(["--frames", "150", "--screenshot", shot.to_str().unwrap()]);
+    let Some(command) = windowed(&args) else {
+        return;
+    };
+    let report = report_of(&run(command));
+    let layer = &report["panel_layer"];
+    let (redraws, reuses) = (
+        layer["redraws"].as_u64().unwrap(),
+        layer["reuses"].as_u64().unwrap(),
+    );
+    eprintln!("panel layer: {redraws} redraws, {reuses} reuses");
+    assert!(redraws >= 1, "{layer}");
+    // Measured 40 redraws (the first build and egui's start-up) and 111 reuses.
+    assert!(
+        reuses * 2 >= redraws + reuses,
+        "the idle panel was drawn again in most frames: {layer}"
+    );
+    // Every frame composites the layer: the panel beside the view has its dark fill and
+    // bright text.
+    let image = load(&shot);
+    let size: u32 = SIZE.parse().unwrap();
+    let panel: Vec<u8> = (0..image.height())
+        .flat_map(|y| (size..image.width()).map(move |x| (x, y)))
+        .map(|(x, y)| image.get_pixel(x, y).0[1])
+        .collect();
+    assert!(!panel.is_empty());
+    let mean = panel.iter().map(|&g| g as f64).sum::<f64>() / panel.len() as f64;
+    let bright = panel.iter().filter(|&&g| g > 110).count();
+    eprintln!("panel region: mean green {mean:.1}, {bright} bright pixels");
+    assert!(mean > 15.0, "the panel region is black (mean {mean:.1})");
+    assert!(bright > 100, "no panel text ({bright} bright pixels)");
+}

@@ -832,13 +832,14 @@ pub fn unbuffered_pipeline(
             write_mask,
             topology: wgpu::PrimitiveTopology::TriangleList,
             buffers: &[],
+            blend: None,
         },
     )
 }
 
 /// What [`overlay_pipeline`] builds: `vertex_entry` and `fs_main` of `module`, drawing
 /// `topology` from `buffers` (none: the vertex stage makes its vertices) into one colour
-/// target of `format`, with no depth and no blending.
+/// target of `format`, with no depth, blended by `blend` (`None`: written as is).
 pub struct OverlayPipeline<'a> {
     pub label: &'a str,
     pub module: &'a wgpu::ShaderModule,
@@ -848,6 +849,7 @@ pub struct OverlayPipeline<'a> {
     pub write_mask: wgpu::ColorWrites,
     pub topology: wgpu::PrimitiveTopology,
     pub buffers: &'a [Option<wgpu::VertexBufferLayout<'a>>],
+    pub blend: Option<wgpu::BlendState>,
 }
 
 /// The render pipeline `desc` describes (full-target passes, the viewer's overlays).
@@ -878,7 +880,7 @@ pub fn overlay_pipeline(device: &wgpu::Device, desc: &OverlayPipeline) -> wgpu::
             compilation_options: Default::default(),
             targets: &[Some(wgpu::ColorTargetState {
                 format: desc.format,
-                blend: None,
+                blend: desc.blend,
                 write_mask: desc.write_mask,
             })],
         }),

@@ -197,6 +197,7 @@ impl DebugOverlay {
                     write_mask: wgpu::ColorWrites::ALL,
                     topology: wgpu::PrimitiveTopology::LineList,
                     buffers,
+                    blend: None,
                 },
             )
         };

@@ -8,6 +8,7 @@
 //! [`state::ViewerState`], testable without a window.
 
 pub mod debug;
+pub mod panel_layer;
 pub mod reference;
 pub mod state;
 
@@ -232,6 +233,28 @@ type Built = Result<(Box<dyn Method>, Arc<Scene>), String>;
 struct Worker {
     generation: u64,
     receiver: mpsc::Receiver<Built>,
+}
+
+/// How often the panel's changing readouts (frame times, pass timings, figures) are
+/// refreshed: between refreshes an idle panel draws the same shapes, and its cached layer
+/// ([`panel_layer::PanelLayer`]) is reused.
+const READOUT_INTERVAL: std::time::Duration = std::time::Duration::from_millis(250);
+
+/// The readouts the panel shows, as of their last refresh.
+#[derive(Clone, Debug, Default)]
+struct Readout {
+    history: std::collections::VecDeque<f32>,
+    frame_ms: f64,
+    timings: FrameTimings,
+    figures: Figures,
+    taken: Option<Instant>,
+}
+
+impl Readout {
+    fn is_due(&self, now: Instant) -> bool {
+        self.taken
+            .is_none_or(|taken| now.duration_since(taken) >= READOUT_INTERVAL)
+    }
 }
 
 /// The numbers of the render JSON line that the panel shows, from the last frame.
@@ -535,6 +558,8 @@ struct Running {
     egui_ctx: egui::Context,
     egui_state: egui_winit::State,
     egui_renderer: egui_wgpu::Renderer,
+    panel: panel_layer::PanelLayer,
+    readout: Readout,
     state: ViewerState,
     /// The rig's camera of the last frame (before the rig offsets its views) and the scene
     /// centre: where drags and the wheel start from.
@@ -656,6 +681,7 @@ impl Running {
         );
         let egui_renderer =
             egui_wgpu::Renderer::new(&ctx.device, format, egui_wgpu::RendererOptions::default());
+        let panel = panel_layer::PanelLayer::new(&ctx, format);
         let mut state = ViewerState::new(
             request.camera.clone(),
             request.time,
@@ -696,6 +722,8 @@ impl Running {
             egui_ctx,
             egui_state,
             egui_renderer,
+            panel,
+            readout: Readout::default(),
             state,
             camera_now: Mat4::IDENTITY,
             yfov_now: 1.0,
@@ -1047,15 +1075,22 @@ impl Running {
 
         let raw_input = self.egui_state.take_egui_input(&self.window);
         let mut actions = std::mem::take(&mut self.pending_actions);
+        if self.readout.is_due(now) {
+            self.readout = Readout {
+                history: self.state.frame_ms_history.clone(),
+                frame_ms: self.frame_ms,
+                timings: self.timings.clone(),
+                figures: self.figures.clone(),
+                taken: Some(now),
+            };
+        }
         let mut full = {
             let mut panel = PanelData {
                 method_name: self.method_name,
                 edits: &mut self.edits,
                 method_error: self.method_error.as_deref(),
                 state: &mut self.state,
-                timings: &self.timings,
-                figures: &self.figures,
-                frame_ms: self.frame_ms,
+                readout: &self.readout,
                 cameras: scene
                     .cameras
                     .iter()
@@ -1091,7 +1126,21 @@ impl Running {
         self.egui_state
             .handle_platform_output(&self.window, full.platform_output);
         let pixels_per_point = full.pixels_per_point;
-        let jobs = self.egui_ctx.tessellate(full.shapes, pixels_per_point);
+        let size = (self.config.width, self.config.height);
+        let panel_stale = self.panel.is_stale(
+            &full.shapes,
+            !full.textures_delta.set.is_empty(),
+            size,
+            pixels_per_point,
+        );
+        let panel_shapes = std::mem::take(&mut full.shapes);
+        let jobs = if panel_stale {
+            self.egui_ctx
+                .tessellate(panel_shapes.clone(), pixels_per_point)
+        } else {
+            self.panel.reuse();
+            vec![]
+        };
         for (id, deltas) in full.textures_delta.set.drain() {
             for delta in deltas {
                 self.egui_renderer
@@ -1132,16 +1181,26 @@ impl Running {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("present"),
             });
-        self.egui_renderer.update_buffers(
-            &self.ctx.device,
-            &self.ctx.queue,
-            &mut encoder,
-            &jobs,
-            &screen,
-        );
+        if panel_stale {
+            self.egui_renderer.update_buffers(
+                &self.ctx.device,
+                &self.ctx.queue,
+                &mut encoder,
+                &jobs,
+                &screen,
+            );
+            self.panel.redraw(
+                &self.ctx,
+                &mut encoder,
+                &self.egui_renderer,
+                &jobs,
+                &screen,
+                panel_shapes,
+            );
+        }
         if let Some(output) = &output {
             let target = output.texture.create_view(&Default::default());
-            self.draw(&mut encoder, &target, &jobs, &screen);
+            self.draw(&mut encoder, &target);
         }
         // A scripted run ends after its frames once no rebuild is in flight.
         let last = drawing
@@ -1162,7 +1221,7 @@ impl Running {
         let shot = shot_path.as_ref().map(|_| self.offscreen_target());
         if let Some(texture) = &shot {
             let target = texture.create_view(&Default::default());
-            self.draw(&mut encoder, &target, &jobs, &screen);
+            self.draw(&mut encoder, &target);
         }
         self.ctx.queue.submit([encoder.finish()]);
         if let Some(output) = output {
@@ -1315,14 +1374,9 @@ impl Running {
         }
     }
 
-    /// The views into their regions, then the panel, into `target` (the window's format).
-    fn draw(
-        &self,
-        encoder: &mut wgpu::CommandEncoder,
-        target: &wgpu::TextureView,
-        jobs: &[egui::ClippedPrimitive],
-        screen: &egui_wgpu::ScreenDescriptor,
-    ) {
+    /// The views into their regions, then the panel's layer, into `target` (the window's
+    /// format).
+    fn draw(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView) {
         let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("present"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -1368,8 +1422,7 @@ impl Running {
                 self.debug_overlay.draw(&mut pass, draws);
             }
         }
-        pass.set_viewport(0.0, 0.0, w as f32, h as f32, 0.0, 1.0);
-        self.egui_renderer.render(&mut pass, jobs, screen);
+        self.panel.composite(&mut pass);
     }
 
     fn offscreen_target(&self) -> wgpu::Texture {
@@ -1467,6 +1520,8 @@ impl Running {
                 "max": round3(self.state.frame_ms_history.iter().fold(0.0f32, |a, &b| a.max(b)) as f64),
             },
             "pass_total_ms_mean": round3(self.pass_total_sum_ms / self.frames_done.max(1) as f64),
+            // Frames that drew the panel's layer, and frames that composited it as it was.
+            "panel_layer": {"redraws": self.panel.redraws, "reuses": self.panel.reuses},
             "screenshot": self.request.screenshot.as_ref().map(|p| p.display().to_string()),
         });
         if let Some(r) = &self.state.rebuilds.last {
@@ -1505,9 +1560,8 @@ struct PanelData<'a> {
     edits: &'a mut BTreeMap<&'static str, String>,
     method_error: Option<&'a str>,
     state: &'a mut ViewerState,
-    timings: &'a FrameTimings,
-    figures: &'a Figures,
-    frame_ms: f64,
+    /// Frame times, pass timings and figures as of their last refresh.
+    readout: &'a Readout,
     /// The scene's cameras, "index: name".
     cameras: Vec<String>,
     /// The field of view on screen, degrees.
@@ -1619,14 +1673,14 @@ impl PanelData<'_> {
 
     /// Frame time with its history plot and the counts of the render JSON line.
     fn figures_ui(&self, ui: &mut egui::Ui) {
-        let history = &self.state.frame_ms_history;
+        let history = &self.readout.history;
         ui.label(format!(
             "frame {:.1} ms (interval), record + submit {:.1} ms",
             history.back().copied().unwrap_or(0.0),
-            self.frame_ms
+            self.readout.frame_ms
         ));
         frame_plot(ui, history);
-        let f = self.figures;
+        let f = &self.readout.figures;
         ui.label(format!(
             "GPU bytes {:.1} MiB",
             f.gpu_bytes as f64 / 1048576.0
@@ -1818,7 +1872,8 @@ impl PanelData<'_> {
     }
 
     fn passes_ui(&self, ui: &mut egui::Ui) {
-        let gpu = if self.timings.solution.gpu_timestamps {
+        let timings = &self.readout.timings;
+        let gpu = if timings.solution.gpu_timestamps {
             "GPU timestamps"
         } else {
             "wall clock"
@@ -1830,8 +1885,8 @@ impl PanelData<'_> {
                 ui.label(format!("    {label:<20} {ms:8.2}"));
             }
         };
-        scope(ui, "solution", &self.timings.solution);
-        for (name, timings) in self.view_names.iter().zip(&self.timings.views) {
+        scope(ui, "solution", &timings.solution);
+        for (name, timings) in self.view_names.iter().zip(&timings.views) {
             scope(ui, &format!("view {name}"), timings);
         }
     }
