@@ -845,13 +845,16 @@ fn an_absurd_max_edge_is_capped_by_the_triangle_budget() {
 }
 
 /// Without `--max-edge`, the sparse methods refine an imported scene to their points' spacing
-/// √(area / points); other methods and built-in scenes keep 5 cm, and a given value wins.
+/// √(area / points) times `EDGE_PER_POINT_SPACING` (1/√2); other methods and built-in scenes
+/// keep 5 cm, and a given value wins.
 #[test]
 fn sparse_methods_tessellate_imported_meshes_to_the_point_spacing() {
     use valgi::app::load_scene;
     use valgi::method::MethodOptions;
     let dir = temp_dir("sparse-spacing");
-    // A 4 m × 2 m wall: 8 m², 2 points → spacing 2 m; 1 point → 2.83 m.
+    // A 4 m × 2 m wall: 8 m², 2 points → spacing 2 m (edge 1.41 m); 1 point → 2.83 m.
+    let edge = 2.0 * valgi::vals::EDGE_PER_POINT_SPACING;
+    assert!((edge - std::f32::consts::SQRT_2).abs() < 1e-6);
     std::fs::write(
         dir.join("wall.obj"),
         "v 0 0 0\nv 4 0 0\nv 4 2 0\nv 0 2 0\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1//1 3//1 4//1\n",
@@ -862,9 +865,12 @@ fn sparse_methods_tessellate_imported_meshes_to_the_point_spacing() {
     options.set("sparse-points", "2");
     let (scene, tess) = load_scene(&spec, &[("sparse", &options)], None, false, EMITTERS).unwrap();
     assert_eq!(tess.source, "sparse spacing");
-    assert!((tess.max_edge - 2.0).abs() < 1e-4, "{tess:?}");
+    assert!((tess.max_edge - edge).abs() < 1e-4, "{tess:?}");
     let longest = longest_world_edge(&scene);
-    assert!(longest <= 2.0 * (1.0 + 1e-5) && longest > 1.0, "{longest}");
+    assert!(
+        longest <= edge * (1.0 + 1e-5) && longest > 0.5 * edge,
+        "{longest}"
+    );
     // The finest of several sparse methods; a method without sparse points does not count.
     let mut coarse = MethodOptions::default();
     coarse.set("sparse-points", "1");
@@ -881,7 +887,7 @@ fn sparse_methods_tessellate_imported_meshes_to_the_point_spacing() {
         EMITTERS,
     )
     .unwrap();
-    assert!((tess.max_edge - 2.0).abs() < 1e-4, "{tess:?}");
+    assert!((tess.max_edge - edge).abs() < 1e-4, "{tess:?}");
     let (scene, tess) = load_scene(&spec, &[("direct", &none)], None, false, EMITTERS).unwrap();
     assert_eq!((tess.source, tess.max_edge), ("default", 0.05));
     assert!(longest_world_edge(&scene) <= 0.05 * (1.0 + 1e-5));
@@ -979,7 +985,7 @@ fn budget_mode_tessellates_for_the_points_it_picks_with_the_command_line_light()
     .unwrap();
     let spacing = valgi::vals::points::point_spacing(&scene, settings.sparse_points).unwrap();
     assert!(
-        (tess.max_edge / spacing - 1.0).abs() < 0.02,
+        (tess.max_edge / (spacing * valgi::vals::EDGE_PER_POINT_SPACING) - 1.0).abs() < 0.02,
         "tessellated for {} m, budget mode picked {} points ({spacing} m apart): {report}",
         tess.max_edge,
         settings.sparse_points

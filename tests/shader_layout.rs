@@ -170,7 +170,7 @@ fn workgroup_sizes_match_the_dispatches() {
 /// them) have the same values.
 #[test]
 fn shared_constants_match() {
-    use valgi::light::rsm::{CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+    use valgi::light::rsm::{CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS, SAMPLE_CANDIDATES};
     use valgi::raster::types as base;
     let occlusion = [
         ("TILE_MAX", valgi::vals::sparse::OCCLUSION_TILE_MAX),
@@ -179,6 +179,7 @@ fn shared_constants_match() {
     let clusters = [
         ("MAX_CLUSTERS", MAX_CLUSTERS),
         ("CLUSTER_SAMPLE_SIDE", CLUSTER_SAMPLE_SIDE),
+        ("SAMPLE_CANDIDATES", SAMPLE_CANDIDATES),
     ];
     let per_file: &[(&str, &[(&str, u32)])] = &[
         ("vals_from_rsm.wgsl", &clusters),
@@ -187,7 +188,16 @@ fn shared_constants_match() {
             &[
                 clusters[0],
                 clusters[1],
+                clusters[2],
                 ("MAX_RAY_TILES", valgi::vals::visibility::MAX_RAY_TILES),
+            ],
+        ),
+        (
+            "sensor_occluder.wgsl",
+            &[
+                clusters[1],
+                clusters[2],
+                ("SENSOR_MAX_STEPS", valgi::light::sensor::SENSOR_MAX_STEPS),
             ],
         ),
         (

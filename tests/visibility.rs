@@ -5,7 +5,7 @@
 mod common;
 
 use glam::{Mat4, Vec3};
-use valgi::light::rsm::{texel_cluster, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+use valgi::light::rsm::{texel_cluster, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS, SAMPLE_CANDIDATES};
 use valgi::method::Method;
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
@@ -271,17 +271,28 @@ fn every_val_carries_its_texel_cluster_and_samples_point_at_their_stratum() {
     assert_eq!(method.rsm.layer_count, 1);
     assert!(tiles * tiles <= MAX_CLUSTERS && tiles > 1, "{tiles} tiles");
     let per_tile = (CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as usize;
-    let mut found = 0;
+    let candidates = SAMPLE_CANDIDATES as usize;
+    let (mut centres, mut corners) = (0, 0);
     for (slot_index, &slot) in samples.iter().enumerate() {
         if slot == 0 {
             continue;
         }
-        found += 1;
-        let tile = (slot_index / per_tile) as u32;
+        if slot_index % candidates == 0 {
+            centres += 1;
+        } else {
+            corners += 1;
+        }
+        let tile = (slot_index / (per_tile * candidates)) as u32;
         let val = &vals[(slot - 1) as usize];
         assert_eq!(val.cluster(), tile % MAX_CLUSTERS, "sample {slot_index}");
     }
-    assert!(found > per_tile, "{found} samples");
+    assert!(centres > per_tile, "{centres} centre samples");
+    // Lit strata have corners too: at this 32² RSM a stratum is one or two texels wide, so a
+    // corner is often the centre itself (measured 91 corners for 237 centres).
+    assert!(
+        corners > centres / 4,
+        "{corners} corners for {centres} centres"
+    );
     // The clusters over the VAL list are exactly the texel tiles: every cluster id in range,
     // and most occurring (a spot's round cone leaves the RSM's corners dark).
     let mut seen = vec![0usize; (tiles * tiles) as usize];

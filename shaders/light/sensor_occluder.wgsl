@@ -5,8 +5,10 @@
 // explains the rules.
 #include "vals_common.wgsl"
 
-// Strata per tile side, as the RSM's tiles have (`light::rsm::CLUSTER_SAMPLE_SIDE`).
+// Strata per tile side and sample candidates per stratum, as the RSM's tiles have
+// (`light::rsm::CLUSTER_SAMPLE_SIDE`, `SAMPLE_CANDIDATES`).
 const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+const SAMPLE_CANDIDATES: u32 = 5u;
 
 struct SensorParams {
     camera_from_world: mat4x4<f32>,
@@ -46,13 +48,21 @@ fn sensor_project(p: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(sensor.fx * p.x / p.z + sensor.cx, sensor.fy * p.y / p.z + sensor.cy);
 }
 
-// The surfel at the centre pixel of stratum `s` of sensor tile `tile` (area 0: none).
-fn sensor_stratum_surfel(tile: u32, s: u32) -> Val {
+// The surfel at candidate `k` of stratum `s` of sensor tile `tile` (area 0: none): the
+// stratum's centre pixel, then its four corner pixels (`light::sensor::stratum_pixel`).
+fn sensor_stratum_surfel(tile: u32, s: u32, k: u32) -> Val {
     let side = sensor.tiles * CLUSTER_SAMPLE_SIDE;
     let gx = (tile % sensor.tiles) * CLUSTER_SAMPLE_SIDE + s % CLUSTER_SAMPLE_SIDE;
     let gy = (tile / sensor.tiles) * CLUSTER_SAMPLE_SIDE + s / CLUSTER_SAMPLE_SIDE;
-    let x = (2u * gx + 1u) * sensor.width / (2u * side);
-    let y = (2u * gy + 1u) * sensor.height / (2u * side);
+    var x = (2u * gx + 1u) * sensor.width / (2u * side);
+    var y = (2u * gy + 1u) * sensor.height / (2u * side);
+    if (k > 0u) {
+        // Stratum g spans ⌈g·n/side⌉ .. ⌈(g+1)·n/side⌉.
+        let first = (vec2<u32>(gx, gy) * vec2<u32>(sensor.width, sensor.height) + side - 1u) / side;
+        let last = ((vec2<u32>(gx, gy) + 1u) * vec2<u32>(sensor.width, sensor.height) + side - 1u) / side - 1u;
+        x = select(first.x, last.x, ((k - 1u) & 1u) == 1u);
+        y = select(first.y, last.y, ((k - 1u) >> 1u) == 1u);
+    }
     var surfel = sensor_surfels[y * sensor.width + x];
     if (!(surfel.position_area.w > 0.0)) {
         surfel.position_area.w = 0.0;

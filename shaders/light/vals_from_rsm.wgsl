@@ -36,9 +36,10 @@ struct RsmTile {
 // Per view, its tile; views may have different sides (the lights share the VALs by power).
 @group(0) @binding(8) var<storage, read> view_tiles: array<RsmTile>;
 
-// `src/light/rsm.rs` holds the same two constants and the CPU twins of the functions below.
+// `src/light/rsm.rs` holds the same constants and the CPU twins of the functions below.
 const MAX_CLUSTERS: u32 = 32u;
 const CLUSTER_SAMPLE_SIDE: u32 = 4u;
+const SAMPLE_CANDIDATES: u32 = 5u;
 
 fn layer_tile(view: u32, side: u32, x: u32, y: u32) -> u32 {
     let tx = x * size.tiles / side;
@@ -47,14 +48,41 @@ fn layer_tile(view: u32, side: u32, x: u32, y: u32) -> u32 {
 }
 
 // The stratum of x in its tile if x is that stratum's centre texel, else CLUSTER_SAMPLE_SIDE.
-fn sample_stratum(side: u32, x: u32) -> u32 {
+// The stratum of coordinate `x` in its tile (one axis) and its role there: 1 the centre,
+// 2 the first, 3 the last texel, 0 none; the centre wins where roles coincide
+// (`light::rsm::stratum_role`).
+fn stratum_role(side: u32, x: u32) -> vec2<u32> {
+    // Tile t holds the texels with ⌊x·T/R⌋ = t: from ⌈t·R/T⌉ to ⌈(t+1)·R/T⌉.
     let t = x * size.tiles / side;
-    let x0 = t * side / size.tiles;
-    let x1 = (t + 1u) * side / size.tiles;
+    let x0 = (t * side + size.tiles - 1u) / size.tiles;
+    let x1 = ((t + 1u) * side + size.tiles - 1u) / size.tiles;
     let width = max(x1 - x0, 1u);
-    let stratum = (x - x0) * CLUSTER_SAMPLE_SIDE / width;
+    // The stratum whose span [x0 + s·w/S, x0 + (s+1)·w/S) holds x.
+    let stratum = ((x - x0 + 1u) * CLUSTER_SAMPLE_SIDE - 1u) / width;
+    let first = x0 + stratum * width / CLUSTER_SAMPLE_SIDE;
+    let last = x0 + (stratum + 1u) * width / CLUSTER_SAMPLE_SIDE - 1u;
     let centre = x0 + (2u * stratum + 1u) * width / (2u * CLUSTER_SAMPLE_SIDE);
-    return select(CLUSTER_SAMPLE_SIDE, stratum, centre == x);
+    var role = 0u;
+    if (x == centre) {
+        role = 1u;
+    } else if (x == first) {
+        role = 2u;
+    } else if (x == last) {
+        role = 3u;
+    }
+    return vec2<u32>(stratum, role);
+}
+
+// The sample candidate a texel is, from its two axes' roles: 0 the stratum's centre, 1–4 its
+// corners, SAMPLE_CANDIDATES none (`light::rsm::sample_candidate`).
+fn sample_candidate(rx: u32, ry: u32) -> u32 {
+    if (rx == 1u && ry == 1u) {
+        return 0u;
+    }
+    if (rx >= 2u && ry >= 2u) {
+        return 1u + (rx - 2u) + 2u * (ry - 2u);
+    }
+    return SAMPLE_CANDIDATES;
 }
 
 // The view whose rows hold `row`: the last with first_row ≤ row (binary search).
@@ -144,7 +172,7 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
     let tile = view_tiles[view];
     let y = row - tile.first_row;
     var slot = row_offsets[row];
-    let stratum_y = sample_stratum(tile.side, y);
+    let stratum_y = stratum_role(tile.side, y);
     for (var x = 0u; x < tile.side; x++) {
         let t = rsm_texel(tile, x, y);
         let flux = textureLoad(rsm_flux, t.xy, t.z, 0);
@@ -158,10 +186,12 @@ fn write_rows(@builtin(global_invocation_id) id: vec3<u32>) {
         let cluster_tile = layer_tile(view, tile.side, x, y);
         val.flux = vec4<f32>(flux.rgb, f32(cluster_tile % MAX_CLUSTERS));
         vals[slot] = val;
-        let stratum_x = sample_stratum(tile.side, x);
-        if (stratum_x < CLUSTER_SAMPLE_SIDE && stratum_y < CLUSTER_SAMPLE_SIDE) {
+        let stratum_x = stratum_role(tile.side, x);
+        let candidate = sample_candidate(stratum_x.y, stratum_y.y);
+        if (candidate < SAMPLE_CANDIDATES) {
             let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
-            cluster_samples[cluster_tile * per_tile + stratum_y * CLUSTER_SAMPLE_SIDE + stratum_x] = slot + 1u;
+            let stratum = stratum_y.x * CLUSTER_SAMPLE_SIDE + stratum_x.x;
+            cluster_samples[(cluster_tile * per_tile + stratum) * SAMPLE_CANDIDATES + candidate] = slot + 1u;
         }
         slot += 1u;
     }

@@ -47,28 +47,42 @@ struct StratumSample {
     end: vec3<f32>,
 }
 
-// Stratum `s` of tile `tile`: an RSM tile's sample slot, or past the RSM's tiles a sensor
-// tile's surfel.
+// Candidate `k` of stratum `s` of tile `tile`: an RSM tile's sample slot, or past the RSM's
+// tiles a sensor tile's surfel (area 0: none).
+fn candidate_val(tile: u32, s: u32, k: u32) -> Val {
+    if (tile >= params.rsm_tiles) {
+        return sensor_stratum_surfel(tile - params.rsm_tiles, s, k);
+    }
+    let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+    let slot = cluster_samples[(tile * per_tile + s) * SAMPLE_CANDIDATES + k];
+    var val: Val;
+    if (slot == 0u) {
+        val.position_area = vec4<f32>(0.0);
+        return val;
+    }
+    return vals[slot - 1u];
+}
+
+// Stratum `s` of tile `tile` as a ray target: its first candidate (centre, then corners)
+// whose VAL reaches the point.
 fn stratum_sample(point: WorldPoint, tile: u32, s: u32) -> StratumSample {
     var out: StratumSample;
-    var val: Val;
-    if (tile < params.rsm_tiles) {
-        let slot = cluster_samples[tile * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE + s];
-        if (slot == 0u) {
-            return out;
-        }
-        val = vals[slot - 1u];
-    } else {
-        val = sensor_stratum_surfel(tile - params.rsm_tiles, s);
+    for (var k = 0u; k < SAMPLE_CANDIDATES; k++) {
+        let val = candidate_val(tile, s, k);
         if (val.position_area.w <= 0.0) {
-            return out;
+            continue;
         }
+        let g = disc_geometry(point.position, point.normal, val).x;
+        let weight = g * (val.flux.r + val.flux.g + val.flux.b);
+        if (!(weight > 0.0)) {
+            continue;
+        }
+        let l = val.position_area.xyz;
+        out.weight = weight;
+        out.offset = RAY_OFFSET * length(l - point.position);
+        out.end = l + val.normal.xyz * out.offset;
+        return out;
     }
-    let g = disc_geometry(point.position, point.normal, val).x;
-    let l = val.position_area.xyz;
-    out.weight = max(g * (val.flux.r + val.flux.g + val.flux.b), 0.0);
-    out.offset = RAY_OFFSET * length(l - point.position);
-    out.end = l + val.normal.xyz * out.offset;
     return out;
 }
 
@@ -77,6 +91,7 @@ fn sample_visible(point: WorldPoint, sample: StratumSample) -> bool {
     return !segment_occluded(start, sample.end) && !sensor_blocks(start, sample.end);
 }
 
+// V of `cluster` at the point: the weighted fraction of its strata's samples the rays see.
 fn cluster_visibility(point: WorldPoint, cluster: u32) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     var seen = 0.0;

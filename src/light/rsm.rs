@@ -353,17 +353,53 @@ pub fn view_of_row(tiles: &[RsmTile], row: u32) -> usize {
         .saturating_sub(1)
 }
 
-/// The stratum of a texel in its tile (one axis), if the texel is that stratum's sample:
-/// strata split the tile's span `[t·R/T, (t+1)·R/T)` into `CLUSTER_SAMPLE_SIDE` parts, and a
-/// stratum's sample is its centre texel.
-pub fn sample_stratum(resolution: u32, tiles: u32, x: u32) -> Option<u32> {
+/// Sample candidates per stratum: its centre texel, then its four corner texels. A stratum's
+/// ray sample at a point is the first candidate whose VAL reaches the point
+/// (`vals::visibility`). Where the centre lies on a surface facing away from the point (or in
+/// its plane), a corner on another surface of the stratum stands in, so more of the light
+/// that does reach the point is sampled. With centres alone, a cluster none of whose centres
+/// reached a point counted as fully seen, though other texels of it lit the point: a thin
+/// strip of floor at a tile's edge, behind a wall.
+pub const SAMPLE_CANDIDATES: u32 = 5;
+
+/// The role of coordinate `x` in its stratum along one axis: 1 the centre, 2 the first, 3 the
+/// last texel, 0 none (with the stratum). Strata split the tile's texels (those with
+/// `⌊x·T/R⌋ = t`) into `CLUSTER_SAMPLE_SIDE` spans; the centre wins where roles coincide.
+fn stratum_role(resolution: u32, tiles: u32, x: u32) -> (u32, u32) {
+    // Tile t holds the texels with ⌊x·T/R⌋ = t: from ⌈t·R/T⌉ to ⌈(t+1)·R/T⌉.
     let t = x * tiles / resolution;
-    let x0 = t * resolution / tiles;
-    let x1 = (t + 1) * resolution / tiles;
+    let x0 = (t * resolution).div_ceil(tiles);
+    let x1 = ((t + 1) * resolution).div_ceil(tiles);
     let width = (x1 - x0).max(1);
-    let stratum = (x - x0) * CLUSTER_SAMPLE_SIDE / width;
+    // The stratum whose span `[x0 + s·w/S, x0 + (s+1)·w/S)` holds x.
+    let stratum = ((x - x0 + 1) * CLUSTER_SAMPLE_SIDE - 1) / width;
+    let first = x0 + stratum * width / CLUSTER_SAMPLE_SIDE;
+    let last = x0 + (stratum + 1) * width / CLUSTER_SAMPLE_SIDE - 1;
     let centre = x0 + (2 * stratum + 1) * width / (2 * CLUSTER_SAMPLE_SIDE);
-    (centre == x).then_some(stratum)
+    let role = if x == centre {
+        1
+    } else if x == first {
+        2
+    } else if x == last {
+        3
+    } else {
+        0
+    };
+    (stratum, role)
+}
+
+/// Where texel (x, y) of a view writes itself as a sample candidate: its stratum
+/// (`sy·CLUSTER_SAMPLE_SIDE + sx`) and candidate (0 the centre, 1–4 the corners: first/last
+/// column, first/last row), or `None`. `sample_candidate` in `vals_from_rsm.wgsl` is the twin.
+pub fn sample_candidate(resolution: u32, tiles: u32, x: u32, y: u32) -> Option<(u32, u32)> {
+    let (sx, rx) = stratum_role(resolution, tiles, x);
+    let (sy, ry) = stratum_role(resolution, tiles, y);
+    let candidate = match (rx, ry) {
+        (1, 1) => 0,
+        (2 | 3, 2 | 3) => 1 + (rx - 2) + 2 * (ry - 2),
+        _ => return None,
+    };
+    Some((sy * CLUSTER_SAMPLE_SIDE + sx, candidate))
 }
 
 const POSITION_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
@@ -409,8 +445,9 @@ pub struct Rsm {
     /// Cluster tiles per layer side ([`cluster_tiles`]); every VAL's `flux.w` holds its
     /// cluster.
     pub tiles: u32,
-    /// Per tile over all layers, `CLUSTER_SAMPLE_SIDE²` slots: 1 + the index of the VAL at
-    /// the stratum's centre texel, or 0 where that texel is unlit.
+    /// Per tile over all layers and per stratum of its `CLUSTER_SAMPLE_SIDE²`,
+    /// [`SAMPLE_CANDIDATES`] slots: 1 + the index of the VAL at the candidate texel, or 0
+    /// where that texel is unlit.
     pub cluster_samples: wgpu::Buffer,
     pub bytes: GpuBytes,
     lights_buffer: wgpu::Buffer,
@@ -800,6 +837,7 @@ impl Rsm {
                 label: Some("rsm cluster samples"),
                 size: (layers as u64
                     * (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as u64
+                    * SAMPLE_CANDIDATES as u64
                     * 4)
                 .max(4),
                 usage: wgpu::BufferUsages::STORAGE
@@ -1119,6 +1157,34 @@ impl Rsm {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_stratum_has_one_centre_and_four_distinct_corner_candidates() {
+        // A 128² view in 5×5 tiles: tiles 25–26 texels, strata 6–7.
+        let (resolution, tiles) = (128, 5);
+        let mut found = std::collections::HashMap::new();
+        for y in 0..resolution {
+            for x in 0..resolution {
+                if let Some((s, k)) = sample_candidate(resolution, tiles, x, y) {
+                    let tile = layer_tile(resolution, tiles, 0, x, y);
+                    let previous = found.insert((tile, s, k), (x, y));
+                    assert!(
+                        previous.is_none(),
+                        "tile {tile} stratum {s} candidate {k} twice"
+                    );
+                }
+            }
+        }
+        let strata = (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE) as usize;
+        assert_eq!(found.len(), strata * SAMPLE_CANDIDATES as usize);
+        // Tile 0 holds texels 0–25 (⌊x·5/128⌋ = 0), its stratum 0 texels 0–5: centre 3,
+        // corners 0 and 5.
+        assert_eq!(found[&(0, 0, 0)], (3, 3));
+        assert_eq!(found[&(0, 0, 1)], (0, 0));
+        assert_eq!(found[&(0, 0, 2)], (5, 0));
+        assert_eq!(found[&(0, 0, 3)], (0, 5));
+        assert_eq!(found[&(0, 0, 4)], (5, 5));
+    }
 
     #[test]
     fn the_val_budget_shrinks_every_view_to_the_largest_side_that_fits() {

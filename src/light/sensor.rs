@@ -129,22 +129,44 @@ pub fn world_tile(params: &SensorParams, world: Vec3) -> u32 {
     )
 }
 
-/// The centre pixel of stratum `s` (row-major in the tile's `CLUSTER_SAMPLE_SIDE²` grid) of
-/// tile `tile`: the strata of all tiles form one even grid over the image.
-pub fn stratum_pixel(width: u32, height: u32, tiles: u32, tile: u32, s: u32) -> (u32, u32) {
+/// Candidate `k` of stratum `s` (row-major in the tile's `CLUSTER_SAMPLE_SIDE²` grid) of tile
+/// `tile`: the stratum's centre pixel (k = 0), then its corner pixels (k = 1–4: first/last
+/// column, first/last row), as the RSM's strata have (`rsm::SAMPLE_CANDIDATES`). The strata of
+/// all tiles form one even grid over the image.
+pub fn stratum_pixel(width: u32, height: u32, tiles: u32, tile: u32, s: u32, k: u32) -> (u32, u32) {
     let side = (tiles * CLUSTER_SAMPLE_SIDE) as u64;
     let gx = ((tile % tiles) * CLUSTER_SAMPLE_SIDE + s % CLUSTER_SAMPLE_SIDE) as u64;
     let gy = ((tile / tiles) * CLUSTER_SAMPLE_SIDE + s / CLUSTER_SAMPLE_SIDE) as u64;
+    let (w, h) = (width as u64, height as u64);
+    if k == 0 {
+        return (
+            ((2 * gx + 1) * w / (2 * side)) as u32,
+            ((2 * gy + 1) * h / (2 * side)) as u32,
+        );
+    }
+    // Stratum g spans ⌈g·n/side⌉ .. ⌈(g+1)·n/side⌉, inside its tile's span (`pixel_tile`).
+    let pick = |g: u64, n: u64, last: bool| {
+        if last {
+            ((g + 1) * n).div_ceil(side) - 1
+        } else {
+            (g * n).div_ceil(side)
+        }
+    };
     (
-        ((2 * gx + 1) * width as u64 / (2 * side)) as u32,
-        ((2 * gy + 1) * height as u64 / (2 * side)) as u32,
+        pick(gx, w, (k - 1) & 1 == 1) as u32,
+        pick(gy, h, (k - 1) >> 1 == 1) as u32,
     )
 }
 
-/// The ray sample of stratum `s` of sensor tile `tile`: the surfel at its centre pixel, if
-/// that pixel has one.
-pub fn stratum_surfel(params: &SensorParams, surfels: &[Val], tile: u32, s: u32) -> Option<Val> {
-    let (x, y) = stratum_pixel(params.width, params.height, params.tiles, tile, s);
+/// The surfel at candidate `k` of stratum `s` of sensor tile `tile`, if that pixel has one.
+pub fn stratum_surfel(
+    params: &SensorParams,
+    surfels: &[Val],
+    tile: u32,
+    s: u32,
+    k: u32,
+) -> Option<Val> {
+    let (x, y) = stratum_pixel(params.width, params.height, params.tiles, tile, s, k);
     let surfel = *surfels.get((y * params.width + x) as usize)?;
     (surfel.area > 0.0).then_some(surfel)
 }
@@ -390,6 +412,18 @@ mod tests {
 
     #[test]
     fn tiles_and_strata_cover_the_image_evenly() {
+        // Sizes the strata do not divide: every candidate still lies in its own tile.
+        for (w, h) in [(30u32, 20u32), (61, 47)] {
+            for tile in 0..SENSOR_TILES * SENSOR_TILES {
+                for s in 0..CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE {
+                    for k in 0..super::super::rsm::SAMPLE_CANDIDATES {
+                        let (x, y) = stratum_pixel(w, h, SENSOR_TILES, tile, s, k);
+                        assert!(x < w && y < h);
+                        assert_eq!(pixel_tile(w, h, SENSOR_TILES, x, y), tile, "{w}×{h}");
+                    }
+                }
+            }
+        }
         let (w, h, t) = (64, 48, SENSOR_TILES);
         assert_eq!(pixel_tile(w, h, t, 0, 0), 0);
         assert_eq!(pixel_tile(w, h, t, 63, 47), t * t - 1);
@@ -398,14 +432,21 @@ mod tests {
         let mut seen = std::collections::HashSet::new();
         for tile in 0..t * t {
             for s in 0..per_tile {
-                let (x, y) = stratum_pixel(w, h, t, tile, s);
-                // Each stratum's centre lies in its own tile, and no two strata share one.
-                assert_eq!(pixel_tile(w, h, t, x, y), tile, "tile {tile} stratum {s}");
-                assert!(seen.insert((x, y)));
+                for k in 0..super::super::rsm::SAMPLE_CANDIDATES {
+                    let (x, y) = stratum_pixel(w, h, t, tile, s, k);
+                    // Each candidate lies in its own tile, and no two share a pixel.
+                    assert_eq!(pixel_tile(w, h, t, x, y), tile, "tile {tile} stratum {s}");
+                    assert!(seen.insert((x, y)), "tile {tile} stratum {s} candidate {k}");
+                }
             }
         }
-        // 16 strata per side over 64 columns: centres at 2, 6, 10, …
-        assert_eq!(stratum_pixel(w, h, t, 0, 0), (2, 1));
-        assert_eq!(stratum_pixel(w, h, t, 0, 1), (6, 1));
+        // 16 strata per side over 64 columns (4 pixels each): centres at 2, 6, 10, …
+        assert_eq!(stratum_pixel(w, h, t, 0, 0, 0), (2, 1));
+        assert_eq!(stratum_pixel(w, h, t, 0, 1, 0), (6, 1));
+        // Corners of stratum 1 (columns 4–7, rows 0–2 of 48/16 = 3).
+        assert_eq!(stratum_pixel(w, h, t, 0, 1, 1), (4, 0));
+        assert_eq!(stratum_pixel(w, h, t, 0, 1, 2), (7, 0));
+        assert_eq!(stratum_pixel(w, h, t, 0, 1, 3), (4, 2));
+        assert_eq!(stratum_pixel(w, h, t, 0, 1, 4), (7, 2));
     }
 }

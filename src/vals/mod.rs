@@ -145,11 +145,19 @@ pub fn uses_sparse_points(method: &str) -> bool {
     matches!(method, "sparse" | "sparse+atlas")
 }
 
+/// An imported scene's longest edge for the sparse methods, per spacing of their points: the
+/// spacing of twice as many points. Pixels take their lights from their triangle's vertices,
+/// so the vertex density bounds the accuracy as well as the point count: on Veach Ajar lit
+/// through the door (`src/vals/README.md`) 4096 points on a mesh refined to their own
+/// spacing gave 0.86 of the reference's mean indirect light, on one refined to 1/√2 of it
+/// 0.96 (8192 points on that mesh: 0.95), for 19 % more frame time on lavapipe.
+pub const EDGE_PER_POINT_SPACING: f32 = std::f32::consts::FRAC_1_SQRT_2;
+
 /// The default tessellation of an imported scene for the sparse methods: the spacing of
-/// their sparse points (`sparse-points` of `options`), so that no triangle spans more than
-/// about one point (a triangle with edges ≤ s has at most √3/4·s² of area, 0.43 of a point's
-/// share s²). Finer meshes only cost preprocessing (every vertex links to 8 points); coarser
-/// ones blur the points' irradiance across a triangle. `None` for a scene without area.
+/// their sparse points (`sparse-points` of `options`) times [`EDGE_PER_POINT_SPACING`], so
+/// that no triangle spans more than about half a point's share of area. Finer meshes cost
+/// preprocessing and per-vertex work (every vertex links to 8 points); coarser ones blur the
+/// points' light across a triangle. `None` for a scene without area.
 ///
 /// Under a FLIP target the count comes from a survey of the scene as it will be rendered:
 /// `edited` is the scene with the command line's lights and camera (and that camera's name and
@@ -185,7 +193,7 @@ pub fn default_max_edge(
         }
         _ => {}
     }
-    Ok(points::point_spacing(scene, points))
+    Ok(points::point_spacing(scene, points).map(|spacing| spacing * EDGE_PER_POINT_SPACING))
 }
 
 /// The sparse method's structs shared with WGSL, for the layout test.

@@ -7,7 +7,8 @@
 //! Here the VALs are grouped into clusters that are tiles of the RSM (spatially coherent, and
 //! fixed to texels, so they move smoothly with the light: `light::rsm::texel_cluster`), and
 //! each (point, cluster) pair gets a visible fraction from shadow rays through the scene's
-//! BVH to the VALs at the cluster's sample strata:
+//! BVH to the VALs at the cluster's sample strata (per stratum the first of its centre and
+//! corner texels whose VAL reaches the point, `rsm::SAMPLE_CANDIDATES`):
 //!
 //! `V_c(x) = Σ_s w_s·vis(x, l_s) / Σ_s w_s`, `w_s = Φ_s·g(x, n, s)` (flux times the disc
 //! geometry term, so the samples that matter most at x count most), and `V_c = 1` where no
@@ -17,7 +18,7 @@
 use glam::Vec3;
 
 use crate::light::bvh::SceneBvh;
-use crate::light::rsm::{GpuVal, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS};
+use crate::light::rsm::{GpuVal, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS, SAMPLE_CANDIDATES};
 use crate::light::sensor::{depth_blocks, stratum_surfel, SensorImage};
 use crate::vals::math::disc_geometry;
 
@@ -71,39 +72,46 @@ pub fn cluster_visibility(
 ) -> f32 {
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     let sensor_tiles = sensor.map_or(0, |s| s.params.tile_count());
-    // (Φ·g at x, ray start, ray end) of a stratum's sample, None when it does not reach x.
-    let sample = |tile: u32, s: u32| {
-        let val = match sensor {
-            Some(image) if tile >= rsm_tiles => {
-                stratum_surfel(&image.params, &image.surfels, tile - rsm_tiles, s)?
-            }
-            _ => {
-                let slot = samples
-                    .get((tile * per_tile + s) as usize)
-                    .copied()
-                    .unwrap_or(0);
-                slot.checked_sub(1)
-                    .and_then(|i| vals.get(i as usize))?
-                    .to_val()
-            }
-        };
-        let (g, _) = disc_geometry(x, n, &val);
-        let weight = g * (val.flux.x + val.flux.y + val.flux.z);
-        if weight.is_nan() || weight <= 0.0 {
-            return None;
+    // Candidate k of stratum s of a tile: an RSM slot, or past the RSM's tiles a sensor
+    // tile's surfel.
+    let candidate = |tile: u32, s: u32, k: u32| match sensor {
+        Some(image) if tile >= rsm_tiles => {
+            stratum_surfel(&image.params, &image.surfels, tile - rsm_tiles, s, k)
         }
-        let offset = RAY_OFFSET * (val.position - x).length();
-        Some((weight, x + n * offset, val.position + val.normal * offset))
+        _ => {
+            let slot = samples
+                .get(((tile * per_tile + s) * SAMPLE_CANDIDATES + k) as usize)
+                .copied()
+                .unwrap_or(0);
+            slot.checked_sub(1)
+                .and_then(|i| vals.get(i as usize))
+                .map(GpuVal::to_val)
+                .filter(|val| val.area > 0.0)
+        }
+    };
+    // (Φ·g at x, ray start, ray end) of a stratum's sample: its first candidate (centre,
+    // then corners) that reaches x; None when none does.
+    let sample = |tile: u32, s: u32| {
+        (0..SAMPLE_CANDIDATES).find_map(|k| {
+            let val = candidate(tile, s, k)?;
+            let (g, _) = disc_geometry(x, n, &val);
+            let weight = g * (val.flux.x + val.flux.y + val.flux.z);
+            // A NaN weight is skipped too.
+            if weight.is_nan() || weight <= 0.0 {
+                return None;
+            }
+            let offset = RAY_OFFSET * (val.position - x).length();
+            Some((weight, x + n * offset, val.position + val.normal * offset))
+        })
     };
     let blocked = |from: Vec3, to: Vec3| {
         bvh.occluded(from, to)
             || sensor.is_some_and(|image| depth_blocks(&image.params, &image.depth, from, to))
     };
-    let mut seen = 0.0f32;
-    let mut total = 0.0f32;
-    let mut tile = cluster;
     let all_tiles = rsm_tiles + sensor_tiles;
     let stride = ray_tile_stride(cluster, all_tiles);
+    let (mut seen, mut total) = (0.0f32, 0.0f32);
+    let mut tile = cluster;
     while tile < all_tiles {
         let (mut coarse_seen, mut coarse_hidden) = (false, false);
         for s in (0..per_tile).filter(|&s| !adaptive || is_coarse_stratum(s)) {
