@@ -21,6 +21,10 @@ pub const FILES: &[(&str, &str)] = &[
     ("bvh.wgsl", include_str!("../shaders/base/bvh.wgsl")),
     ("present.wgsl", include_str!("../shaders/base/present.wgsl")),
     (
+        "fullscreen.wgsl",
+        include_str!("../shaders/base/fullscreen.wgsl"),
+    ),
+    (
         "panel_layer.wgsl",
         include_str!("../shaders/base/panel_layer.wgsl"),
     ),

@@ -532,9 +532,9 @@ fn small_mr_settings(real_scale: f32) -> MrSettings {
     s
 }
 
-#[test]
-fn a_real_object_in_front_hides_the_virtual_one_and_the_sensor_vals_light_it() {
-    let Some(ctx) = common::gpu() else { return };
+/// A 32×24 sensor (camera = world, OpenCV axes) facing a wall 3 m away, with a real thing
+/// whose face is `near` metres away over the image columns `columns`, all of colour `grey`.
+fn wall_frame(columns: std::ops::Range<u32>, near: f32, grey: f32) -> (RgbdFrame, Intrinsics) {
     let k = Intrinsics {
         width: 32,
         height: 24,
@@ -543,15 +543,28 @@ fn a_real_object_in_front_hides_the_virtual_one_and_the_sensor_vals_light_it() {
         cx: 15.5,
         cy: 11.5,
     };
-    // A grey wall 3 m away; the left half of the image is a real box 1 m away.
     let frame = RgbdFrame {
         width: 32,
         height: 24,
-        depth: (0..32 * 24)
-            .map(|i| if i % 32 < 16 { 1.0 } else { 3.0 })
+        depth: (0..32 * 24u32)
+            .map(|i| {
+                if columns.contains(&(i % 32)) {
+                    near
+                } else {
+                    3.0
+                }
+            })
             .collect(),
-        color: vec![[0.5, 0.5, 0.5]; 32 * 24],
+        color: vec![[grey; 3]; 32 * 24],
     };
+    (frame, k)
+}
+
+#[test]
+fn a_real_object_in_front_hides_the_virtual_one_and_the_sensor_vals_light_it() {
+    let Some(ctx) = common::gpu() else { return };
+    // A grey wall 3 m away; the left half of the image is a real box 1 m away.
+    let (frame, k) = wall_frame(0..16, 1.0, 0.5);
     let scene = sphere_scene(Vec3::new(0.0, 0.0, 2.0), 0.3);
     let mut mr = MixedReality::new(&ctx, scene.clone(), k, small_mr_settings(1.0)).unwrap();
     let out = mr.render(&ctx, &frame, Mat4::IDENTITY).unwrap();
@@ -1199,33 +1212,12 @@ fn sensor_vals_follow_the_rsm_vals_in_one_buffer() {
     assert_eq!(clusters, expected_clusters);
 }
 
-/// A 32×24 sensor (camera = world, OpenCV axes) facing a wall 3 m away, with a real post
-/// whose face is 2 m away over columns 4–8, left of a virtual sphere at 2.2 m: rays from the
-/// sphere to the wall's far left pass behind the post's face, inside its assumed thickness.
-fn post_frame() -> (RgbdFrame, Intrinsics) {
-    let k = Intrinsics {
-        width: 32,
-        height: 24,
-        fx: 30.0,
-        fy: 30.0,
-        cx: 15.5,
-        cy: 11.5,
-    };
-    let frame = RgbdFrame {
-        width: 32,
-        height: 24,
-        depth: (0..32 * 24)
-            .map(|i| if (4..9).contains(&(i % 32)) { 2.0 } else { 3.0 })
-            .collect(),
-        color: vec![[0.6, 0.6, 0.6]; 32 * 24],
-    };
-    (frame, k)
-}
-
 #[test]
 fn the_sensor_depth_blocks_visibility_rays_like_its_cpu_twin() {
     let Some(ctx) = common::gpu() else { return };
-    let (frame, k) = post_frame();
+    // A real post whose face is 2 m away over columns 4–8, left of a virtual sphere at 2.2 m:
+    // rays from the sphere to the wall's far left pass behind the post's face.
+    let (frame, k) = wall_frame(4..9, 2.0, 0.6);
     let scene = sphere_scene(Vec3::new(0.0, 0.0, 2.2), 0.25);
     let world = scene.world_from_node();
     let run = |occluders: bool| {

@@ -28,18 +28,7 @@ struct PresentParams {
 @group(0) @binding(3) var reference_direct: texture_2d<f32>;
 @group(0) @binding(4) var reference_indirect: texture_2d<f32>;
 
-struct VertexOut {
-    @builtin(position) position: vec4<f32>,
-}
-
-// One triangle that covers the viewport.
-@vertex
-fn vs_main(@builtin(vertex_index) index: u32) -> VertexOut {
-    let corner = vec2<f32>(f32((index << 1u) & 2u), f32(index & 2u));
-    var out: VertexOut;
-    out.position = vec4<f32>(corner * 2.0 - 1.0, 0.0, 1.0);
-    return out;
-}
+#include "fullscreen.wgsl"
 
 fn srgb_oetf(x: f32) -> f32 {
     if (x <= 0.0031308) {
