@@ -432,6 +432,28 @@ fn mr_refuses_a_sparse_point_count_out_of_range() {
 }
 
 #[test]
+fn mr_refuses_a_real_thickness_that_is_not_a_length() {
+    let dir = common::temp_dir("cli-mr-thickness");
+    let out = dir.to_str().unwrap();
+    for thickness in ["0", "-1", "NaN", "inf", "1e9"] {
+        assert_refused(
+            &[
+                "mr",
+                "--color",
+                "no-color.png",
+                "--depth",
+                "no-depth.png",
+                "--real-thickness",
+                thickness,
+                "--out",
+                out,
+            ],
+            &["--real-thickness", "metres"],
+        );
+    }
+}
+
+#[test]
 fn shadow_budgets_val_budgets_spp_and_sparse_points_out_of_range_are_refused() {
     if common::gpu().is_none() {
         return;
