@@ -53,6 +53,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/light/sensor_occluder.wgsl"),
     ),
     (
+        "sensor_strata.wgsl",
+        include_str!("../shaders/light/sensor_strata.wgsl"),
+    ),
+    (
         "depth_vals.wgsl",
         include_str!("../shaders/mixed_reality/depth_vals.wgsl"),
     ),

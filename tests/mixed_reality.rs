@@ -297,6 +297,13 @@ fn depth_vals_on_the_device_match_their_cpu_twins() {
         let candidates = gpu.read_candidates(&ctx).unwrap();
         let cpu = depth_vals_cpu(&frame, &p);
         assert_vals_match(&candidates[..cpu.len()], &cpu);
+        // The visibility rays' sample slots hold the surfels at their candidate pixels.
+        let surfel_vals: Vec<Val> = surfels_cpu.iter().map(|s| s.val).collect();
+        let samples_cpu =
+            valgi::light::sensor::surfel_samples(&surfel_vals, p.width, p.height, SENSOR_TILES);
+        let samples = gpu.read_samples(&ctx).unwrap();
+        assert_vals_match(&samples, &samples_cpu);
+        assert!(samples_cpu.iter().filter(|v| v.area > 0.0).count() > samples_cpu.len() / 2);
         // Each lit candidate carries its block's image tile, the cluster it joins.
         let tiles = gpu.read_candidate_tiles(&ctx).unwrap();
         let mut seen_tiles = std::collections::HashSet::new();
@@ -1252,12 +1259,13 @@ fn the_sensor_depth_blocks_visibility_rays_like_its_cpu_twin() {
     // With it, the CPU twin over the CPU twins' depth and surfels.
     let p = on.settings.depth.kernel_params(&k, Mat4::IDENTITY);
     let depth = math::bilateral(&frame.depth, &p);
+    let surfels: Vec<Val> = math::surfels(&depth, &frame.color, &p)
+        .iter()
+        .map(|s| s.val)
+        .collect();
     let image = SensorImage {
         params: on.settings.depth.sensor_params(&k, Mat4::IDENTITY),
-        surfels: math::surfels(&depth, &frame.color, &p)
-            .iter()
-            .map(|s| s.val)
-            .collect(),
+        samples: valgi::light::sensor::surfel_samples(&surfels, k.width, k.height, SENSOR_TILES),
         depth,
     };
     let samples = on.method.rsm.read_cluster_samples(&ctx).unwrap();

@@ -1,14 +1,11 @@
 // A depth sensor's image for the visibility pass: the clusters its VALs form (tiles of the
-// image, whose ray samples are the surfels at the strata's centre pixels) and its depth as an
+// image, with ray samples per stratum that its producer fills) and its depth as an
 // occluder of shadow rays (a height field with a thickness prior). Bind group 2 of its
 // includer (`light::sensor::SensorBuffers`); `src/light/sensor.rs` is the CPU twin and
 // explains the rules.
 #include "vals_common.wgsl"
 
-// Strata per tile side and sample candidates per stratum, as the RSM's tiles have
-// (`light::rsm::CLUSTER_SAMPLE_SIDE`, `SAMPLE_CANDIDATES`).
-const CLUSTER_SAMPLE_SIDE: u32 = 4u;
-const SAMPLE_CANDIDATES: u32 = 5u;
+#include "sensor_strata.wgsl"
 
 struct SensorParams {
     camera_from_world: mat4x4<f32>,
@@ -32,8 +29,9 @@ struct SensorParams {
 @group(2) @binding(0) var<uniform> sensor: SensorParams;
 // Filtered depth per pixel (m along the optical axis, 0 a hole).
 @group(2) @binding(1) var<storage, read> sensor_depth: array<f32>;
-// Per pixel its surfel (area ≤ 0: none).
-@group(2) @binding(2) var<storage, read> sensor_surfels: array<Val>;
+// Per tile, stratum and candidate (`(tile·16 + s)·SAMPLE_CANDIDATES + k`) the VAL the rays
+// go to (area ≤ 0: none), filled by the sensor's producer.
+@group(2) @binding(2) var<storage, read> sensor_samples: array<Val>;
 
 const SENSOR_MAX_STEPS: u32 = 48u;
 const SENSOR_NEAR: f32 = 0.05;
@@ -48,26 +46,14 @@ fn sensor_project(p: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(sensor.fx * p.x / p.z + sensor.cx, sensor.fy * p.y / p.z + sensor.cy);
 }
 
-// The surfel at candidate `k` of stratum `s` of sensor tile `tile` (area 0: none): the
-// stratum's centre pixel, then its four corner pixels (`light::sensor::stratum_pixel`).
-fn sensor_stratum_surfel(tile: u32, s: u32, k: u32) -> Val {
-    let side = sensor.tiles * CLUSTER_SAMPLE_SIDE;
-    let gx = (tile % sensor.tiles) * CLUSTER_SAMPLE_SIDE + s % CLUSTER_SAMPLE_SIDE;
-    let gy = (tile / sensor.tiles) * CLUSTER_SAMPLE_SIDE + s / CLUSTER_SAMPLE_SIDE;
-    var x = (2u * gx + 1u) * sensor.width / (2u * side);
-    var y = (2u * gy + 1u) * sensor.height / (2u * side);
-    if (k > 0u) {
-        // Stratum g spans ⌈g·n/side⌉ .. ⌈(g+1)·n/side⌉.
-        let first = (vec2<u32>(gx, gy) * vec2<u32>(sensor.width, sensor.height) + side - 1u) / side;
-        let last = ((vec2<u32>(gx, gy) + 1u) * vec2<u32>(sensor.width, sensor.height) + side - 1u) / side - 1u;
-        x = select(first.x, last.x, ((k - 1u) & 1u) == 1u);
-        y = select(first.y, last.y, ((k - 1u) >> 1u) == 1u);
+// Candidate `k` of stratum `s` of sensor tile `tile` (area 0: none).
+fn sensor_stratum_sample(tile: u32, s: u32, k: u32) -> Val {
+    let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
+    var sample = sensor_samples[(tile * per_tile + s) * SAMPLE_CANDIDATES + k];
+    if (!(sample.position_area.w > 0.0)) {
+        sample.position_area.w = 0.0;
     }
-    var surfel = sensor_surfels[y * sensor.width + x];
-    if (!(surfel.position_area.w > 0.0)) {
-        surfel.position_area.w = 0.0;
-    }
-    return surfel;
+    return sample;
 }
 
 // Whether the seen surfaces block the world segment from `start` to `end`: a run of samples

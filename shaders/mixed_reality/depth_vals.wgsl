@@ -1,9 +1,12 @@
-// A depth-sensor frame → virtual area lights (seed 003 §5). Three passes over the frame:
+// A depth-sensor frame → virtual area lights (seed 003 §5). Four passes over the frame:
 // `bilateral` smooths the depth (holes skipped), `surfels` turns every pixel into a
 // camera-facing Lambertian disc in world space, `reduce` merges the surfels of each block of a
-// stratified grid into one VAL (footprint-weighted; 1×1 blocks keep every pixel).
-// `src/mixed_reality/math.rs` is the CPU twin of every pass.
+// stratified grid into one VAL (footprint-weighted; 1×1 blocks keep every pixel), and
+// `samples_of_surfels` puts the surfels at the image tiles' sample candidates into the
+// visibility rays' sample slots. `src/mixed_reality/math.rs` is the CPU twin of the first
+// three, `light::sensor::surfel_samples` of the last.
 #include "vals_common.wgsl"
+#include "sensor_strata.wgsl"
 
 struct DepthValParams {
     // The sensor's camera (OpenCV axes: x right, y down, +z forward) to world.
@@ -40,6 +43,8 @@ struct DepthValParams {
 // position_area.w: the VAL area (0 = no surfel); normal.w: the true area, the merge weight.
 @group(0) @binding(4) var<storage, read_write> surfels: array<Val>;
 @group(0) @binding(5) var<storage, read_write> candidates: array<Val>;
+// The visibility rays' samples of the image's tiles (`light::sensor::sample_slot`).
+@group(0) @binding(6) var<storage, read_write> samples: array<Val>;
 
 const TRUE_AREA_MIN_COSINE: f32 = 0.2;
 
@@ -202,4 +207,24 @@ fn reduce(@builtin(global_invocation_id) id: vec3<u32>) {
         out.flux = vec4<f32>(flux, f32(tile));
     }
     candidates[block] = out;
+}
+
+// One invocation per sample slot: the surfel at the slot's candidate pixel (area 0: none).
+@compute @workgroup_size(64, 1, 1)
+fn samples_of_surfels(@builtin(global_invocation_id) id: vec3<u32>) {
+    let tiles = params.cluster_tiles;
+    let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE * SAMPLE_CANDIDATES;
+    let slot = id.x;
+    if (slot >= tiles * tiles * per_tile) {
+        return;
+    }
+    let k = slot % SAMPLE_CANDIDATES;
+    let s = (slot / SAMPLE_CANDIDATES) % (CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE);
+    let tile = slot / per_tile;
+    let pixel = stratum_candidate_pixel(vec2<u32>(params.width, params.height), tiles, tile, s, k);
+    var sample = surfels[pixel.y * params.width + pixel.x];
+    if (!(sample.position_area.w > 0.0)) {
+        sample.position_area = vec4<f32>(0.0);
+    }
+    samples[slot] = sample;
 }

@@ -51,7 +51,7 @@ struct StratumSample {
 // tiles a sensor tile's surfel (area 0: none).
 fn candidate_val(tile: u32, s: u32, k: u32) -> Val {
     if (tile >= params.rsm_tiles) {
-        return sensor_stratum_surfel(tile - params.rsm_tiles, s, k);
+        return sensor_stratum_sample(tile - params.rsm_tiles, s, k);
     }
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
     let slot = cluster_samples[(tile * per_tile + s) * SAMPLE_CANDIDATES + k];

@@ -4,9 +4,11 @@
 //!
 //! **Clusters.** The image is cut into `tiles × tiles` rectangles ([`SENSOR_TILES`]); a VAL
 //! from the sensor belongs to the tile its pixel (or, for a fused VAL, its projection into
-//! the latest frame) falls in. Each tile is a cluster of the visibility pass like an RSM
-//! tile, after the RSM's tiles. Its `CLUSTER_SAMPLE_SIDE²` ray samples are the latest
-//! frame's surfels at the centres of the tile's strata ([`stratum_pixel`]).
+//! the producer's tiling camera) falls in. Each tile is a cluster of the visibility pass like
+//! an RSM tile, after the RSM's tiles. Its `CLUSTER_SAMPLE_SIDE²` strata have
+//! `rsm::SAMPLE_CANDIDATES` ray sample slots each, at the strata's centre and corner pixels
+//! ([`stratum_pixel`]), which the producer fills with VALs ([`sample_slot`]); the rays go to
+//! the first candidate of a stratum that reaches the point, as for the RSM's strata.
 //!
 //! **Occluders.** The sensor's filtered depth is a height field over its image: what lies
 //! behind a seen surface, up to `thickness` deeper, is taken to be solid. A shadow ray is
@@ -24,7 +26,7 @@
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
 
-use super::rsm::CLUSTER_SAMPLE_SIDE;
+use super::rsm::{CLUSTER_SAMPLE_SIDE, SAMPLE_CANDIDATES};
 use super::Val;
 
 /// Sensor tiles per image side: `SENSOR_TILES²` clusters of the visibility pass (`SENSOR_TILES`
@@ -158,17 +160,81 @@ pub fn stratum_pixel(width: u32, height: u32, tiles: u32, tile: u32, s: u32, k: 
     )
 }
 
-/// The surfel at candidate `k` of stratum `s` of sensor tile `tile`, if that pixel has one.
-pub fn stratum_surfel(
-    params: &SensorParams,
-    surfels: &[Val],
-    tile: u32,
-    s: u32,
-    k: u32,
-) -> Option<Val> {
-    let (x, y) = stratum_pixel(params.width, params.height, params.tiles, tile, s, k);
-    let surfel = *surfels.get((y * params.width + x) as usize)?;
-    (surfel.area > 0.0).then_some(surfel)
+/// Sample slots of `tiles × tiles` sensor tiles.
+pub fn sample_slots(tiles: u32) -> usize {
+    (tiles * tiles * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE * SAMPLE_CANDIDATES) as usize
+}
+
+/// The slot of candidate `k` of stratum `s` of sensor tile `tile` in the samples buffer.
+pub fn sample_slot(tile: u32, s: u32, k: u32) -> usize {
+    ((tile * CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE + s) * SAMPLE_CANDIDATES + k) as usize
+}
+
+/// Candidate `k` of stratum `s` of sensor tile `tile`, if its slot holds a VAL.
+pub fn stratum_sample(samples: &[Val], tile: u32, s: u32, k: u32) -> Option<Val> {
+    let sample = *samples.get(sample_slot(tile, s, k))?;
+    (sample.area > 0.0).then_some(sample)
+}
+
+/// The samples of a frame whose own surfels are the ray targets: each slot holds the surfel
+/// at its candidate pixel (`width × height` `surfels`, area ≤ 0 none). The CPU twin of
+/// `depth_vals.wgsl::samples`.
+pub fn surfel_samples(surfels: &[Val], width: u32, height: u32, tiles: u32) -> Vec<Val> {
+    let mut samples = vec![Val::default(); sample_slots(tiles)];
+    for tile in 0..tiles * tiles {
+        for s in 0..CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE {
+            for k in 0..SAMPLE_CANDIDATES {
+                let (x, y) = stratum_pixel(width, height, tiles, tile, s, k);
+                if let Some(surfel) = surfels.get((y * width + x) as usize) {
+                    if surfel.area > 0.0 {
+                        samples[sample_slot(tile, s, k)] = *surfel;
+                    }
+                }
+            }
+        }
+    }
+    samples
+}
+
+/// The samples of a list of VALs seen by `params`' camera (fused VALs, which are no pixels
+/// of one frame): each slot holds the VAL whose projection is nearest its candidate pixel
+/// among those in the slot's stratum (ties: the first in the list), or none.
+pub fn projected_samples(params: &SensorParams, vals: &[Val]) -> Vec<Val> {
+    let tiles = params.tiles;
+    let side = tiles * CLUSTER_SAMPLE_SIDE;
+    let mut samples = vec![Val::default(); sample_slots(tiles)];
+    let mut nearest = vec![f32::INFINITY; samples.len()];
+    if side == 0 || params.width == 0 || params.height == 0 {
+        return samples;
+    }
+    for val in vals.iter().filter(|v| v.area > 0.0) {
+        let p = params.camera_point(val.position);
+        if p.z <= 0.0 {
+            continue;
+        }
+        let (u, v) = params.project(p);
+        let Some((x, y)) = params.pixel(u, v) else {
+            continue;
+        };
+        // The stratum whose span ⌈g·n/side⌉ .. ⌈(g+1)·n/side⌉ holds the pixel.
+        let stratum = |c: u32, n: u32| ((c as u64 + 1) * side as u64 - 1) / n as u64;
+        let (gx, gy) = (
+            stratum(x, params.width) as u32,
+            stratum(y, params.height) as u32,
+        );
+        let tile = (gy / CLUSTER_SAMPLE_SIDE) * tiles + gx / CLUSTER_SAMPLE_SIDE;
+        let s = (gy % CLUSTER_SAMPLE_SIDE) * CLUSTER_SAMPLE_SIDE + gx % CLUSTER_SAMPLE_SIDE;
+        for k in 0..SAMPLE_CANDIDATES {
+            let (cx, cy) = stratum_pixel(params.width, params.height, tiles, tile, s, k);
+            let d2 = (u - cx as f32).powi(2) + (v - cy as f32).powi(2);
+            let slot = sample_slot(tile, s, k);
+            if d2 < nearest[slot] {
+                nearest[slot] = d2;
+                samples[slot] = *val;
+            }
+        }
+    }
+    samples
 }
 
 /// Whether the real surfaces in `depth` (metres along the optical axis per pixel, 0 a hole)
@@ -227,8 +293,8 @@ pub struct SensorImage {
     pub params: SensorParams,
     /// Filtered depth per pixel (m, 0 a hole).
     pub depth: Vec<f32>,
-    /// Per pixel its surfel (area ≤ 0: none).
-    pub surfels: Vec<Val>,
+    /// The ray samples per slot ([`sample_slot`]; area ≤ 0: none).
+    pub samples: Vec<Val>,
 }
 
 /// The sensor's image on the GPU, owned by the VAL producer (which writes `params` with each
@@ -238,8 +304,8 @@ pub struct SensorBuffers {
     pub params: wgpu::Buffer,
     /// `width × height` f32: the filtered depth.
     pub depth: wgpu::Buffer,
-    /// `width × height` `rsm::GpuVal`: each pixel's surfel.
-    pub surfels: wgpu::Buffer,
+    /// [`sample_slots`] `rsm::GpuVal`: the ray samples of the tiles' strata.
+    pub samples: wgpu::Buffer,
     /// Tiles per image side (fixed for the producer's life).
     pub tiles: u32,
 }
@@ -411,12 +477,38 @@ mod tests {
     }
 
     #[test]
+    fn projected_samples_take_the_val_nearest_each_candidate_pixel() {
+        let (p, _) = wall_with_post();
+        let at_pixel = |x: f32, y: f32, z: f32| Val {
+            position: Vec3::new((x - p.cx) / p.fx * z, (y - p.cy) / p.fy * z, z),
+            normal: Vec3::NEG_Z,
+            flux: Vec3::ONE,
+            area: 1e-4,
+        };
+        // Stratum 1 of tile 0 spans columns 4–7 and rows 0–2; its centre pixel is (6, 1).
+        let near = at_pixel(6.2, 1.1, 2.0);
+        let far = at_pixel(4.4, 0.3, 2.0);
+        let behind = Val {
+            position: Vec3::new(0.0, 0.0, -1.0),
+            ..near
+        };
+        let samples = projected_samples(&p, &[far, near, behind]);
+        assert_eq!(stratum_sample(&samples, 0, 1, 0), Some(near));
+        // The corner (4, 0) is nearer `far`.
+        assert_eq!(stratum_sample(&samples, 0, 1, 1), Some(far));
+        // Other strata stay empty.
+        assert_eq!(stratum_sample(&samples, 0, 0, 0), None);
+        let filled = samples.iter().filter(|v| v.area > 0.0).count();
+        assert_eq!(filled, SAMPLE_CANDIDATES as usize);
+    }
+
+    #[test]
     fn tiles_and_strata_cover_the_image_evenly() {
         // Sizes the strata do not divide: every candidate still lies in its own tile.
         for (w, h) in [(30u32, 20u32), (61, 47)] {
             for tile in 0..SENSOR_TILES * SENSOR_TILES {
                 for s in 0..CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE {
-                    for k in 0..super::super::rsm::SAMPLE_CANDIDATES {
+                    for k in 0..SAMPLE_CANDIDATES {
                         let (x, y) = stratum_pixel(w, h, SENSOR_TILES, tile, s, k);
                         assert!(x < w && y < h);
                         assert_eq!(pixel_tile(w, h, SENSOR_TILES, x, y), tile, "{w}×{h}");
@@ -432,7 +524,7 @@ mod tests {
         let mut seen = std::collections::HashSet::new();
         for tile in 0..t * t {
             for s in 0..per_tile {
-                for k in 0..super::super::rsm::SAMPLE_CANDIDATES {
+                for k in 0..SAMPLE_CANDIDATES {
                     let (x, y) = stratum_pixel(w, h, t, tile, s, k);
                     // Each candidate lies in its own tile, and no two share a pixel.
                     assert_eq!(pixel_tile(w, h, t, x, y), tile, "tile {tile} stratum {s}");

@@ -14,14 +14,17 @@ use crate::frame::PIXEL_TILE;
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::GpuVal;
-use crate::light::sensor::{world_tile, SensorBuffers, SensorParams, SENSOR_TILES};
+use crate::light::sensor::{
+    projected_samples, world_tile, SensorBuffers, SensorParams, SENSOR_TILES,
+};
 use crate::light::{ExternalVals, Val, ValSource};
 use crate::raster::RenderError;
 
-/// `depth_vals.wgsl`: its parameters, then the raw depth, colour, filtered depth, surfels and
-/// per-block candidates its three passes read and write.
+/// `depth_vals.wgsl`: its parameters, then the raw depth, colour, filtered depth, surfels,
+/// per-block candidates and the visibility rays' sample slots its four passes read and write.
 const BINDINGS: &[Slot] = &[
     Slot::Uniform,
+    Slot::StorageRw,
     Slot::StorageRw,
     Slot::StorageRw,
     Slot::StorageRw,
@@ -225,8 +228,14 @@ pub struct DepthVals {
     surfels: wgpu::Buffer,
     /// The latest frame's `SensorParams` for the visibility pass (also in `external.sensor`).
     sensor_params: wgpu::Buffer,
-    /// bilateral, surfel, reduce.
-    pipelines: [wgpu::ComputePipeline; 3],
+    /// The visibility rays' samples of the image's tiles (also in `external.sensor`).
+    samples: wgpu::Buffer,
+    /// `--accumulate`: the camera the fused VALs are tiled and sampled in, the first frame's
+    /// (fixed, so a fused VAL keeps its cluster and the samples stay put while the camera
+    /// moves).
+    tiling_camera: Option<Mat4>,
+    /// bilateral, surfel, reduce, samples.
+    pipelines: [wgpu::ComputePipeline; 4],
     group: wgpu::BindGroup,
     bytes: GpuBytes,
     /// A frame has been uploaded (until then the candidates are all empty).
@@ -283,6 +292,10 @@ impl DepthVals {
         let depth_filtered = storage("mr filtered depth", pixels * 4);
         let surfels = storage("mr surfels", pixels * val);
         let candidates = storage("mr candidates", blocks * val);
+        let samples = storage(
+            "mr sensor samples",
+            crate::light::sensor::sample_slots(SENSOR_TILES) as u64 * val,
+        );
         let params_buffer = bytes.uniform::<DepthValParams>(device, "mr params");
         let sensor_params = bytes.uniform::<SensorParams>(device, "mr sensor");
         let cs = wgpu::ShaderStages::COMPUTE;
@@ -296,10 +309,11 @@ impl DepthVals {
                 &depth_filtered,
                 &surfels,
                 &candidates,
+                &samples,
             ],
         );
         let module = ctx.shader("depth_vals.wgsl");
-        let pipelines = ["bilateral", "surfel", "reduce"].map(|entry| {
+        let pipelines = ["bilateral", "surfel", "reduce", "samples_of_surfels"].map(|entry| {
             crate::raster::compute_pipeline_at(device, entry, &module, &bgl.layout, entry)
         });
         Ok(Self {
@@ -313,7 +327,7 @@ impl DepthVals {
                 sensor: Some(SensorBuffers {
                     params: sensor_params.clone(),
                     depth: depth_filtered.clone(),
-                    surfels: surfels.clone(),
+                    samples: samples.clone(),
                     tiles: SENSOR_TILES,
                 }),
             },
@@ -323,6 +337,8 @@ impl DepthVals {
             depth_filtered,
             surfels,
             sensor_params,
+            samples,
+            tiling_camera: None,
             pipelines,
             group,
             bytes,
@@ -377,17 +393,32 @@ impl DepthVals {
             let capacity = (self.external.rows * self.external.row_length) as usize;
             let fused = fusion.push(surfels, capacity);
             self.last_fused = fused.len();
-            // Each fused VAL's cluster is the tile it projects to in this frame.
+            // Each fused VAL's cluster is the tile it projects to in the first frame's camera,
+            // and each sample slot holds the fused VAL that projects nearest its candidate
+            // pixel there: both stay put while the camera moves.
+            let tiling = SensorParams {
+                camera_from_world: self
+                    .tiling_camera
+                    .get_or_insert(world_from_camera)
+                    .inverse()
+                    .to_cols_array_2d(),
+                ..sensor
+            };
             let mut records: Vec<GpuVal> = fused
                 .iter()
                 .map(|val| {
                     let mut record = GpuVal::from_val(val);
-                    record.flux[3] = world_tile(&sensor, val.position) as f32;
+                    record.flux[3] = world_tile(&tiling, val.position) as f32;
                     record
                 })
                 .collect();
             records.resize(capacity, GpuVal::default());
             q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
+            let samples: Vec<GpuVal> = projected_samples(&tiling, &fused)
+                .iter()
+                .map(GpuVal::from_val)
+                .collect();
+            q.write_buffer(&self.samples, 0, bytemuck::cast_slice(&samples));
         }
         Ok(())
     }
@@ -403,16 +434,22 @@ impl DepthVals {
             .sensor_params(&self.intrinsics, world_from_camera)
     }
 
-    /// The three passes ("mr bilateral", "mr surfels", "mr reduce"); without `reduce` the
-    /// first two only (the fusion makes the candidates, the visibility pass still reads the
-    /// frame's filtered depth and surfels).
+    /// The four passes ("mr bilateral", "mr surfels", "mr reduce", "mr samples"); without
+    /// `reduce` the first two only (the fusion makes the candidates and the samples; the
+    /// visibility pass still reads the frame's filtered depth).
     pub fn record_passes(&self, passes: &mut Passes, reduce: bool) -> Result<(), GpuError> {
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
         let blocks = self.external.rows * self.external.row_length;
         let tiles = (w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
-        let sizes = [tiles, tiles, (blocks.div_ceil(REDUCE_GROUP), 1, 1)];
-        let labels = ["mr bilateral", "mr surfels", "mr reduce"];
-        let passes_run = if reduce { 3 } else { 2 };
+        let slots = crate::light::sensor::sample_slots(SENSOR_TILES) as u32;
+        let sizes = [
+            tiles,
+            tiles,
+            (blocks.div_ceil(REDUCE_GROUP), 1, 1),
+            (slots.div_ceil(REDUCE_GROUP), 1, 1),
+        ];
+        let labels = ["mr bilateral", "mr surfels", "mr reduce", "mr samples"];
+        let passes_run = if reduce { 4 } else { 2 };
         for ((pipeline, (x, y, z)), label) in self
             .pipelines
             .iter()
@@ -448,6 +485,12 @@ impl DepthVals {
     pub fn read_candidate_tiles(&self, ctx: &GpuContext) -> Result<Vec<u32>, GpuError> {
         let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.external.candidates)?;
         Ok(raw.iter().map(GpuVal::cluster).collect())
+    }
+
+    /// The visibility rays' sample slots (`light::sensor::sample_slot`).
+    pub fn read_samples(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {
+        let raw: Vec<GpuVal> = crate::gpu::read_buffer(ctx, &self.samples)?;
+        Ok(raw.iter().map(GpuVal::to_val).collect())
     }
 
     pub fn read_candidates(&self, ctx: &GpuContext) -> Result<Vec<Val>, GpuError> {

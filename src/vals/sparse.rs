@@ -317,7 +317,7 @@ const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, W];
 /// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
 const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
 /// Group 2 of the visibility pass (`sensor_occluder.wgsl`): a depth sensor's parameters,
-/// filtered depth and per-pixel surfels ([`crate::light::sensor::SensorBuffers`]).
+/// filtered depth and ray samples ([`crate::light::sensor::SensorBuffers`]).
 const SENSOR_BINDINGS: &[Slot] = &[Slot::Uniform, R, R];
 
 /// The sparse passes' layouts and pipelines, compiled once per device and shared by every
@@ -398,12 +398,12 @@ impl SparsePipelines {
             );
             let storage = wgpu::BufferUsages::STORAGE;
             let depth = zeros("no sensor depth", 16, storage);
-            let surfels = zeros(
-                "no sensor surfels",
+            let samples = zeros(
+                "no sensor samples",
                 std::mem::size_of::<crate::light::rsm::GpuVal>(),
                 storage,
             );
-            sensor.bind(device, &[&params, &depth, &surfels])
+            sensor.bind(device, &[&params, &depth, &samples])
         };
         // Apply: a raster pass over the scene, depth-tested Equal against the G-buffer.
         let vs_fs = wgpu::ShaderStages::VERTEX_FRAGMENT;
@@ -745,7 +745,7 @@ impl SparseGpu {
         let sensor_group = match sensor {
             Some(sensor) => pipelines
                 .sensor
-                .bind(device, &[&sensor.params, &sensor.depth, &sensor.surfels]),
+                .bind(device, &[&sensor.params, &sensor.depth, &sensor.samples]),
             None => pipelines.no_sensor.clone(),
         };
         let visibility_group = pipelines.visibility.0.bind(

@@ -19,7 +19,7 @@ use glam::Vec3;
 
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{GpuVal, CLUSTER_SAMPLE_SIDE, MAX_CLUSTERS, SAMPLE_CANDIDATES};
-use crate::light::sensor::{depth_blocks, stratum_surfel, SensorImage};
+use crate::light::sensor::{depth_blocks, stratum_sample, SensorImage};
 use crate::vals::math::disc_geometry;
 
 /// Ray ends are pulled off both surfaces by this fraction of the segment's length.
@@ -50,8 +50,9 @@ pub fn is_coarse_stratum(s: u32) -> bool {
 /// `V_c(x)` for cluster `cluster` at the point (x, n), from the rays to the sampled VALs of
 /// its tiles (at most [`MAX_RAY_TILES`] of them, [`ray_tile_stride`]): `rsm_tiles` RSM tiles
 /// over all layers, `samples` the RSM's cluster sample slots (1 + VAL index, 0 unlit), `vals`
-/// as the GPU holds them. A depth `sensor`'s tiles follow the RSM's, sampled at their strata's
-/// surfels, and its depth blocks rays too ([`crate::light::sensor`]).
+/// as the GPU holds them. A depth `sensor`'s tiles follow the RSM's, sampled at the VALs its
+/// producer put in their strata's slots, and its depth blocks rays too
+/// ([`crate::light::sensor`]).
 ///
 /// `adaptive` (`--visibility-rays adaptive`): per tile, rays go to the coarse strata
 /// ([`is_coarse_stratum`]) first; when all of those that reach x agree (all seen or all
@@ -75,9 +76,7 @@ pub fn cluster_visibility(
     // Candidate k of stratum s of a tile: an RSM slot, or past the RSM's tiles a sensor
     // tile's surfel.
     let candidate = |tile: u32, s: u32, k: u32| match sensor {
-        Some(image) if tile >= rsm_tiles => {
-            stratum_surfel(&image.params, &image.surfels, tile - rsm_tiles, s, k)
-        }
+        Some(image) if tile >= rsm_tiles => stratum_sample(&image.samples, tile - rsm_tiles, s, k),
         _ => {
             let slot = samples
                 .get(((tile * per_tile + s) * SAMPLE_CANDIDATES + k) as usize)
