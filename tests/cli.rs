@@ -409,23 +409,33 @@ fn sparse_handles_a_scene_without_faces_and_refuses_oversized_meshes_early() {
     assert!(started.elapsed().as_secs() < 60, "{:?}", started.elapsed());
 }
 
+/// `valgi mr` with `option value` and frames that do not exist is refused for the option,
+/// before any file is read.
+fn assert_mr_refuses(name: &str, option: &str, value: &str, expected: &[&str]) {
+    let dir = common::temp_dir(name);
+    assert_refused(
+        &[
+            "mr",
+            "--color",
+            "no-color.png",
+            "--depth",
+            "no-depth.png",
+            option,
+            value,
+            "--out",
+            dir.to_str().unwrap(),
+        ],
+        expected,
+    );
+}
+
 #[test]
 fn mr_refuses_a_sparse_point_count_out_of_range() {
-    let dir = common::temp_dir("cli-mr-points");
-    let out = dir.to_str().unwrap();
     for count in ["0", "10000000"] {
-        assert_refused(
-            &[
-                "mr",
-                "--color",
-                "no-color.png",
-                "--depth",
-                "no-depth.png",
-                "--sparse-points",
-                count,
-                "--out",
-                out,
-            ],
+        assert_mr_refuses(
+            "cli-mr-points",
+            "--sparse-points",
+            count,
             &["--sparse-points", count],
         );
     }
@@ -433,21 +443,11 @@ fn mr_refuses_a_sparse_point_count_out_of_range() {
 
 #[test]
 fn mr_refuses_a_real_thickness_that_is_not_a_length() {
-    let dir = common::temp_dir("cli-mr-thickness");
-    let out = dir.to_str().unwrap();
     for thickness in ["0", "-1", "NaN", "inf", "1e9"] {
-        assert_refused(
-            &[
-                "mr",
-                "--color",
-                "no-color.png",
-                "--depth",
-                "no-depth.png",
-                "--real-thickness",
-                thickness,
-                "--out",
-                out,
-            ],
+        assert_mr_refuses(
+            "cli-mr-thickness",
+            "--real-thickness",
+            thickness,
             &["--real-thickness", "metres"],
         );
     }

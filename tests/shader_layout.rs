@@ -112,6 +112,11 @@ fn workgroup_sizes_match_the_dispatches() {
         ("depth_vals.wgsl", "bilateral", [tile, tile, 1]),
         ("depth_vals.wgsl", "surfel", [tile, tile, 1]),
         ("depth_vals.wgsl", "reduce", [reduce, 1, 1]),
+        (
+            "depth_vals.wgsl",
+            "samples_of_surfels",
+            [valgi::mixed_reality::depth_vals::SAMPLES_GROUP, 1, 1],
+        ),
         ("vals_append.wgsl", "count_rows", [append, 1, 1]),
         ("vals_append.wgsl", "append_rows", [append, 1, 1]),
     ];

@@ -35,6 +35,9 @@ const BINDINGS: &[Slot] = &[
 /// Blocks per workgroup of the `reduce` pass (`@workgroup_size(64, 1, 1)`).
 pub const REDUCE_GROUP: u32 = 64;
 
+/// Sample slots per workgroup of the `samples_of_surfels` pass (`@workgroup_size(64, 1, 1)`).
+pub const SAMPLES_GROUP: u32 = 64;
+
 /// `DepthValParams` in `shaders/mixed_reality/depth_vals.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
@@ -446,7 +449,7 @@ impl DepthVals {
             tiles,
             tiles,
             (blocks.div_ceil(REDUCE_GROUP), 1, 1),
-            (slots.div_ceil(REDUCE_GROUP), 1, 1),
+            (slots.div_ceil(SAMPLES_GROUP), 1, 1),
         ];
         let labels = ["mr bilateral", "mr surfels", "mr reduce", "mr samples"];
         let passes_run = if reduce { 4 } else { 2 };
