@@ -245,7 +245,7 @@ fn run_gpu(ctx: &GpuContext, frame: &RgbdFrame, k: Intrinsics, s: DepthValSettin
     let mut vals = DepthVals::new(ctx, k, s).unwrap();
     vals.upload(ctx, frame, pose()).unwrap();
     let mut passes = Passes::new(ctx);
-    vals.record_passes(&mut passes, true).unwrap();
+    vals.record_passes(&mut passes).unwrap();
     passes.finish().unwrap();
     vals
 }

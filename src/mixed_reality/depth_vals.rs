@@ -372,57 +372,60 @@ impl DepthVals {
                 "the camera pose is not finite".into(),
             ));
         }
-        let params = DepthValParams::from(&self.kernel_params(world_from_camera));
-        let color: Vec<[f32; 4]> = frame
-            .color
-            .iter()
-            .map(|c| [c[0], c[1], c[2], 0.0])
-            .collect();
+        let p = self.kernel_params(world_from_camera);
         let q = &ctx.queue;
-        q.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
         let sensor = self.sensor_params(world_from_camera);
         q.write_buffer(&self.sensor_params, 0, bytemuck::bytes_of(&sensor));
-        q.write_buffer(&self.depth_raw, 0, bytemuck::cast_slice(&frame.depth));
-        q.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
         self.has_frame = true;
         self.last_valid_pixels = frame.depth.iter().filter(|&&z| z > 0.0).count();
-        if let Some(fusion) = &mut self.fusion {
-            // The fusion runs on the CPU over the surfel pass's CPU twin; its VALs replace
-            // the reduction's candidates.
-            let p = self
-                .settings
-                .kernel_params(&self.intrinsics, world_from_camera);
-            let surfels = math::surfels(&math::bilateral(&frame.depth, &p), &frame.color, &p);
-            let capacity = (self.external.rows * self.external.row_length) as usize;
-            let fused = fusion.push(surfels, capacity);
-            self.last_fused = fused.len();
-            // Each fused VAL's cluster is the tile it projects to in the first frame's camera,
-            // and each sample slot holds the fused VAL that projects nearest its candidate
-            // pixel there: both stay put while the camera moves.
-            let tiling = SensorParams {
-                camera_from_world: self
-                    .tiling_camera
-                    .get_or_insert(world_from_camera)
-                    .inverse()
-                    .to_cols_array_2d(),
-                ..sensor
-            };
-            let mut records: Vec<GpuVal> = fused
+        let Some(fusion) = &mut self.fusion else {
+            // The GPU passes filter, back-project and reduce this frame.
+            let color: Vec<[f32; 4]> = frame
+                .color
                 .iter()
-                .map(|val| {
-                    let mut record = GpuVal::from_val(val);
-                    record.flux[3] = world_tile(&tiling, val.position) as f32;
-                    record
-                })
+                .map(|c| [c[0], c[1], c[2], 0.0])
                 .collect();
-            records.resize(capacity, GpuVal::default());
-            q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
-            let samples: Vec<GpuVal> = projected_samples(&tiling, &fused)
-                .iter()
-                .map(GpuVal::from_val)
-                .collect();
-            q.write_buffer(&self.samples, 0, bytemuck::cast_slice(&samples));
-        }
+            let params = DepthValParams::from(&p);
+            q.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(&params));
+            q.write_buffer(&self.depth_raw, 0, bytemuck::cast_slice(&frame.depth));
+            q.write_buffer(&self.color, 0, bytemuck::cast_slice(&color));
+            return Ok(());
+        };
+        // The fusion runs on the CPU over the filter's and the surfel pass's CPU twins; its
+        // VALs replace the reduction's candidates, and the filtered depth goes up as it is
+        // for the visibility rays' march (no GPU pass runs for this frame).
+        let filtered = math::bilateral(&frame.depth, &p);
+        q.write_buffer(&self.depth_filtered, 0, bytemuck::cast_slice(&filtered));
+        let surfels = math::surfels(&filtered, &frame.color, &p);
+        let capacity = (self.external.rows * self.external.row_length) as usize;
+        let fused = fusion.push(surfels, capacity);
+        self.last_fused = fused.len();
+        // Each fused VAL's cluster is the tile it projects to in the first frame's camera,
+        // and each sample slot holds the fused VAL that projects nearest its candidate
+        // pixel there: both stay put while the camera moves.
+        let tiling = SensorParams {
+            camera_from_world: self
+                .tiling_camera
+                .get_or_insert(world_from_camera)
+                .inverse()
+                .to_cols_array_2d(),
+            ..sensor
+        };
+        let mut records: Vec<GpuVal> = fused
+            .iter()
+            .map(|val| {
+                let mut record = GpuVal::from_val(val);
+                record.flux[3] = world_tile(&tiling, val.position) as f32;
+                record
+            })
+            .collect();
+        records.resize(capacity, GpuVal::default());
+        q.write_buffer(&self.external.candidates, 0, bytemuck::cast_slice(&records));
+        let samples: Vec<GpuVal> = projected_samples(&tiling, &fused)
+            .iter()
+            .map(GpuVal::from_val)
+            .collect();
+        q.write_buffer(&self.samples, 0, bytemuck::cast_slice(&samples));
         Ok(())
     }
 
@@ -437,10 +440,9 @@ impl DepthVals {
             .sensor_params(&self.intrinsics, world_from_camera)
     }
 
-    /// The four passes ("mr bilateral", "mr surfels", "mr reduce", "mr samples"); without
-    /// `reduce` the first two only (the fusion makes the candidates and the samples; the
-    /// visibility pass still reads the frame's filtered depth).
-    pub fn record_passes(&self, passes: &mut Passes, reduce: bool) -> Result<(), GpuError> {
+    /// The four passes ("mr bilateral", "mr surfels", "mr reduce", "mr samples") of a frame
+    /// that is not fused (with `--accumulate` the CPU makes all they would).
+    pub fn record_passes(&self, passes: &mut Passes) -> Result<(), GpuError> {
         let (w, h) = (self.intrinsics.width, self.intrinsics.height);
         let blocks = self.external.rows * self.external.row_length;
         let tiles = (w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE), 1);
@@ -452,14 +454,7 @@ impl DepthVals {
             (slots.div_ceil(SAMPLES_GROUP), 1, 1),
         ];
         let labels = ["mr bilateral", "mr surfels", "mr reduce", "mr samples"];
-        let passes_run = if reduce { 4 } else { 2 };
-        for ((pipeline, (x, y, z)), label) in self
-            .pipelines
-            .iter()
-            .zip(sizes)
-            .zip(labels)
-            .take(passes_run)
-        {
+        for ((pipeline, (x, y, z)), label) in self.pipelines.iter().zip(sizes).zip(labels) {
             passes.compute(label, |pass| {
                 pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &self.group, &[]);
@@ -517,9 +512,9 @@ impl ValSource for DepthVals {
             self.upload(ctx, &frame, pose)?;
         }
         match (self.has_frame, self.fusion.is_some()) {
-            (true, false) => self.record_passes(passes, true)?,
-            // `upload` wrote the fused VALs as the candidates.
-            (true, true) => self.record_passes(passes, false)?,
+            (true, false) => self.record_passes(passes)?,
+            // `upload` wrote the fused VALs, their samples and the filtered depth.
+            (true, true) => {}
             (false, _) => passes
                 .encoder()
                 .clear_buffer(&self.external.candidates, 0, None),

@@ -1377,9 +1377,10 @@ impl Running {
     /// The views into their regions, then the panel's layer, into `target` (the window's
     /// format).
     fn draw(&self, encoder: &mut wgpu::CommandEncoder, target: &wgpu::TextureView) {
-        let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("present"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+        let mut pass = colour_pass(
+            encoder,
+            "present",
+            wgpu::RenderPassColorAttachment {
                 view: target,
                 depth_slice: None,
                 resolve_target: None,
@@ -1387,13 +1388,8 @@ impl Running {
                     load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
                     store: wgpu::StoreOp::Store,
                 },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        let mut pass = pass.forget_lifetime();
+            },
+        );
         let (w, h) = (self.config.width, self.config.height);
         let anaglyph = self.anaglyph();
         for (i, t) in self.present_targets.iter().enumerate() {
@@ -1552,6 +1548,25 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
     } else {
         sum / n as f64
     }
+}
+
+/// A render pass into one colour attachment, free of the encoder's borrow (egui's renderer
+/// takes a `'static` pass).
+fn colour_pass(
+    encoder: &mut wgpu::CommandEncoder,
+    label: &str,
+    attachment: wgpu::RenderPassColorAttachment<'_>,
+) -> wgpu::RenderPass<'static> {
+    encoder
+        .begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some(label),
+            color_attachments: &[Some(attachment)],
+            depth_stencil_attachment: None,
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+        .forget_lifetime()
 }
 
 /// What the panel shows and edits.

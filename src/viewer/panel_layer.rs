@@ -101,23 +101,10 @@ impl PanelLayer {
         let Some(target) = &self.target else {
             return;
         };
-        let pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-            label: Some("panel"),
-            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &target.view,
-                depth_slice: None,
-                resolve_target: None,
-                ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                    store: wgpu::StoreOp::Store,
-                },
-            })],
-            depth_stencil_attachment: None,
-            timestamp_writes: None,
-            occlusion_query_set: None,
-            multiview_mask: None,
-        });
-        let mut pass = pass.forget_lifetime();
+        let Some(attachment) = crate::raster::cleared(&target.view) else {
+            return;
+        };
+        let mut pass = super::colour_pass(encoder, "panel", attachment);
         renderer.render(&mut pass, jobs, screen);
         drop(pass);
         self.covered = covered_pixels(jobs, screen);
