@@ -40,6 +40,7 @@ fn sparse_settings(
             visibility_history: 0,
             adaptive_rays: false,
             gather_slices: 0,
+            occlusion_far: 0.0,
         },
         ..Default::default()
     }
@@ -240,6 +241,44 @@ fn lights_share_the_val_budget_by_power() {
     }
 }
 
+/// A device that binds fewer VALs than the RSMs would make (here 200, the RSMs wanting 384):
+/// the lights share what one binding holds by power, as under `--max-vals`, each keeping its
+/// reflected power, and the method renders.
+#[test]
+fn the_val_buffer_shrinks_to_the_devices_binding_limit() {
+    let val_bytes = std::mem::size_of::<valgi::light::rsm::GpuVal>() as u64;
+    let Some(ctx) = common::gpu_with_limits(|limits| {
+        limits.max_storage_buffer_binding_size = 200 * val_bytes;
+    }) else {
+        return;
+    };
+    let scene = builtin::load("box-point", &BuiltinParams { max_edge: 0.5 }).unwrap();
+    let raster = valgi::raster::Rasterizer::new(&ctx, &scene, settings(8)).unwrap();
+    let rsm = valgi::light::rsm::Rsm::new(&ctx, &scene, &raster, 8).unwrap();
+    // 6·5² = 150 of the 200 fit; 6·6² = 216 would not.
+    assert_eq!(rsm.light_sides, vec![5]);
+    let mut passes = valgi::gpu::Passes::new(&ctx);
+    rsm.prepare(&ctx, &scene, &scene.world_from_node());
+    rsm.record(&mut passes, &raster.scene_gpu).unwrap();
+    passes.finish().unwrap();
+    let vals = rsm.read_vals(&ctx).unwrap();
+    assert_eq!(vals.len(), 150);
+    let flux: f64 = vals.iter().map(|v| v.flux.x as f64).sum();
+    let expected = 0.5 * 4.0 * std::f64::consts::PI * scene.lights[0].intensity as f64;
+    assert!(
+        (flux - expected).abs() < 0.03 * expected,
+        "reflected flux {flux} vs {expected}"
+    );
+    // A whole frame of brute force on the same device (its own RSM at 8²).
+    let mut options = MethodOptions::default();
+    options.set("rsm", 8);
+    let mut method = BruteMethod::new(&ctx, &scene, settings(8), &options).unwrap();
+    let frame = method
+        .render(&ctx, &scene, &scene.world_from_node(), &camera(&scene, 8))
+        .unwrap();
+    assert!(frame.indirect.pixels.iter().any(|p| p[0] > 0.0));
+}
+
 /// Kernels longer than the device's workgroups per dimension wrap into another dimension:
 /// with the limit lowered to 3 groups every per-point and per-vertex pass wraps, and the
 /// image is the same to the bit (a thread skipped or run twice would change it).
@@ -378,11 +417,18 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
                 radius: p.disc_radius,
             })
             .collect();
-        // Tiles of 4 points make super-tiles of 256, so the pass skips whole super-tiles.
-        for (mode, tile) in [(OcclusionMode::Sum, 64), (OcclusionMode::Union, 4)] {
+        // Tiles of 4 points make super-tiles of 256, so the pass skips whole super-tiles;
+        // `occlusion-far` 0.5 takes many tiles whole.
+        for (mode, tile, far) in [
+            (OcclusionMode::Sum, 64, 0.0),
+            (OcclusionMode::Union, 4, 0.0),
+            (OcclusionMode::Sum, 4, 0.5),
+            (OcclusionMode::Union, 4, 0.5),
+        ] {
             let mut so = s;
             so.options.occlusion = mode;
             so.options.tile = tile;
+            so.options.occlusion_far = far;
             let (occluding, _, occluded) = run_sparse(&ctx, &scene, 32, so, Stage::Occlusion);
             // The tile bounds the pass culls with, against their CPU twin.
             let tile = so.options.tile;
@@ -394,18 +440,34 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
             let super_tiles = supers.iter().zip(discs.chunks(span));
             for (k, (gpu, chunk)) in tiles.chain(super_tiles).enumerate() {
                 let cpu = math::occluder_bounds(chunk);
+                let moments_close =
+                    |a: Vec3, b: Vec3| (a - b).abs().max_element() <= 1e-4 * cpu.area;
                 assert!(
                     (gpu.center - cpu.center).length() < 1e-5
                         && (gpu.radius - cpu.radius).abs() < 1e-5
-                        && (gpu.max_disc_radius - cpu.max_disc_radius).abs() < 1e-6,
+                        && (gpu.max_disc_radius - cpu.max_disc_radius).abs() < 1e-6
+                        && (gpu.half_extent - cpu.half_extent).abs().max_element() < 1e-5
+                        && (gpu.area - cpu.area).abs() <= 1e-4 * cpu.area
+                        && gpu.count == cpu.count
+                        && moments_close(gpu.axes, cpu.axes)
+                        && moments_close(gpu.tensor_diagonal, cpu.tensor_diagonal)
+                        && moments_close(gpu.tensor_off, cpu.tensor_off),
                     "bounds {k}: {gpu:?} vs {cpu:?}"
                 );
             }
             let mut darkened = 0;
+            let mut taken_whole = 0;
             for (i, r) in receivers.iter().enumerate() {
                 let before = &renormalized.lights[i];
                 let (sd, _) = renormalized.spheres[i];
-                let o = math::occlusion(i, r, before.diffuse_position, sd, &discs, mode);
+                let walk = math::OcclusionWalk {
+                    mode,
+                    tile: tile as usize,
+                    far: 0.0,
+                };
+                let exact = math::occlusion(i, r, before.diffuse_position, sd, &discs, walk);
+                let walk = math::OcclusionWalk { far, ..walk };
+                let o = math::occlusion(i, r, before.diffuse_position, sd, &discs, walk);
                 let cpu = before.diffuse * (1.0 - o);
                 let gpu = occluded.lights[i].diffuse;
                 assert!(
@@ -415,7 +477,15 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
                 if o > 0.01 {
                     darkened += 1;
                 }
+                if o != exact {
+                    taken_whole += 1;
+                }
             }
+            assert_eq!(
+                taken_whole > 0,
+                far > 0.0,
+                "{mode:?} far {far}: {taken_whole} points changed by whole tiles"
+            );
             assert!(
                 darkened > 10,
                 "{mode:?}: occlusion touched only {darkened} points"

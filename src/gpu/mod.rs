@@ -236,32 +236,40 @@ impl GpuContext {
     /// `WGPU_ADAPTER_NAME` (case-insensitive substring of the adapter's name); otherwise takes
     /// the high-performance adapter, falling back to any (software drivers included).
     pub fn new() -> Result<Self, GpuError> {
-        pollster::block_on(Self::new_async())
+        Self::with_limits(|_| {})
     }
 
-    async fn new_async() -> Result<Self, GpuError> {
+    /// [`GpuContext::new`] with the adapter's limits changed by `adjust` before the device is
+    /// asked for them: lowering one shows how the code meets a smaller device (a binding
+    /// limit, a workgroup count) on the machine at hand.
+    pub fn with_limits(adjust: impl Fn(&mut wgpu::Limits)) -> Result<Self, GpuError> {
+        pollster::block_on(Self::new_async(&adjust))
+    }
+
+    async fn new_async(adjust: &dyn Fn(&mut wgpu::Limits)) -> Result<Self, GpuError> {
         if std::env::var_os("WGPU_BACKEND").is_some() {
             let backends = wgpu::Backends::from_env().unwrap_or_default();
-            return Self::on_backends(backends).await;
+            return Self::on_backends(backends, adjust).await;
         }
         // Vulkan, Metal or DX12 first; OpenGL only when none of those has an adapter, because
         // probing EGL without a display is slow and noisy.
-        match Self::on_backends(wgpu::Backends::PRIMARY).await {
-            Err(GpuError::NoAdapter { .. }) => {
-                Self::on_backends(wgpu::Backends::GL)
-                    .await
-                    .map_err(|e| match e {
-                        GpuError::NoAdapter { .. } => GpuError::NoAdapter {
-                            backends: format!("{:?}", wgpu::Backends::PRIMARY | wgpu::Backends::GL),
-                        },
-                        other => other,
-                    })
-            }
+        match Self::on_backends(wgpu::Backends::PRIMARY, adjust).await {
+            Err(GpuError::NoAdapter { .. }) => Self::on_backends(wgpu::Backends::GL, adjust)
+                .await
+                .map_err(|e| match e {
+                    GpuError::NoAdapter { .. } => GpuError::NoAdapter {
+                        backends: format!("{:?}", wgpu::Backends::PRIMARY | wgpu::Backends::GL),
+                    },
+                    other => other,
+                }),
             other => other,
         }
     }
 
-    async fn on_backends(backends: wgpu::Backends) -> Result<Self, GpuError> {
+    async fn on_backends(
+        backends: wgpu::Backends,
+        adjust: &dyn Fn(&mut wgpu::Limits),
+    ) -> Result<Self, GpuError> {
         let mut instance_desc = wgpu::InstanceDescriptor::new_without_display_handle();
         instance_desc.backends = backends;
         // Debug labels stay off unless WGPU_DEBUG=1: Mesa 22's lavapipe crashes in
@@ -321,7 +329,7 @@ impl GpuContext {
                 }
             }
         };
-        Self::from_adapter(adapter).await
+        Self::from_adapter(adapter, adjust).await
     }
 
     /// An instance for windows on `display` (a winit event loop's display handle), with the
@@ -355,7 +363,7 @@ impl GpuContext {
                         backends: "any that can present to the window".into(),
                     })?,
             };
-            Self::from_adapter(adapter).await
+            Self::from_adapter(adapter, &|_| {}).await
         })
     }
 
@@ -385,7 +393,10 @@ impl GpuContext {
         missing
     }
 
-    async fn from_adapter(adapter: wgpu::Adapter) -> Result<Self, GpuError> {
+    async fn from_adapter(
+        adapter: wgpu::Adapter,
+        adjust: &dyn Fn(&mut wgpu::Limits),
+    ) -> Result<Self, GpuError> {
         let adapter_info = adapter.get_info();
         let missing = Self::missing_capabilities(&adapter);
         if !missing.is_empty() {
@@ -403,7 +414,8 @@ impl GpuContext {
         }
         // Ask for what the adapter has: large scenes and high resolutions need more than the
         // WebGPU defaults, and software drivers report generous limits.
-        let required_limits = adapter.limits();
+        let mut required_limits = adapter.limits();
+        adjust(&mut required_limits);
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("valgi device"),

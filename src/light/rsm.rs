@@ -141,6 +141,16 @@ pub fn budget_resolution(requested: u32, views: u32, max_vals: u32) -> Option<u3
     (side > 0).then_some(side)
 }
 
+/// Most RSM VALs the VAL buffer holds beside `external_slots` external VALs when the device
+/// binds at most `max_binding` bytes (the buffer is bound whole); `None` when not even the
+/// external VALs fit.
+pub fn binding_val_fit(max_binding: u64, external_slots: u64) -> Option<u32> {
+    let slots = max_binding / std::mem::size_of::<GpuVal>() as u64;
+    slots
+        .checked_sub(external_slots)
+        .map(|fit| fit.min(u32::MAX as u64) as u32)
+}
+
 /// Views of at most this side take the exact texel solid angle ([`texel_solid_angle`]).
 pub const EXACT_SOLID_ANGLE_SIDE: u32 = 16;
 
@@ -560,13 +570,35 @@ impl Rsm {
         external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
         let scene_gpu = &raster.scene_gpu;
-        let max_vals = raster.settings.val_budget();
-        let budget = raster.settings.budget_name(
-            &format!("--max-vals {}", raster.settings.max_vals),
-            &format!("{max_vals} VALs"),
-        );
         let device = &ctx.device;
         let limits = device.limits();
+        let external_slots = external.map_or(0, |e| e.rows as u64 * e.row_length as u64);
+        let max_binding = limits
+            .max_storage_buffer_binding_size
+            .min(limits.max_buffer_size);
+        let settings_budget = raster.settings.val_budget();
+        let binding_fit = binding_val_fit(max_binding, external_slots).ok_or_else(|| {
+            RenderError::Settings(format!(
+                "{external_slots} external VALs need {} of VAL storage; the device binds at \
+                 most {}: lower the external VALs (depth frame size or block size)",
+                crate::gpu::format_bytes(external_slots * std::mem::size_of::<GpuVal>() as u64),
+                crate::gpu::format_bytes(max_binding),
+            ))
+        })?;
+        // The VAL buffer is bound whole: past what one binding holds, the RSMs share that
+        // many VALs by power as they share --max-vals (the lights keep their power).
+        let max_vals = settings_budget.min(binding_fit);
+        let budget = if binding_fit < settings_budget {
+            format!(
+                "the {binding_fit} VALs one binding of the device holds ({} beside {external_slots} external VALs)",
+                crate::gpu::format_bytes(max_binding)
+            )
+        } else {
+            raster.settings.budget_name(
+                &format!("--max-vals {}", raster.settings.max_vals),
+                &format!("{max_vals} VALs"),
+            )
+        };
         if requested_resolution == 0 || requested_resolution > limits.max_texture_dimension_2d {
             return Err(RenderError::Settings(format!(
                 "--rsm {requested_resolution}: the RSM resolution must be 1..={}",
@@ -584,9 +616,14 @@ impl Rsm {
             .collect();
         let light_sides =
             share_sides(&requests, requested_resolution, max_vals).ok_or_else(|| {
+                let remedy = if binding_fit < settings_budget {
+                    "use fewer lights".to_string()
+                } else {
+                    format!("raise --max-vals to at least {layer_count}")
+                };
                 RenderError::Settings(format!(
                     "{budget}: scene '{}' has {layer_count} light views ({}), so not even one VAL \
-                     per view fits; raise --max-vals to at least {layer_count}",
+                     per view fits; {remedy}",
                     scene.name,
                     crate::gpu::count_of(scene.lights.len(), "light"),
                 ))
@@ -646,7 +683,6 @@ impl Rsm {
         }
         let rows: u64 = view_sides.iter().map(|&s| s as u64).sum();
         let texels: u64 = view_sides.iter().map(|&s| s as u64 * s as u64).sum();
-        let external_slots = external.map_or(0, |e| e.rows as u64 * e.row_length as u64);
         let slots = texels + external_slots;
         if slots > u32::MAX as u64 {
             return Err(RenderError::Settings(format!(
@@ -654,14 +690,7 @@ impl Rsm {
             )));
         }
         let val_bytes = slots.max(1) * std::mem::size_of::<GpuVal>() as u64;
-        let max_binding = limits
-            .max_storage_buffer_binding_size
-            .min(limits.max_buffer_size);
-        if val_bytes > max_binding {
-            return Err(RenderError::Settings(format!(
-                "--rsm {resolution} with {layer_count} layers and {external_slots} external VALs needs {val_bytes} bytes of VALs; the device binds at most {max_binding} bytes: lower --rsm, --max-vals or the external VALs"
-            )));
-        }
+        debug_assert!(val_bytes <= max_binding.max(std::mem::size_of::<GpuVal>() as u64));
         let mut bytes = GpuBytes::default();
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let vals_buffer = ctx.scoped(
@@ -1157,6 +1186,16 @@ impl Rsm {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_binding_holds_whole_vals_after_the_external_ones() {
+        let val = std::mem::size_of::<GpuVal>() as u64;
+        assert_eq!(binding_val_fit(200 * val, 0), Some(200));
+        assert_eq!(binding_val_fit(200 * val + val - 1, 50), Some(150));
+        assert_eq!(binding_val_fit(200 * val, 200), Some(0));
+        assert_eq!(binding_val_fit(200 * val, 201), None);
+        assert_eq!(binding_val_fit(u64::MAX, 0), Some(u32::MAX));
+    }
 
     #[test]
     fn every_stratum_has_one_centre_and_four_distinct_corner_candidates() {

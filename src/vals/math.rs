@@ -316,35 +316,138 @@ pub fn occluder_share(x: Vec3, n: Vec3, light: Vec3, sphere: f32, disc: &Occlude
 }
 
 /// A tile of occluder discs as the occlusion pass culls it: a sphere around every disc
-/// centre and the largest disc radius (`tile_bounds` in `vals_occluder_bounds.wgsl`).
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// centre and the largest disc radius (`write_bounds` in `vals_occluder_bounds.wgsl`), and
+/// the discs' area moments, from which [`far_share`] takes a far tile whole.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OccluderBounds {
     pub center: Vec3,
     pub radius: f32,
     pub max_disc_radius: f32,
+    /// Half the size of the centres' box (whose centre is `center`).
+    pub half_extent: Vec3,
+    /// Σ πρ² over the discs.
+    pub area: f32,
+    pub count: u32,
+    /// Σ πρ²·|n| per axis.
+    pub axes: Vec3,
+    /// Σ πρ²·n nᵀ: (xx, yy, zz), then (xy, xz, yz).
+    pub tensor_diagonal: Vec3,
+    pub tensor_off: Vec3,
 }
 
-/// The bounds of `discs`: the centre of their centres' box, the farthest centre from it.
+impl OccluderBounds {
+    /// Σ πρ²·|n·w| over the discs, from above: the smaller of Cauchy–Schwarz's
+    /// √(Σπρ² · wᵀ(Σπρ² n nᵀ)w), exact when every |n·w| is equal (a flat patch), and the
+    /// triangle inequality's Σ_k (Σπρ²|n_k|)·|w_k|, exact when every normal is on an axis (a
+    /// box, a room).
+    pub fn projected_area(&self, w: Vec3) -> f32 {
+        let d = self.tensor_diagonal;
+        let o = self.tensor_off;
+        let quadratic = d.x * w.x * w.x
+            + d.y * w.y * w.y
+            + d.z * w.z * w.z
+            + 2.0 * (o.x * w.x * w.y + o.y * w.x * w.z + o.z * w.y * w.z);
+        let cauchy_schwarz = (self.area * quadratic.max(0.0)).sqrt();
+        let axes = self.axes.dot(w.abs());
+        cauchy_schwarz.min(axes)
+    }
+}
+
+/// The bounds of `discs`: the centre of their centres' box, the farthest centre from it, and
+/// their area moments.
 pub fn occluder_bounds(discs: &[OccluderDisc]) -> OccluderBounds {
     let (lo, hi) = discs.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(lo, hi), d| (lo.min(d.center), hi.max(d.center)),
     );
     let center = 0.5 * (lo + hi);
-    OccluderBounds {
+    let mut bounds = OccluderBounds {
         center,
         radius: discs
             .iter()
             .map(|d| (d.center - center).length())
             .fold(0.0, f32::max),
         max_disc_radius: discs.iter().map(|d| d.radius).fold(0.0, f32::max),
+        half_extent: 0.5 * (hi - lo),
+        count: discs.len() as u32,
+        ..Default::default()
+    };
+    for d in discs {
+        let a = PI * d.radius * d.radius;
+        let n = d.normal;
+        bounds.area += a;
+        bounds.axes += a * n.abs();
+        bounds.tensor_diagonal += a * n * n;
+        bounds.tensor_off += a * Vec3::new(n.x * n.y, n.x * n.z, n.y * n.z);
     }
+    bounds
+}
+
+/// The summed shares of a whole tile of discs seen from (x, n) when it is far
+/// (`far_share` in `vals_occlusion.wgsl`); `None` when it is not, and its discs must be taken
+/// one by one.
+///
+/// Far: the tile's radius plus its largest disc's is at most `far` times its distance d, every
+/// centre nearer than the light and above the horizon. Seen from x, the discs then lie in a
+/// square around the tile's direction ŵ of half side asin(r/d) (each centre's direction is
+/// within that angle, and projection onto the tangent plane shortens chords) plus the largest
+/// disc's half side; the tile is taken as that square, grey with the discs' summed projected
+/// area A = Σ πρ_j²|n_j·ŵ|/(d² + ρ̄²) ([`OccluderBounds::projected_area`], ρ̄² the mean ρ²)
+/// spread evenly over it. Its share is A/S × (overlap of the light's square with it)/(its
+/// area) × the centre's ramp: A/S when it lies wholly inside the light's square, as the discs
+/// one by one give (each overlap then being the disc's whole area), and the evenly spread
+/// expectation where it straddles the square's edge. The error is first order in r/d across
+/// the tile and cancels to second order for a tile symmetric about its centre.
+pub fn far_share(
+    x: Vec3,
+    n: Vec3,
+    light: Vec3,
+    sphere: f32,
+    bounds: &OccluderBounds,
+    far: f32,
+) -> Option<f32> {
+    let to_light = light - x;
+    let light_distance = to_light.length();
+    let v = bounds.center - x;
+    let distance = v.length();
+    let r = bounds.radius;
+    if far <= 0.0
+        || sphere <= 0.0
+        || light_distance <= 0.0
+        || bounds.count == 0
+        || r + bounds.max_disc_radius > far * distance
+        || distance + r >= light_distance
+        || n.dot(v) <= r
+    {
+        return None;
+    }
+    let (t, b) = tangent_frame(n);
+    let wl = to_light / light_distance;
+    let wc = v / distance;
+    let alpha = (r / distance).min(1.0).asin();
+    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
+    let rd = bounds.max_disc_radius;
+    let nearest = distance - r;
+    let disc_half = 0.5 * (PI * rd * rd / (rd * rd + nearest * nearest)).sqrt();
+    let tile_side = 2.0 * (alpha + disc_half);
+    let tile_area = tile_side * tile_side;
+    let overlap = square_overlap(
+        (wl.dot(t), wl.dot(b)),
+        sphere_area,
+        (wc.dot(t), wc.dot(b)),
+        tile_area,
+    );
+    let mean_radius2 = bounds.area / (PI * bounds.count as f32);
+    let area = bounds.projected_area(wc) / (distance * distance + mean_radius2);
+    let ramp = ((light_distance - distance) / sphere).min(1.0);
+    Some(area / sphere_area * (overlap / tile_area) * ramp)
 }
 
 /// False only when no disc inside `bounds` can take a share of the light sphere seen from
 /// (x, n), so the pass may skip the whole tile without changing a bit of the result. Every
-/// reason [`occluder_share`] returns 0 is checked for the whole sphere of centres: all below
-/// the horizon, all at least as far as the light, or too far sideways — a centre within the
+/// reason [`occluder_share`] returns 0 is checked for the whole box or sphere of centres: all
+/// at or below the horizon (the box's highest corner along n is), all at least as far as the
+/// light, or too far sideways — a centre within the
 /// sphere is within `asin(R/d)` of the sphere's direction, so its projected square centre
 /// within that of the sphere's (projection onto the tangent plane shortens chords), and
 /// squares overlap only when their centres are closer than the half sides' sum on both axes.
@@ -361,6 +464,10 @@ pub fn tile_may_occlude(
         return false;
     }
     let v = bounds.center - x;
+    // Every centre of the box at or below the horizon (the box's highest corner along n).
+    if n.dot(v) + n.abs().dot(bounds.half_extent) <= 0.0 {
+        return false;
+    }
     let distance = v.length();
     let r = bounds.radius;
     // x inside (or at the rim of) the sphere: every direction is possible.
@@ -383,27 +490,108 @@ pub fn tile_may_occlude(
     (wl - wc).dot(t).abs() < reach && (wl - wc).dot(b).abs() < reach
 }
 
-/// Occlusion at receiver `index` from every other disc.
+/// One receiver of a workgroup as [`group_ball`] sees it: its position and how far its
+/// farthest light with a sphere is (`None`: no light can be occluded).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GroupReceiver {
+    pub x: Vec3,
+    pub reach: Option<f32>,
+}
+
+/// The occlusion workgroup's reach (`group_ball` in `vals_occlusion.wgsl`): a ball around its
+/// receivers (the centre of their box, the farthest from it) grown by the longest distance
+/// from a receiver to its own light; `None` when no receiver has a light with a sphere.
+pub fn group_ball(receivers: &[GroupReceiver]) -> Option<(Vec3, f32)> {
+    let lit = || receivers.iter().filter(|r| r.reach.is_some());
+    let (lo, hi) = lit().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), r| (lo.min(r.x), hi.max(r.x)),
+    );
+    let reach = lit().filter_map(|r| r.reach).reduce(f32::max)?;
+    let center = 0.5 * (lo + hi);
+    let radius = lit().map(|r| (r.x - center).length()).fold(0.0, f32::max);
+    Some((center, radius + reach))
+}
+
+/// Whether a super-tile within `bounds` may hold a disc that takes a share of some receiver
+/// of the group whose [`group_ball`] is `ball` (`ball_may_reach` in `vals_occlusion.wgsl`).
+/// Conservative against [`tile_may_occlude`]: that test is true only for a receiver x with a
+/// light at distance L when |c − x| < L + 1.001·r + 10⁻⁶, and |c − x| ≥ |c − g| − R_g, so a
+/// centre farther than R_g + L_max + 1.001·r (with slack for rounding) from the group's centre
+/// g fails it for every receiver, and the pass may skip the super-tile for the whole group.
+pub fn ball_may_reach(ball: Option<(Vec3, f32)>, bounds: &OccluderBounds) -> bool {
+    let Some((center, reach)) = ball else {
+        return false;
+    };
+    let limit = (reach + 1.001 * bounds.radius) * 1.0001 + 1e-5;
+    (bounds.center - center).length() <= limit
+}
+
+/// How the occlusion pass combines and walks the discs: the mode, discs per tile, and the
+/// far-tile fraction (`occlusion-far`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OcclusionWalk {
+    pub mode: OcclusionMode,
+    pub tile: usize,
+    pub far: f32,
+}
+
+/// Occlusion at receiver `index` from every other disc, as the occlusion pass takes them:
+/// super-tiles of [`crate::vals::sparse::OCCLUSION_SUPER_TILE`] tiles of `tile` discs, each
+/// skipped when [`tile_may_occlude`] says no, taken whole when [`far_share`] (with `far`)
+/// says yes, else opened; an opened tile's discs one by one in order. With `far` = 0 that is
+/// every disc in order. A whole tile's k discs of summed share s count as k discs of s/k
+/// each in `union`.
 pub fn occlusion(
     index: usize,
     receiver: &Receiver,
     light: Vec3,
     sphere: f32,
     discs: &[OccluderDisc],
-    mode: OcclusionMode,
+    walk: OcclusionWalk,
 ) -> f32 {
-    let mut sum = 0.0f32;
-    let mut visible = 1.0f32;
+    let OcclusionWalk { mode, tile, far } = walk;
     if matches!(mode, OcclusionMode::Off | OcclusionMode::Rays) {
         return 0.0;
     }
-    for (j, disc) in discs.iter().enumerate() {
-        if j == index {
+    let (x, n) = (receiver.position, receiver.normal);
+    let tile = tile.clamp(1, crate::vals::sparse::OCCLUSION_TILE_MAX as usize);
+    let span = tile * crate::vals::sparse::OCCLUSION_SUPER_TILE as usize;
+    let mut sum = 0.0f32;
+    let mut visible = 1.0f32;
+    let whole = |share: f32, count: u32, sum: &mut f32, visible: &mut f32| {
+        *sum += share;
+        *visible *= (1.0 - share / count.max(1) as f32)
+            .max(0.0)
+            .powi(count as i32);
+    };
+    for (s, super_discs) in discs.chunks(span).enumerate() {
+        let bounds = occluder_bounds(super_discs);
+        if !tile_may_occlude(x, n, light, sphere, &bounds) {
             continue;
         }
-        let o = occluder_share(receiver.position, receiver.normal, light, sphere, disc);
-        sum += o;
-        visible *= 1.0 - o;
+        if let Some(share) = far_share(x, n, light, sphere, &bounds, far) {
+            whole(share, bounds.count, &mut sum, &mut visible);
+            continue;
+        }
+        for (t, tile_discs) in super_discs.chunks(tile).enumerate() {
+            let bounds = occluder_bounds(tile_discs);
+            if !tile_may_occlude(x, n, light, sphere, &bounds) {
+                continue;
+            }
+            if let Some(share) = far_share(x, n, light, sphere, &bounds, far) {
+                whole(share, bounds.count, &mut sum, &mut visible);
+                continue;
+            }
+            for (j, disc) in tile_discs.iter().enumerate() {
+                if s * span + t * tile + j == index {
+                    continue;
+                }
+                let o = occluder_share(x, n, light, sphere, disc);
+                sum += o;
+                visible *= 1.0 - o;
+            }
+        }
     }
     match mode {
         OcclusionMode::Sum => sum.min(1.0),
@@ -539,6 +727,183 @@ mod tests {
         }
     }
 
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+        /// The workgroup's test is conservative: when `ball_may_reach` skips a super-tile,
+        /// `tile_may_occlude` skips it for every receiver of the group and each of its lights.
+        #[test]
+        fn a_super_tile_the_group_skips_is_skipped_by_every_receiver(
+            receivers in proptest::collection::vec(
+                (
+                    proptest::array::uniform3(-2.0f32..2.0),
+                    proptest::array::uniform3(-1.0f32..1.0),
+                    proptest::array::uniform3(-4.0f32..4.0),
+                    0.0f32..1.0,
+                ),
+                1..64,
+            ),
+            centre in proptest::array::uniform3(-8.0f32..8.0),
+            radius in 0.0f32..2.0,
+            max_disc_radius in 0.001f32..0.3,
+        ) {
+            let bounds = OccluderBounds { center: Vec3::from(centre), radius, max_disc_radius, ..Default::default() };
+            let lit: Vec<_> = receivers
+                .iter()
+                .map(|&(x, n, light, sphere)| {
+                    let (x, light) = (Vec3::from(x), Vec3::from(light));
+                    let n = Vec3::from(n).try_normalize().unwrap_or(Vec3::Y);
+                    (x, n, light, sphere)
+                })
+                .collect();
+            let group: Vec<GroupReceiver> = lit
+                .iter()
+                .map(|&(x, _, light, sphere)| GroupReceiver {
+                    x,
+                    reach: (sphere > 0.0).then(|| (light - x).length()),
+                })
+                .collect();
+            if !ball_may_reach(group_ball(&group), &bounds) {
+                for &(x, n, light, sphere) in &lit {
+                    proptest::prop_assert!(!tile_may_occlude(x, n, light, sphere, &bounds));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_group_skips_super_tiles_beyond_its_lights() {
+        let receiver = |x: f32, reach: Option<f32>| GroupReceiver {
+            x: Vec3::new(x, 0.0, 0.0),
+            reach,
+        };
+        let ball = group_ball(&[
+            receiver(-1.0, Some(2.0)),
+            receiver(1.0, Some(3.0)),
+            receiver(9.0, None),
+        ]);
+        assert_eq!(ball, Some((Vec3::ZERO, 4.0)));
+        let at = |x: f32| OccluderBounds {
+            center: Vec3::new(x, 0.0, 0.0),
+            radius: 1.0,
+            max_disc_radius: 0.1,
+            ..Default::default()
+        };
+        assert!(ball_may_reach(ball, &at(4.9)));
+        assert!(!ball_may_reach(ball, &at(5.1)));
+        assert!(!ball_may_reach(
+            group_ball(&[receiver(0.0, None)]),
+            &at(0.0)
+        ));
+    }
+
+    /// A box of 6 faces × 4 discs and a flat patch: the area moments give Σπρ²|n·w| exactly
+    /// (axis normals, equal normals) and from above otherwise.
+    #[test]
+    fn area_moments_give_the_projected_area() {
+        let disc = |normal: Vec3, radius: f32| OccluderDisc {
+            center: Vec3::ZERO,
+            normal,
+            radius,
+        };
+        let exact = |discs: &[OccluderDisc], w: Vec3| -> f32 {
+            discs
+                .iter()
+                .map(|d| PI * d.radius * d.radius * d.normal.dot(w).abs())
+                .sum()
+        };
+        let faces = [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ];
+        let cube: Vec<_> = faces
+            .iter()
+            .flat_map(|&n| std::iter::repeat_n(disc(n, 0.1), 4))
+            .collect();
+        let tilted = Vec3::new(0.3, 0.8, -0.5).normalize();
+        let patch: Vec<_> = (1..6).map(|i| disc(tilted, 0.02 * i as f32)).collect();
+        let mixed: Vec<_> = (0..12)
+            .map(|i| {
+                let a = i as f32 * 0.7;
+                disc(Vec3::new(a.cos(), 0.5, a.sin()).normalize(), 0.05)
+            })
+            .collect();
+        for w in [Vec3::Y, Vec3::new(1.0, 2.0, -0.5).normalize(), tilted] {
+            let c = exact(&cube, w);
+            assert!((occluder_bounds(&cube).projected_area(w) - c).abs() < 1e-5 * c.max(1.0));
+            let p = exact(&patch, w);
+            assert!((occluder_bounds(&patch).projected_area(w) - p).abs() < 1e-4 * p.max(1e-3));
+            let m = exact(&mixed, w);
+            let bound = occluder_bounds(&mixed).projected_area(w);
+            assert!(
+                bound >= m * (1.0 - 1e-5) && bound <= 1.5 * m,
+                "{bound} vs {m}"
+            );
+        }
+    }
+
+    /// A far tile inside a large light counts whole within a few per cent of its discs one by
+    /// one; near, straddling the light's edge or behind the light it is not taken whole.
+    #[test]
+    fn a_far_tile_counts_whole_close_to_its_discs() {
+        let x = Vec3::ZERO;
+        let n = Vec3::Y;
+        let light = Vec3::new(0.0, 20.0, 0.0);
+        let sphere = 10.0;
+        // A 5×5 grid of discs 0.1 m apart, facing down, 6 m above the receiver.
+        let grid = |centre: Vec3| -> Vec<OccluderDisc> {
+            (0..25)
+                .map(|i| OccluderDisc {
+                    center: centre
+                        + Vec3::new((i % 5) as f32 * 0.1 - 0.2, 0.0, (i / 5) as f32 * 0.1 - 0.2),
+                    normal: Vec3::NEG_Y,
+                    radius: 0.04,
+                })
+                .collect()
+        };
+        let discs = grid(Vec3::new(0.5, 6.0, 0.3));
+        let bounds = occluder_bounds(&discs);
+        let one_by_one: f32 = discs
+            .iter()
+            .map(|d| occluder_share(x, n, light, sphere, d))
+            .sum();
+        let whole = far_share(x, n, light, sphere, &bounds, 0.15).expect("far and inside");
+        assert!(
+            (whole - one_by_one).abs() < 0.02 * one_by_one,
+            "whole {whole} vs one by one {one_by_one}"
+        );
+        // Too near for 0.15 (radius 0.33 m at 1 m).
+        let near = occluder_bounds(&grid(Vec3::new(0.0, 1.0, 0.0)));
+        assert!(far_share(x, n, light, sphere, &near, 0.15).is_none());
+        // 0 takes every disc on its own.
+        assert!(far_share(x, n, light, sphere, &bounds, 0.0).is_none());
+        // A small light whose square is smaller than the tile's, near its edge: the discs
+        // spread evenly over the tile's square, so the share is the covered fraction of the
+        // whole, near what the discs one by one give on average.
+        let small = 0.4;
+        let edge = occluder_bounds(&grid(Vec3::new(0.15, 6.0, 0.0)));
+        let discs_edge = grid(Vec3::new(0.15, 6.0, 0.0));
+        let straddling = far_share(x, n, light, small, &edge, 0.15).expect("far");
+        let one_by_one_small: f32 = discs_edge
+            .iter()
+            .map(|d| occluder_share(x, n, light, small, d))
+            .sum();
+        assert!(
+            straddling > 0.0 && (straddling - one_by_one_small).abs() < 0.5 * one_by_one_small,
+            "straddling {straddling} vs one by one {one_by_one_small}"
+        );
+        // Beside the light's square: nothing.
+        assert_eq!(
+            far_share(x, n, Vec3::new(15.0, 20.0, 0.0), small, &bounds, 0.15),
+            Some(0.0)
+        );
+        // Beyond the light.
+        assert!(far_share(x, n, Vec3::new(0.0, 5.0, 0.0), sphere, &bounds, 0.15).is_none());
+    }
+
     #[test]
     fn culling_skips_tiles_far_from_the_light_path() {
         let discs = [OccluderDisc {
@@ -641,7 +1006,11 @@ mod tests {
             light,
             0.5,
             &discs,
-            OcclusionMode::Sum,
+            OcclusionWalk {
+                mode: OcclusionMode::Sum,
+                tile: 64,
+                far: 0.0,
+            },
         );
         let union = occlusion(
             usize::MAX,
@@ -649,7 +1018,11 @@ mod tests {
             light,
             0.5,
             &discs,
-            OcclusionMode::Union,
+            OcclusionWalk {
+                mode: OcclusionMode::Union,
+                tile: 64,
+                far: 0.0,
+            },
         );
         assert!(sum > 0.0 && union > 0.0);
         assert!(union <= sum + 1e-6, "union {union} sum {sum}");

@@ -41,6 +41,12 @@ pub const OCCLUSION_TILE_MAX: u32 = 256;
 /// `vals_occluder_bounds.wgsl`): the pass tests a super-tile's bounds before its tiles'.
 pub const OCCLUSION_SUPER_TILE: u32 = 64;
 
+/// vec4 words per tile (and super-tile) of occluder bounds (`BOUNDS_VEC4S` in
+/// `vals_occluder_bounds.wgsl` and `vals_occlusion.wgsl`; [`super::math::OccluderBounds`]): centre
+/// and radius; largest disc radius, Σπρ², disc count; Σπρ²|n|; Σπρ² n nᵀ in two (the
+/// centres' box's half size in the last three `w`).
+pub const OCCLUDER_BOUNDS_VEC4S: u32 = 5;
+
 /// Tiles and super-tiles of `point_count` points at `tile` points a tile.
 pub fn occlusion_tiles(point_count: u32, tile: u32) -> (u32, u32) {
     let tile = tile.clamp(1, OCCLUSION_TILE_MAX);
@@ -140,6 +146,10 @@ pub struct SparseOptions {
     /// Slices of the VAL list the compute gather is split into (0: automatic, see
     /// [`gather_slices`]).
     pub gather_slices: u32,
+    /// Disc occlusion (`sum`, `union`): a tile or super-tile of discs whose radius is at most
+    /// this fraction of its distance counts as a whole, from its area moments
+    /// (`occlusion-far`; 0: every disc on its own, see [`crate::vals::math::far_share`]).
+    pub occlusion_far: f32,
 }
 
 /// The two forms of the gather (`--gather`), which compute the same sums.
@@ -309,9 +319,10 @@ const GATHER_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, W, W, R];
 /// Instances, points, point diffuse and glossy (renormalized in place), extra, clamp counts.
 const RENORMALIZE_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, W];
 /// Instances, points, the occluder tiles' bounds it writes.
-const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W];
-/// Instances, points, point diffuse and glossy (dimmed in place), extra, occluder bounds.
-const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R];
+const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W, W];
+/// Instances, points, point diffuse and glossy (dimmed in place), extra, occluder bounds,
+/// world-space discs.
+const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R, R];
 /// Instances, points, point lights, instance ranges, links, the vertex lights it writes.
 const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, W];
 /// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
@@ -704,22 +715,24 @@ impl SparseGpu {
             &pipelines.renormalize,
             &[&lights[..], &[&clamp_buffer]].concat(),
         );
-        // Two vec4 per tile and super-tile of occluder discs; at most one tile per point.
+        // At most one tile per point.
         let (most_tiles, most_supers) = occlusion_tiles(point_count.max(1), 1);
         let occluder_bounds = empty(
             &mut bytes,
             "occluder bounds",
-            32 * (most_tiles + most_supers) as u64,
+            16 * OCCLUDER_BOUNDS_VEC4S as u64 * (most_tiles + most_supers) as u64,
         );
+        // Every point's disc in world space (centre, radius; normal), for the occlusion pass.
+        let occluder_discs = empty(&mut bytes, "occluder discs", 32 * point_count.max(1) as u64);
         let occluder_bounds_kernel = kernel(
             "occluder bounds",
             &pipelines.occluder_bounds,
-            &[&occluder_bounds],
+            &[&occluder_bounds, &occluder_discs],
         );
         let occlusion = kernel(
             "occlusion",
             &pipelines.occlusion,
-            &[&lights[..], &[&occluder_bounds]].concat(),
+            &[&lights[..], &[&occluder_bounds, &occluder_discs]].concat(),
         );
         let interpolate = kernel(
             "interpolation",
@@ -956,11 +969,19 @@ impl SparseGpu {
         let buffer = &self.occluder_bounds.buffers[3];
         let raw: Vec<[f32; 4]> = crate::gpu::read_buffer(ctx, buffer)?;
         let (tiles, supers) = occlusion_tiles(self.point_count, tile);
-        let mut all = raw.chunks_exact(2).map(|pair| super::math::OccluderBounds {
-            center: Vec3::new(pair[0][0], pair[0][1], pair[0][2]),
-            radius: pair[0][3],
-            max_disc_radius: pair[1][0],
-        });
+        let mut all = raw
+            .chunks_exact(OCCLUDER_BOUNDS_VEC4S as usize)
+            .map(|slot| super::math::OccluderBounds {
+                center: Vec3::new(slot[0][0], slot[0][1], slot[0][2]),
+                radius: slot[0][3],
+                max_disc_radius: slot[1][0],
+                area: slot[1][1],
+                count: slot[1][2] as u32,
+                half_extent: Vec3::new(slot[2][3], slot[3][3], slot[4][3]),
+                axes: Vec3::new(slot[2][0], slot[2][1], slot[2][2]),
+                tensor_diagonal: Vec3::new(slot[3][0], slot[3][1], slot[3][2]),
+                tensor_off: Vec3::new(slot[4][0], slot[4][1], slot[4][2]),
+            });
         let tile_bounds = all.by_ref().take(tiles as usize).collect();
         Ok((tile_bounds, all.take(supers as usize).collect()))
     }
@@ -1007,6 +1028,8 @@ impl SparseGpu {
             } else {
                 0
             },
+            occlusion_far: options.occlusion_far,
+            _pad: [0; 3],
         }
     }
 

@@ -17,7 +17,12 @@ pub fn small_render_settings(size: u32) -> RenderSettings {
 /// The GPU device, or `None` (with a loud message) when there is none. Under CI
 /// (`CI=true`) a missing adapter fails the test: CI must never pass while testing nothing.
 pub fn gpu() -> Option<GpuContext> {
-    match GpuContext::new() {
+    gpu_with_limits(|_| {})
+}
+
+/// [`gpu`] on a device asked for the adapter's limits as changed by `adjust`.
+pub fn gpu_with_limits(adjust: impl Fn(&mut wgpu::Limits)) -> Option<GpuContext> {
+    match GpuContext::with_limits(adjust) {
         Ok(ctx) => Some(ctx),
         Err(e) => {
             if std::env::var("CI")
