@@ -6,7 +6,7 @@ floor, lit by a spot light from above, renders it with `valgi render --method sp
 `--occlusion` mode given, and prints the passes' times from the JSON line (`table2`).
 
     python3 scripts/many_instances.py [--counts 1000,3000] [--modes sum,rays] [--size 64]
-        [--max-edge 0.25] [--points-per-instance 64] [--occlusion-far F]
+        [--max-edge 0.25] [--points-per-instance 64]
 
 Needs a release build (`cargo build --release --bin valgi`).
 """
@@ -117,8 +117,6 @@ def main():
                         help="valgi's --sparse-points is this times the instance count")
     parser.add_argument("--light-height", type=float, default=None,
                         help="spot light height in m (default: the grid's side, lighting all of it)")
-    parser.add_argument("--occlusion-far", default=None,
-                        help="valgi's --occlusion-far for the disc modes (default: valgi's)")
     parser.add_argument("--out", default="out/many-instances")
     parser.add_argument("--valgi", default=str(ROOT / "target/release/valgi"))
     args = parser.parse_args()
@@ -135,8 +133,6 @@ def main():
                        "--occlusion", mode, "--max-edge", str(args.max_edge),
                        "--sparse-points", str(args.points_per_instance * count), "--width", str(args.size), "--height", str(args.size),
                        "--out", str(out / f"instances-{count}-{mode}.png")]
-            if args.occlusion_far is not None and mode in ("sum", "union"):
-                command += ["--occlusion-far", args.occlusion_far]
             start = time.time()
             run = subprocess.run(command, capture_output=True, text=True)
             wall = time.time() - start

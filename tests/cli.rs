@@ -488,13 +488,6 @@ fn shadow_budgets_val_budgets_spp_and_sparse_points_out_of_range_are_refused() {
             &["--gather-slices", slices, "1..=256"],
         );
     }
-    for far in ["-0.1", "0.6", "NaN", "near"] {
-        let flag = format!("--occlusion-far={far}");
-        assert_refused(
-            &tiny_render(out, &["--method", "sparse", "--occlusion", "sum", &flag]),
-            &["occlusion-far", far],
-        );
-    }
     // plane-point's point light has six RSM views: five VALs cannot give each one.
     assert_refused(
         &tiny_render(out, &["--method", "sparse", "--max-vals", "5"]),

@@ -108,6 +108,8 @@ fn workgroup_sizes_match_the_dispatches() {
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occluder_bounds.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_occluder_bounds.wgsl", "cs_tiles", [group, 1, 1]),
+        ("vals_occluder_bounds.wgsl", "cs_nodes", [group, 1, 1]),
         ("vals_interpolate.wgsl", "cs_main", [group, 1, 1]),
         ("depth_vals.wgsl", "bilateral", [tile, tile, 1]),
         ("depth_vals.wgsl", "surfel", [tile, tile, 1]),
@@ -179,7 +181,8 @@ fn shared_constants_match() {
     use valgi::raster::types as base;
     let occlusion = [
         ("TILE_MAX", valgi::vals::sparse::OCCLUSION_TILE_MAX),
-        ("SUPER_TILE", valgi::vals::sparse::OCCLUSION_SUPER_TILE),
+        ("FANOUT", valgi::vals::math::OCCLUSION_FANOUT as u32),
+        ("BOUNDS_VEC4S", valgi::vals::sparse::OCCLUDER_BOUNDS_VEC4S),
     ];
     let clusters = [
         ("MAX_CLUSTERS", MAX_CLUSTERS),

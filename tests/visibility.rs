@@ -26,7 +26,6 @@ fn settings(points: usize) -> SparseSettings {
             visibility_history: 0,
             adaptive_rays: false,
             gather_slices: 0,
-            occlusion_far: 0.0,
         },
         ..Default::default()
     }

@@ -29,9 +29,6 @@ struct SparseParams {
     rsm_tiles: u32,
     // Percent of the last frame's cluster visibility kept in this frame's.
     visibility_history: u32,
-    // Disc occlusion takes a tile whole once its radius is at most this fraction of its
-    // distance (0: never; `occlusion-far`).
-    occlusion_far: f32,
 }
 
 // Where an instance's vertices, points and links start in the flat buffers.

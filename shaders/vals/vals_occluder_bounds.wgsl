@@ -1,85 +1,117 @@
-// Bounds of every tile of occluder discs, for the occlusion pass to skip tiles that cannot
-// hide any of a point's light and to take far ones whole (CPU twin:
-// `vals::math::occluder_bounds`): per tile of `params.tile` points, BOUNDS_VEC4S vec4 — the
-// centre and radius of a sphere around its disc centres; the largest disc radius, Σπρ² and
-// the disc count; Σπρ²|n|; Σπρ² n nᵀ (diagonal, then xy, xz, yz), with the half size of the
-// centres' box in the last three w — then the same for every
-// super-tile of SUPER_TILE tiles, so that far regions cost the occlusion pass one test per
-// super-tile. The tile invocations also write every point's disc in world space.
+// The occlusion tree (CPU twin: `vals::math::occlusion_tree`). Three stages, one dispatch
+// each, each reading what the one before wrote:
+// - `cs_main`: every point's disc in world space, written at its place in the walk order (the
+//   points' Morton order, `vals::math::walk_order`), so that a tile of consecutive discs is a
+//   compact patch across instances too;
+// - `cs_tiles`: per tile of `params.tile` discs of the walk, BOUNDS_VEC4S vec4 — the centre
+//   and radius of a sphere around its disc centres; the half size of their box and the
+//   largest disc radius (`vals::math::occluder_bounds`);
+// - `cs_nodes`: per internal node (FANOUT children a node, level by level up to one root, after
+//   the tiles), the same from the tiles under it (`vals::math::combine_bounds`: the box around
+//   their boxes, a sphere from its centre around their spheres).
 #include "vals_common.wgsl"
 
 const TILE_MAX: u32 = 256u;
-const SUPER_TILE: u32 = 64u;
-const BOUNDS_VEC4S: u32 = 5u;
+const FANOUT: u32 = 8u;
+const BOUNDS_VEC4S: u32 = 2u;
+// Levels of the tree at most: 8⁸ tiles are more than any point count.
+const LEVELS_MAX: u32 = 9u;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
 @group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
 @group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
 @group(0) @binding(4) var<storage, read_write> occluder_bounds: array<vec4<f32>>;
-// Per point, its disc in world space: (centre, radius), (normal, 0).
+// Per disc of the walk: (centre, radius), (normal, 0).
 @group(0) @binding(5) var<storage, read_write> occluder_discs: array<vec4<f32>>;
+// Per point, its place in the walk.
+@group(0) @binding(6) var<storage, read> occluder_walk: array<u32>;
 
-fn point_at(i: u32) -> WorldPoint {
+@compute @workgroup_size(64, 1, 1)
+fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let i = linear_index(gid, groups);
+    if (i >= params.point_count) {
+        return;
+    }
     let point_meta = points_meta[i];
-    return world_point(points_model[i], point_meta, instances[point_meta.y]);
+    let p = world_point(points_model[i], point_meta, instances[point_meta.y]);
+    let place = occluder_walk[i];
+    occluder_discs[2u * place] = vec4<f32>(p.position, p.disc_radius);
+    occluder_discs[2u * place + 1u] = vec4<f32>(p.normal, 0.0);
 }
 
-// The bounds of points [first, end) into slot `slot`.
-fn write_bounds(first: u32, end: u32, slot: u32) {
+@compute @workgroup_size(64, 1, 1)
+fn cs_tiles(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let tile = clamp(params.tile, 1u, TILE_MAX);
+    let index = linear_index(gid, groups);
+    let first = index * tile;
+    if (first >= params.point_count) {
+        return;
+    }
+    let end = min(first + tile, params.point_count);
     var lo = vec3<f32>(3.4e38);
     var hi = vec3<f32>(-3.4e38);
     var max_disc_radius = 0.0;
-    var area = 0.0;
-    var axes = vec3<f32>(0.0);
-    var diagonal = vec3<f32>(0.0);
-    var off = vec3<f32>(0.0);
     for (var i = first; i < end; i++) {
-        let p = point_at(i);
-        lo = min(lo, p.position);
-        hi = max(hi, p.position);
-        max_disc_radius = max(max_disc_radius, p.disc_radius);
-        let a = PI * p.disc_radius * p.disc_radius;
-        let n = p.normal;
-        area += a;
-        axes += a * abs(n);
-        diagonal += a * n * n;
-        off += a * vec3<f32>(n.x * n.y, n.x * n.z, n.y * n.z);
+        let c = occluder_discs[2u * i];
+        lo = min(lo, c.xyz);
+        hi = max(hi, c.xyz);
+        max_disc_radius = max(max_disc_radius, c.w);
     }
     let centre = 0.5 * (lo + hi);
     var radius = 0.0;
     for (var i = first; i < end; i++) {
-        radius = max(radius, length(point_at(i).position - centre));
+        radius = max(radius, length(occluder_discs[2u * i].xyz - centre));
     }
-    let base = BOUNDS_VEC4S * slot;
-    occluder_bounds[base] = vec4<f32>(centre, radius);
-    occluder_bounds[base + 1u] = vec4<f32>(max_disc_radius, area, f32(end - first), 0.0);
-    let half_extent = 0.5 * (hi - lo);
-    occluder_bounds[base + 2u] = vec4<f32>(axes, half_extent.x);
-    occluder_bounds[base + 3u] = vec4<f32>(diagonal, half_extent.y);
-    occluder_bounds[base + 4u] = vec4<f32>(off, half_extent.z);
+    write_bounds(index, centre, radius, 0.5 * (hi - lo), max_disc_radius);
 }
 
-// One invocation per tile, then one per super-tile (SUPER_TILE tiles), whose bounds follow
-// the tiles' in the buffer.
+fn write_bounds(slot: u32, centre: vec3<f32>, radius: f32, half_extent: vec3<f32>, max_disc_radius: f32) {
+    occluder_bounds[BOUNDS_VEC4S * slot] = vec4<f32>(centre, radius);
+    occluder_bounds[BOUNDS_VEC4S * slot + 1u] = vec4<f32>(half_extent, max_disc_radius);
+}
+
 @compute @workgroup_size(64, 1, 1)
-fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+fn cs_nodes(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let tile = clamp(params.tile, 1u, TILE_MAX);
-    let index = linear_index(gid, groups);
     let tiles = (params.point_count + tile - 1u) / tile;
-    if (index < tiles) {
-        let first = index * tile;
-        for (var i = first; i < min(first + tile, params.point_count); i++) {
-            let p = point_at(i);
-            occluder_discs[2u * i] = vec4<f32>(p.position, p.disc_radius);
-            occluder_discs[2u * i + 1u] = vec4<f32>(p.normal, 0.0);
+    // Which internal level and node this invocation is, and the tiles under the node.
+    var index = linear_index(gid, groups);
+    var level_size = tiles;
+    var slot = tiles;
+    var span = 1u;
+    var found = false;
+    for (var level = 1u; level < LEVELS_MAX && level_size > 1u; level++) {
+        level_size = (level_size + FANOUT - 1u) / FANOUT;
+        span *= FANOUT;
+        if (index < level_size) {
+            slot += index;
+            found = true;
+            break;
         }
-        write_bounds(first, min(first + tile, params.point_count), index);
+        index -= level_size;
+        slot += level_size;
+    }
+    if (!found) {
         return;
     }
-    let span = tile * SUPER_TILE;
-    let first = (index - tiles) * span;
-    if (first < params.point_count) {
-        write_bounds(first, min(first + span, params.point_count), index);
+    let first = index * span;
+    let end = min(first + span, tiles);
+    var lo = vec3<f32>(3.4e38);
+    var hi = vec3<f32>(-3.4e38);
+    var max_disc_radius = 0.0;
+    for (var t = first; t < end; t++) {
+        let sphere = occluder_bounds[BOUNDS_VEC4S * t];
+        let sizes = occluder_bounds[BOUNDS_VEC4S * t + 1u];
+        lo = min(lo, sphere.xyz - sizes.xyz);
+        hi = max(hi, sphere.xyz + sizes.xyz);
+        max_disc_radius = max(max_disc_radius, sizes.w);
     }
+    let centre = 0.5 * (lo + hi);
+    var radius = 0.0;
+    for (var t = first; t < end; t++) {
+        let sphere = occluder_bounds[BOUNDS_VEC4S * t];
+        radius = max(radius, length(sphere.xyz - centre) + sphere.w);
+    }
+    write_bounds(slot, centre, radius, 0.5 * (hi - lo), max_disc_radius);
 }

@@ -44,10 +44,6 @@ pub struct ValParams {
     pub rsm_tiles: u32,
     /// Percent of the last frame's cluster visibility kept (0: none, or no history yet).
     pub visibility_history: u32,
-    /// `occlusion-far`: disc occlusion takes a tile (or super-tile) whole, from its area
-    /// moments, once its radius is at most this fraction of its distance (0: never).
-    pub occlusion_far: f32,
-    pub _pad: [u32; 3],
 }
 
 /// VALs made by something other than the RSM — the surfels of a depth-sensor frame — that

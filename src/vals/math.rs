@@ -315,9 +315,8 @@ pub fn occluder_share(x: Vec3, n: Vec3, light: Vec3, sphere: f32, disc: &Occlude
     (overlap / sphere_area).min(1.0) * ramp
 }
 
-/// A tile of occluder discs as the occlusion pass culls it: a sphere around every disc
-/// centre and the largest disc radius (`write_bounds` in `vals_occluder_bounds.wgsl`), and
-/// the discs' area moments, from which [`far_share`] takes a far tile whole.
+/// A node of occluder discs as the occlusion pass culls it: a sphere around every disc centre,
+/// the box around them, and the largest disc radius (`vals_occluder_bounds.wgsl`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OccluderBounds {
     pub center: Vec3,
@@ -325,43 +324,16 @@ pub struct OccluderBounds {
     pub max_disc_radius: f32,
     /// Half the size of the centres' box (whose centre is `center`).
     pub half_extent: Vec3,
-    /// Σ πρ² over the discs.
-    pub area: f32,
-    pub count: u32,
-    /// Σ πρ²·|n| per axis.
-    pub axes: Vec3,
-    /// Σ πρ²·n nᵀ: (xx, yy, zz), then (xy, xz, yz).
-    pub tensor_diagonal: Vec3,
-    pub tensor_off: Vec3,
 }
 
-impl OccluderBounds {
-    /// Σ πρ²·|n·w| over the discs, from above: the smaller of Cauchy–Schwarz's
-    /// √(Σπρ² · wᵀ(Σπρ² n nᵀ)w), exact when every |n·w| is equal (a flat patch), and the
-    /// triangle inequality's Σ_k (Σπρ²|n_k|)·|w_k|, exact when every normal is on an axis (a
-    /// box, a room).
-    pub fn projected_area(&self, w: Vec3) -> f32 {
-        let d = self.tensor_diagonal;
-        let o = self.tensor_off;
-        let quadratic = d.x * w.x * w.x
-            + d.y * w.y * w.y
-            + d.z * w.z * w.z
-            + 2.0 * (o.x * w.x * w.y + o.y * w.x * w.z + o.z * w.y * w.z);
-        let cauchy_schwarz = (self.area * quadratic.max(0.0)).sqrt();
-        let axes = self.axes.dot(w.abs());
-        cauchy_schwarz.min(axes)
-    }
-}
-
-/// The bounds of `discs`: the centre of their centres' box, the farthest centre from it, and
-/// their area moments.
+/// The bounds of `discs`: the centre of their centres' box, the farthest centre from it.
 pub fn occluder_bounds(discs: &[OccluderDisc]) -> OccluderBounds {
     let (lo, hi) = discs.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
         |(lo, hi), d| (lo.min(d.center), hi.max(d.center)),
     );
     let center = 0.5 * (lo + hi);
-    let mut bounds = OccluderBounds {
+    OccluderBounds {
         center,
         radius: discs
             .iter()
@@ -369,78 +341,7 @@ pub fn occluder_bounds(discs: &[OccluderDisc]) -> OccluderBounds {
             .fold(0.0, f32::max),
         max_disc_radius: discs.iter().map(|d| d.radius).fold(0.0, f32::max),
         half_extent: 0.5 * (hi - lo),
-        count: discs.len() as u32,
-        ..Default::default()
-    };
-    for d in discs {
-        let a = PI * d.radius * d.radius;
-        let n = d.normal;
-        bounds.area += a;
-        bounds.axes += a * n.abs();
-        bounds.tensor_diagonal += a * n * n;
-        bounds.tensor_off += a * Vec3::new(n.x * n.y, n.x * n.z, n.y * n.z);
     }
-    bounds
-}
-
-/// The summed shares of a whole tile of discs seen from (x, n) when it is far
-/// (`far_share` in `vals_occlusion.wgsl`); `None` when it is not, and its discs must be taken
-/// one by one.
-///
-/// Far: the tile's radius plus its largest disc's is at most `far` times its distance d, every
-/// centre nearer than the light and above the horizon. Seen from x, the discs then lie in a
-/// square around the tile's direction ŵ of half side asin(r/d) (each centre's direction is
-/// within that angle, and projection onto the tangent plane shortens chords) plus the largest
-/// disc's half side; the tile is taken as that square, grey with the discs' summed projected
-/// area A = Σ πρ_j²|n_j·ŵ|/(d² + ρ̄²) ([`OccluderBounds::projected_area`], ρ̄² the mean ρ²)
-/// spread evenly over it. Its share is A/S × (overlap of the light's square with it)/(its
-/// area) × the centre's ramp: A/S when it lies wholly inside the light's square, as the discs
-/// one by one give (each overlap then being the disc's whole area), and the evenly spread
-/// expectation where it straddles the square's edge. The error is first order in r/d across
-/// the tile and cancels to second order for a tile symmetric about its centre.
-pub fn far_share(
-    x: Vec3,
-    n: Vec3,
-    light: Vec3,
-    sphere: f32,
-    bounds: &OccluderBounds,
-    far: f32,
-) -> Option<f32> {
-    let to_light = light - x;
-    let light_distance = to_light.length();
-    let v = bounds.center - x;
-    let distance = v.length();
-    let r = bounds.radius;
-    if far <= 0.0
-        || sphere <= 0.0
-        || light_distance <= 0.0
-        || bounds.count == 0
-        || r + bounds.max_disc_radius > far * distance
-        || distance + r >= light_distance
-        || n.dot(v) <= r
-    {
-        return None;
-    }
-    let (t, b) = tangent_frame(n);
-    let wl = to_light / light_distance;
-    let wc = v / distance;
-    let alpha = (r / distance).min(1.0).asin();
-    let sphere_area = PI * sphere * sphere / (sphere * sphere + light_distance * light_distance);
-    let rd = bounds.max_disc_radius;
-    let nearest = distance - r;
-    let disc_half = 0.5 * (PI * rd * rd / (rd * rd + nearest * nearest)).sqrt();
-    let tile_side = 2.0 * (alpha + disc_half);
-    let tile_area = tile_side * tile_side;
-    let overlap = square_overlap(
-        (wl.dot(t), wl.dot(b)),
-        sphere_area,
-        (wc.dot(t), wc.dot(b)),
-        tile_area,
-    );
-    let mean_radius2 = bounds.area / (PI * bounds.count as f32);
-    let area = bounds.projected_area(wc) / (distance * distance + mean_radius2);
-    let ramp = ((light_distance - distance) / sphere).min(1.0);
-    Some(area / sphere_area * (overlap / tile_area) * ramp)
 }
 
 /// False only when no disc inside `bounds` can take a share of the light sphere seen from
@@ -490,110 +391,149 @@ pub fn tile_may_occlude(
     (wl - wc).dot(t).abs() < reach && (wl - wc).dot(b).abs() < reach
 }
 
-/// One receiver of a workgroup as [`group_ball`] sees it: its position and how far its
-/// farthest light with a sphere is (`None`: no light can be occluded).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct GroupReceiver {
-    pub x: Vec3,
-    pub reach: Option<f32>,
-}
+/// Children per internal node of the occlusion tree (`FANOUT` in `vals_occluder_bounds.wgsl`
+/// and `vals_occlusion.wgsl`).
+pub const OCCLUSION_FANOUT: usize = 8;
 
-/// The occlusion workgroup's reach (`group_ball` in `vals_occlusion.wgsl`): a ball around its
-/// receivers (the centre of their box, the farthest from it) grown by the longest distance
-/// from a receiver to its own light; `None` when no receiver has a light with a sphere.
-pub fn group_ball(receivers: &[GroupReceiver]) -> Option<(Vec3, f32)> {
-    let lit = || receivers.iter().filter(|r| r.reach.is_some());
-    let (lo, hi) = lit().fold(
+/// Where each disc goes in the occlusion pass's walk order (`walk[i]`: disc i's place): the
+/// discs sorted by the Morton code of their centres in the cube around them (30 bits), ties
+/// by index, so that a tile of consecutive discs is a compact patch across instances too.
+pub fn walk_order(centres: &[Vec3]) -> Vec<u32> {
+    let (lo, hi) = centres.iter().fold(
         (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
-        |(lo, hi), r| (lo.min(r.x), hi.max(r.x)),
+        |(lo, hi), c| (lo.min(*c), hi.max(*c)),
     );
-    let reach = lit().filter_map(|r| r.reach).reduce(f32::max)?;
-    let center = 0.5 * (lo + hi);
-    let radius = lit().map(|r| (r.x - center).length()).fold(0.0, f32::max);
-    Some((center, radius + reach))
-}
-
-/// Whether a super-tile within `bounds` may hold a disc that takes a share of some receiver
-/// of the group whose [`group_ball`] is `ball` (`ball_may_reach` in `vals_occlusion.wgsl`).
-/// Conservative against [`tile_may_occlude`]: that test is true only for a receiver x with a
-/// light at distance L when |c − x| < L + 1.001·r + 10⁻⁶, and |c − x| ≥ |c − g| − R_g, so a
-/// centre farther than R_g + L_max + 1.001·r (with slack for rounding) from the group's centre
-/// g fails it for every receiver, and the pass may skip the super-tile for the whole group.
-pub fn ball_may_reach(ball: Option<(Vec3, f32)>, bounds: &OccluderBounds) -> bool {
-    let Some((center, reach)) = ball else {
-        return false;
+    // One scale for all axes: cells are cubes, so a flat scene's runs are patches, not
+    // slices.
+    let scale = 1023.0 / (hi - lo).max_element().max(1e-20);
+    let spread = |v: u32| {
+        let mut x = v & 0x3ff;
+        x = (x | (x << 16)) & 0x0300_00ff;
+        x = (x | (x << 8)) & 0x0300_f00f;
+        x = (x | (x << 4)) & 0x030c_30c3;
+        (x | (x << 2)) & 0x0924_9249
     };
-    let limit = (reach + 1.001 * bounds.radius) * 1.0001 + 1e-5;
-    (bounds.center - center).length() <= limit
+    let code = |c: &Vec3| {
+        let q = ((*c - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
+        spread(q.x as u32) | (spread(q.y as u32) << 1) | (spread(q.z as u32) << 2)
+    };
+    let mut by_code: Vec<(u32, u32)> = centres
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (if c.is_finite() { code(c) } else { u32::MAX }, i as u32))
+        .collect();
+    by_code.sort_unstable();
+    let mut walk = vec![0u32; centres.len()];
+    for (place, &(_, i)) in by_code.iter().enumerate() {
+        walk[i as usize] = place as u32;
+    }
+    walk
 }
 
-/// How the occlusion pass combines and walks the discs: the mode, discs per tile, and the
-/// far-tile fraction (`occlusion-far`).
+/// Bounds around the bounds `children` (`cs_nodes` in `vals_occluder_bounds.wgsl`): the box
+/// around their boxes, a sphere from its centre around their spheres, the largest disc. It
+/// holds every disc centre its children hold.
+pub fn combine_bounds(children: &[OccluderBounds]) -> OccluderBounds {
+    let (lo, hi) = children.iter().fold(
+        (Vec3::splat(f32::MAX), Vec3::splat(f32::MIN)),
+        |(lo, hi), c| {
+            (
+                lo.min(c.center - c.half_extent),
+                hi.max(c.center + c.half_extent),
+            )
+        },
+    );
+    let center = 0.5 * (lo + hi);
+    let mut out = OccluderBounds {
+        center,
+        half_extent: 0.5 * (hi - lo),
+        ..Default::default()
+    };
+    for c in children {
+        out.radius = out.radius.max((c.center - center).length() + c.radius);
+        out.max_disc_radius = out.max_disc_radius.max(c.max_disc_radius);
+    }
+    out
+}
+
+/// Nodes per level of the occlusion tree over `discs` discs at `tile` a leaf: the tiles, then
+/// each level of [`OCCLUSION_FANOUT`]-ary internal nodes up to one root (`level_sizes` in
+/// `vals_occlusion.wgsl`).
+pub fn occlusion_levels(discs: usize, tile: usize) -> Vec<usize> {
+    let mut levels = vec![discs.div_ceil(tile.max(1)).max(1)];
+    while *levels.last().expect("one level") > 1 {
+        let below = *levels.last().expect("one level");
+        levels.push(below.div_ceil(OCCLUSION_FANOUT));
+    }
+    levels
+}
+
+/// The occlusion tree's bounds over `discs` in walk order, level by level: the tiles, then
+/// each internal node as [`combine_bounds`] of the tiles under it (`cs_nodes` in
+/// `vals_occluder_bounds.wgsl`; the spheres are tighter than around its children's).
+pub fn occlusion_tree(discs: &[OccluderDisc], tile: usize) -> Vec<Vec<OccluderBounds>> {
+    let tile = tile.max(1);
+    let mut tiles: Vec<OccluderBounds> = discs.chunks(tile).map(occluder_bounds).collect();
+    if tiles.is_empty() {
+        tiles.push(OccluderBounds::default());
+    }
+    let sizes = occlusion_levels(discs.len(), tile);
+    let mut levels = vec![tiles];
+    let mut span = 1;
+    for _ in 1..sizes.len() {
+        span *= OCCLUSION_FANOUT;
+        let next = levels[0].chunks(span).map(combine_bounds).collect();
+        levels.push(next);
+    }
+    levels
+}
+
+/// How the occlusion pass combines and walks the discs: the mode and discs per tile.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OcclusionWalk {
     pub mode: OcclusionMode,
     pub tile: usize,
-    pub far: f32,
 }
 
-/// Occlusion at receiver `index` from every other disc, as the occlusion pass takes them:
-/// super-tiles of [`crate::vals::sparse::OCCLUSION_SUPER_TILE`] tiles of `tile` discs, each
-/// skipped when [`tile_may_occlude`] says no, taken whole when [`far_share`] (with `far`)
-/// says yes, else opened; an opened tile's discs one by one in order. With `far` = 0 that is
-/// every disc in order. A whole tile's k discs of summed share s count as k discs of s/k
-/// each in `union`.
+/// Occlusion at a receiver from `discs` (in walk order, the receiver's own among them: at
+/// distance 0 its share is exactly 0), as the occlusion pass takes them: depth first through
+/// `tree` ([`occlusion_tree`]), children in order, each node skipped when
+/// [`tile_may_occlude`] says no, else opened; an opened tile's discs one by one in order —
+/// every disc that may take a share, in walk order.
 pub fn occlusion(
-    index: usize,
     receiver: &Receiver,
     light: Vec3,
     sphere: f32,
     discs: &[OccluderDisc],
+    tree: &[Vec<OccluderBounds>],
     walk: OcclusionWalk,
 ) -> f32 {
-    let OcclusionWalk { mode, tile, far } = walk;
-    if matches!(mode, OcclusionMode::Off | OcclusionMode::Rays) {
+    if matches!(walk.mode, OcclusionMode::Off | OcclusionMode::Rays) || discs.is_empty() {
         return 0.0;
     }
-    let (x, n) = (receiver.position, receiver.normal);
-    let tile = tile.clamp(1, crate::vals::sparse::OCCLUSION_TILE_MAX as usize);
-    let span = tile * crate::vals::sparse::OCCLUSION_SUPER_TILE as usize;
     let mut sum = 0.0f32;
     let mut visible = 1.0f32;
-    let whole = |share: f32, count: u32, sum: &mut f32, visible: &mut f32| {
-        *sum += share;
-        *visible *= (1.0 - share / count.max(1) as f32)
-            .max(0.0)
-            .powi(count as i32);
-    };
-    for (s, super_discs) in discs.chunks(span).enumerate() {
-        let bounds = occluder_bounds(super_discs);
-        if !tile_may_occlude(x, n, light, sphere, &bounds) {
+    let mut stack = vec![(tree.len() - 1, 0usize)];
+    let (x, n) = (receiver.position, receiver.normal);
+    while let Some((level, k)) = stack.pop() {
+        let bounds = &tree[level][k];
+        if !tile_may_occlude(x, n, light, sphere, bounds) {
             continue;
         }
-        if let Some(share) = far_share(x, n, light, sphere, &bounds, far) {
-            whole(share, bounds.count, &mut sum, &mut visible);
-            continue;
-        }
-        for (t, tile_discs) in super_discs.chunks(tile).enumerate() {
-            let bounds = occluder_bounds(tile_discs);
-            if !tile_may_occlude(x, n, light, sphere, &bounds) {
-                continue;
-            }
-            if let Some(share) = far_share(x, n, light, sphere, &bounds, far) {
-                whole(share, bounds.count, &mut sum, &mut visible);
-                continue;
-            }
-            for (j, disc) in tile_discs.iter().enumerate() {
-                if s * span + t * tile + j == index {
-                    continue;
-                }
+        if level == 0 {
+            let first = k * walk.tile;
+            for disc in &discs[first..(first + walk.tile).min(discs.len())] {
                 let o = occluder_share(x, n, light, sphere, disc);
                 sum += o;
                 visible *= 1.0 - o;
             }
+        } else {
+            let children =
+                k * OCCLUSION_FANOUT..((k + 1) * OCCLUSION_FANOUT).min(tree[level - 1].len());
+            stack.extend(children.rev().map(|c| (level - 1, c)));
         }
     }
-    match mode {
+    match walk.mode {
         OcclusionMode::Sum => sum.min(1.0),
         OcclusionMode::Union => 1.0 - visible,
         OcclusionMode::Off | OcclusionMode::Rays => 0.0,
@@ -728,180 +668,90 @@ mod tests {
     }
 
     proptest::proptest! {
-        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
-        /// The workgroup's test is conservative: when `ball_may_reach` skips a super-tile,
-        /// `tile_may_occlude` skips it for every receiver of the group and each of its lights.
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+        /// The tree only skips what takes no share: the walk gives exactly the plain sum over
+        /// every disc in walk order, for tiles of 1 to 9 discs.
         #[test]
-        fn a_super_tile_the_group_skips_is_skipped_by_every_receiver(
-            receivers in proptest::collection::vec(
-                (
-                    proptest::array::uniform3(-2.0f32..2.0),
-                    proptest::array::uniform3(-1.0f32..1.0),
-                    proptest::array::uniform3(-4.0f32..4.0),
-                    0.0f32..1.0,
-                ),
-                1..64,
+        fn the_tree_walk_is_the_plain_sum(
+            x in proptest::array::uniform3(-1.0f32..1.0),
+            n in proptest::array::uniform3(-1.0f32..1.0),
+            light in proptest::array::uniform3(-3.0f32..3.0),
+            sphere in 0.05f32..1.5,
+            tile in 1usize..10,
+            discs in proptest::collection::vec(
+                (proptest::array::uniform3(-3.0f32..3.0), proptest::array::uniform3(-1.0f32..1.0), 0.01f32..0.4),
+                1..120,
             ),
-            centre in proptest::array::uniform3(-8.0f32..8.0),
-            radius in 0.0f32..2.0,
-            max_disc_radius in 0.001f32..0.3,
         ) {
-            let bounds = OccluderBounds { center: Vec3::from(centre), radius, max_disc_radius, ..Default::default() };
-            let lit: Vec<_> = receivers
+            let n = Vec3::from(n).try_normalize().unwrap_or(Vec3::Y);
+            let discs: Vec<OccluderDisc> = discs
                 .iter()
-                .map(|&(x, n, light, sphere)| {
-                    let (x, light) = (Vec3::from(x), Vec3::from(light));
-                    let n = Vec3::from(n).try_normalize().unwrap_or(Vec3::Y);
-                    (x, n, light, sphere)
+                .map(|&(c, normal, radius)| OccluderDisc {
+                    center: Vec3::from(c),
+                    normal: Vec3::from(normal).try_normalize().unwrap_or(Vec3::X),
+                    radius,
                 })
                 .collect();
-            let group: Vec<GroupReceiver> = lit
-                .iter()
-                .map(|&(x, _, light, sphere)| GroupReceiver {
-                    x,
-                    reach: (sphere > 0.0).then(|| (light - x).length()),
-                })
-                .collect();
-            if !ball_may_reach(group_ball(&group), &bounds) {
-                for &(x, n, light, sphere) in &lit {
-                    proptest::prop_assert!(!tile_may_occlude(x, n, light, sphere, &bounds));
+            let walk = walk_order(&discs.iter().map(|d| d.center).collect::<Vec<_>>());
+            let mut ordered = discs.clone();
+            for (i, d) in discs.iter().enumerate() {
+                ordered[walk[i] as usize] = *d;
+            }
+            let receiver = Receiver { position: Vec3::from(x), normal: n, k: 1.0 };
+            let tree = occlusion_tree(&ordered, tile);
+            for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
+                let got = occlusion(&receiver, Vec3::from(light), sphere, &ordered, &tree, OcclusionWalk { mode, tile });
+                let mut sum = 0.0f32;
+                let mut visible = 1.0f32;
+                for d in &ordered {
+                    let o = occluder_share(receiver.position, n, Vec3::from(light), sphere, d);
+                    sum += o;
+                    visible *= 1.0 - o;
                 }
+                let want = if mode == OcclusionMode::Sum { sum.min(1.0) } else { 1.0 - visible };
+                proptest::prop_assert_eq!(got, want);
             }
         }
     }
 
     #[test]
-    fn the_group_skips_super_tiles_beyond_its_lights() {
-        let receiver = |x: f32, reach: Option<f32>| GroupReceiver {
-            x: Vec3::new(x, 0.0, 0.0),
-            reach,
-        };
-        let ball = group_ball(&[
-            receiver(-1.0, Some(2.0)),
-            receiver(1.0, Some(3.0)),
-            receiver(9.0, None),
-        ]);
-        assert_eq!(ball, Some((Vec3::ZERO, 4.0)));
-        let at = |x: f32| OccluderBounds {
-            center: Vec3::new(x, 0.0, 0.0),
-            radius: 1.0,
-            max_disc_radius: 0.1,
-            ..Default::default()
-        };
-        assert!(ball_may_reach(ball, &at(4.9)));
-        assert!(!ball_may_reach(ball, &at(5.1)));
-        assert!(!ball_may_reach(
-            group_ball(&[receiver(0.0, None)]),
-            &at(0.0)
-        ));
-    }
-
-    /// A box of 6 faces × 4 discs and a flat patch: the area moments give Σπρ²|n·w| exactly
-    /// (axis normals, equal normals) and from above otherwise.
-    #[test]
-    fn area_moments_give_the_projected_area() {
-        let disc = |normal: Vec3, radius: f32| OccluderDisc {
-            center: Vec3::ZERO,
-            normal,
-            radius,
-        };
-        let exact = |discs: &[OccluderDisc], w: Vec3| -> f32 {
-            discs
-                .iter()
-                .map(|d| PI * d.radius * d.radius * d.normal.dot(w).abs())
-                .sum()
-        };
-        let faces = [
-            Vec3::X,
-            Vec3::NEG_X,
-            Vec3::Y,
-            Vec3::NEG_Y,
-            Vec3::Z,
-            Vec3::NEG_Z,
-        ];
-        let cube: Vec<_> = faces
-            .iter()
-            .flat_map(|&n| std::iter::repeat_n(disc(n, 0.1), 4))
-            .collect();
-        let tilted = Vec3::new(0.3, 0.8, -0.5).normalize();
-        let patch: Vec<_> = (1..6).map(|i| disc(tilted, 0.02 * i as f32)).collect();
-        let mixed: Vec<_> = (0..12)
+    fn walk_order_is_a_permutation_that_keeps_neighbours_together() {
+        // Two clusters listed alternately: the walk puts each cluster's discs together.
+        let centres: Vec<Vec3> = (0..20)
             .map(|i| {
-                let a = i as f32 * 0.7;
-                disc(Vec3::new(a.cos(), 0.5, a.sin()).normalize(), 0.05)
+                let side = if i % 2 == 0 { -5.0 } else { 5.0 };
+                Vec3::new(side + 0.01 * i as f32, 0.0, 0.0)
             })
             .collect();
-        for w in [Vec3::Y, Vec3::new(1.0, 2.0, -0.5).normalize(), tilted] {
-            let c = exact(&cube, w);
-            assert!((occluder_bounds(&cube).projected_area(w) - c).abs() < 1e-5 * c.max(1.0));
-            let p = exact(&patch, w);
-            assert!((occluder_bounds(&patch).projected_area(w) - p).abs() < 1e-4 * p.max(1e-3));
-            let m = exact(&mixed, w);
-            let bound = occluder_bounds(&mixed).projected_area(w);
-            assert!(
-                bound >= m * (1.0 - 1e-5) && bound <= 1.5 * m,
-                "{bound} vs {m}"
-            );
+        let walk = walk_order(&centres);
+        let mut seen = walk.clone();
+        seen.sort();
+        assert_eq!(seen, (0..20).collect::<Vec<u32>>());
+        for (i, &w) in walk.iter().enumerate() {
+            assert_eq!(w < 10, i % 2 == 0, "disc {i} at {w}");
         }
     }
 
-    /// A far tile inside a large light counts whole within a few per cent of its discs one by
-    /// one; near, straddling the light's edge or behind the light it is not taken whole.
     #[test]
-    fn a_far_tile_counts_whole_close_to_its_discs() {
-        let x = Vec3::ZERO;
-        let n = Vec3::Y;
-        let light = Vec3::new(0.0, 20.0, 0.0);
-        let sphere = 10.0;
-        // A 5×5 grid of discs 0.1 m apart, facing down, 6 m above the receiver.
-        let grid = |centre: Vec3| -> Vec<OccluderDisc> {
-            (0..25)
-                .map(|i| OccluderDisc {
-                    center: centre
-                        + Vec3::new((i % 5) as f32 * 0.1 - 0.2, 0.0, (i / 5) as f32 * 0.1 - 0.2),
-                    normal: Vec3::NEG_Y,
-                    radius: 0.04,
-                })
-                .collect()
+    fn combined_bounds_hold_their_childrens_discs() {
+        let disc = |c: Vec3, n: Vec3, r: f32| OccluderDisc {
+            center: c,
+            normal: n,
+            radius: r,
         };
-        let discs = grid(Vec3::new(0.5, 6.0, 0.3));
-        let bounds = occluder_bounds(&discs);
-        let one_by_one: f32 = discs
-            .iter()
-            .map(|d| occluder_share(x, n, light, sphere, d))
-            .sum();
-        let whole = far_share(x, n, light, sphere, &bounds, 0.15).expect("far and inside");
-        assert!(
-            (whole - one_by_one).abs() < 0.02 * one_by_one,
-            "whole {whole} vs one by one {one_by_one}"
-        );
-        // Too near for 0.15 (radius 0.33 m at 1 m).
-        let near = occluder_bounds(&grid(Vec3::new(0.0, 1.0, 0.0)));
-        assert!(far_share(x, n, light, sphere, &near, 0.15).is_none());
-        // 0 takes every disc on its own.
-        assert!(far_share(x, n, light, sphere, &bounds, 0.0).is_none());
-        // A small light whose square is smaller than the tile's, near its edge: the discs
-        // spread evenly over the tile's square, so the share is the covered fraction of the
-        // whole, near what the discs one by one give on average.
-        let small = 0.4;
-        let edge = occluder_bounds(&grid(Vec3::new(0.15, 6.0, 0.0)));
-        let discs_edge = grid(Vec3::new(0.15, 6.0, 0.0));
-        let straddling = far_share(x, n, light, small, &edge, 0.15).expect("far");
-        let one_by_one_small: f32 = discs_edge
-            .iter()
-            .map(|d| occluder_share(x, n, light, small, d))
-            .sum();
-        assert!(
-            straddling > 0.0 && (straddling - one_by_one_small).abs() < 0.5 * one_by_one_small,
-            "straddling {straddling} vs one by one {one_by_one_small}"
-        );
-        // Beside the light's square: nothing.
-        assert_eq!(
-            far_share(x, n, Vec3::new(15.0, 20.0, 0.0), small, &bounds, 0.15),
-            Some(0.0)
-        );
-        // Beyond the light.
-        assert!(far_share(x, n, Vec3::new(0.0, 5.0, 0.0), sphere, &bounds, 0.15).is_none());
+        let a = [disc(Vec3::ZERO, Vec3::Y, 0.1), disc(Vec3::X, Vec3::Z, 0.2)];
+        let b = [disc(Vec3::new(4.0, 1.0, -2.0), Vec3::NEG_X, 0.3)];
+        let all: Vec<_> = a.iter().chain(&b).copied().collect();
+        let combined = combine_bounds(&[occluder_bounds(&a), occluder_bounds(&b)]);
+        for d in &all {
+            assert!((d.center - combined.center).length() <= combined.radius + 1e-6);
+            assert!(
+                ((d.center - combined.center).abs() - combined.half_extent).max_element() <= 1e-6
+            );
+        }
+        assert_eq!(combined.max_disc_radius, 0.3);
+        assert_eq!(occlusion_levels(1000, 64), vec![16, 2, 1]);
+        assert_eq!(occlusion_levels(5, 64), vec![1]);
     }
 
     #[test]
@@ -1000,28 +850,27 @@ mod tests {
                 radius: 0.2,
             })
             .collect();
+        let tree = occlusion_tree(&discs, 64);
         let sum = occlusion(
-            usize::MAX,
             &receiver,
             light,
             0.5,
             &discs,
+            &tree,
             OcclusionWalk {
                 mode: OcclusionMode::Sum,
                 tile: 64,
-                far: 0.0,
             },
         );
         let union = occlusion(
-            usize::MAX,
             &receiver,
             light,
             0.5,
             &discs,
+            &tree,
             OcclusionWalk {
                 mode: OcclusionMode::Union,
                 tile: 64,
-                far: 0.0,
             },
         );
         assert!(sum > 0.0 && union > 0.0);

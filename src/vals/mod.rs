@@ -58,7 +58,6 @@ impl Default for SparseSettings {
                 visibility_history: 50,
                 adaptive_rays: false,
                 gather_slices: 0,
-                occlusion_far: DEFAULT_OCCLUSION_FAR,
             },
             glossy_eye: GlossyEye::Mid,
             link_test: true,
@@ -109,7 +108,6 @@ impl SparseSettings {
                 adaptive_rays: options.choice("visibility-rays", &["all", "adaptive"])?
                     == "adaptive",
                 gather_slices: gather_slices_option(options)?,
-                occlusion_far: occlusion_far_option(options)?,
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -118,20 +116,6 @@ impl SparseSettings {
             link_test: options.choice("link-test", &["on", "off"])? == "on",
         })
     }
-}
-
-/// Default `occlusion-far`: a tile counts whole from 6.7 of its radii away.
-pub const DEFAULT_OCCLUSION_FAR: f32 = 0.15;
-
-/// `occlusion-far`: a fraction in 0..=0.5 (0: every disc on its own).
-fn occlusion_far_option(options: &MethodOptions) -> Result<f32, RenderError> {
-    let far: f32 = options.get("occlusion-far", DEFAULT_OCCLUSION_FAR)?;
-    if !(0.0..=0.5).contains(&far) {
-        return Err(RenderError::Settings(format!(
-            "--occlusion-far {far}: must be 0..=0.5 (a tile's radius over its distance; 0 takes every disc on its own)"
-        )));
-    }
-    Ok(far)
 }
 
 /// `gather-slices`: `auto` (0) or a count in 1..=[`sparse::GATHER_SLICES_MAX`].
@@ -229,8 +213,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 tile,
                 vertex_count,
                 rsm_tiles,
-                visibility_history,
-                occlusion_far
+                visibility_history
             ]
         ),
         shared_layout!(
@@ -304,12 +287,6 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Int { min: 1, max: 256 },
         default: "128",
         help: "VALs per workgroup-memory tile in the gather",
-    },
-    OptionSpec {
-        name: "occlusion-far",
-        kind: OptionKind::Text,
-        default: "0.15",
-        help: "disc occlusion (sum, union): a tile of discs at least 1/f of its radius away counts whole, as a grey square of their summed projected area (from its area moments); 0 takes every disc on its own",
     },
     OptionSpec {
         name: "gather",

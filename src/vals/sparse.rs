@@ -37,23 +37,23 @@ pub use crate::light::{
 /// `vals_occlusion.wgsl` and `vals_occluder_bounds.wgsl`).
 pub const OCCLUSION_TILE_MAX: u32 = 256;
 
-/// Tiles per occlusion super-tile (`SUPER_TILE` in `vals_occlusion.wgsl` and
-/// `vals_occluder_bounds.wgsl`): the pass tests a super-tile's bounds before its tiles'.
-pub const OCCLUSION_SUPER_TILE: u32 = 64;
+/// vec4 words per node (tile or internal) of the occlusion tree (`BOUNDS_VEC4S` in
+/// `vals_occluder_bounds.wgsl` and `vals_occlusion.wgsl`; [`super::math::OccluderBounds`]):
+/// the centre and radius of the sphere around its disc centres; the half size of their box
+/// and the largest disc radius.
+pub const OCCLUDER_BOUNDS_VEC4S: u32 = 2;
 
-/// vec4 words per tile (and super-tile) of occluder bounds (`BOUNDS_VEC4S` in
-/// `vals_occluder_bounds.wgsl` and `vals_occlusion.wgsl`; [`super::math::OccluderBounds`]): centre
-/// and radius; largest disc radius, Σπρ², disc count; Σπρ²|n|; Σπρ² n nᵀ in two (the
-/// centres' box's half size in the last three `w`).
-pub const OCCLUDER_BOUNDS_VEC4S: u32 = 5;
-
-/// Tiles and super-tiles of `point_count` points at `tile` points a tile.
-pub fn occlusion_tiles(point_count: u32, tile: u32) -> (u32, u32) {
-    let tile = tile.clamp(1, OCCLUSION_TILE_MAX);
-    (
-        point_count.div_ceil(tile),
-        point_count.div_ceil(tile * OCCLUSION_SUPER_TILE),
+/// Nodes per level of the occlusion tree over `point_count` discs at `tile` (clamped to
+/// 1..=[`OCCLUSION_TILE_MAX`]) a leaf: tiles first, then internal levels up to one root
+/// ([`super::math::occlusion_levels`]).
+pub fn occlusion_levels(point_count: u32, tile: u32) -> Vec<u32> {
+    super::math::occlusion_levels(
+        point_count as usize,
+        tile.clamp(1, OCCLUSION_TILE_MAX) as usize,
     )
+    .into_iter()
+    .map(|n| n as u32)
+    .collect()
 }
 
 /// Invocations per workgroup of the solution kernels (gather, renormalize, occlusion,
@@ -146,10 +146,6 @@ pub struct SparseOptions {
     /// Slices of the VAL list the compute gather is split into (0: automatic, see
     /// [`gather_slices`]).
     pub gather_slices: u32,
-    /// Disc occlusion (`sum`, `union`): a tile or super-tile of discs whose radius is at most
-    /// this fraction of its distance counts as a whole, from its area moments
-    /// (`occlusion-far`; 0: every disc on its own, see [`crate::vals::math::far_share`]).
-    pub occlusion_far: f32,
 }
 
 /// The two forms of the gather (`--gather`), which compute the same sums.
@@ -278,6 +274,8 @@ pub struct SparseGpu {
     occlusion: Kernel,
     /// The bounds of the occlusion pass's disc tiles (view-free, its own parameter block).
     occluder_bounds: Kernel,
+    /// Each point's place in the occlusion walk.
+    occluder_walk: Vec<u32>,
     interpolate: Kernel,
     bvh: SceneBvh,
     visibility_buffer: wgpu::Buffer,
@@ -319,7 +317,8 @@ const GATHER_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, W, W, R];
 /// Instances, points, point diffuse and glossy (renormalized in place), extra, clamp counts.
 const RENORMALIZE_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, W];
 /// Instances, points, the occluder tiles' bounds it writes.
-const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W, W];
+/// Instances, points, the tree's bounds and the world-space discs it writes, the walk order.
+const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R];
 /// Instances, points, point diffuse and glossy (dimmed in place), extra, occluder bounds,
 /// world-space discs.
 const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R, R];
@@ -339,7 +338,10 @@ struct SparsePipelines {
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
+    /// The bounds kernel's discs stage (`cs_main`); `occluder_stages` are its tiles and
+    /// internal-node stages (`cs_tiles`, `cs_nodes`), on the same layout.
     occluder_bounds: (GroupLayout, wgpu::ComputePipeline),
+    occluder_stages: [wgpu::ComputePipeline; 2],
     occlusion: (GroupLayout, wgpu::ComputePipeline),
     interpolate: (GroupLayout, wgpu::ComputePipeline),
     /// Group 1 is the scene BVH's ([`SceneBvh::layout`]), group 2 a depth sensor's.
@@ -439,16 +441,26 @@ impl SparsePipelines {
             targets: &[RADIANCE_FORMAT],
         }
         .build(device);
+        let occluder_bounds = kernel(
+            "occluder bounds",
+            "vals_occluder_bounds.wgsl",
+            OCCLUDER_BOUNDS_BINDINGS,
+        )?;
         Ok(Self {
             gather: (gather_layout, gather),
             gather_reduce,
             partials,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
-            occluder_bounds: kernel(
-                "occluder bounds",
-                "vals_occluder_bounds.wgsl",
-                OCCLUDER_BOUNDS_BINDINGS,
-            )?,
+            occluder_stages: ["cs_tiles", "cs_nodes"].map(|entry| {
+                compute_pipeline_groups(
+                    device,
+                    "occluder bounds",
+                    &ctx.shader("vals_occluder_bounds.wgsl"),
+                    &[&occluder_bounds.0.layout],
+                    entry,
+                )
+            }),
+            occluder_bounds,
             occlusion: kernel("occlusion", "vals_occlusion.wgsl", OCCLUSION_BINDINGS)?,
             interpolate: kernel(
                 "interpolation",
@@ -715,19 +727,41 @@ impl SparseGpu {
             &pipelines.renormalize,
             &[&lights[..], &[&clamp_buffer]].concat(),
         );
-        // At most one tile per point.
-        let (most_tiles, most_supers) = occlusion_tiles(point_count.max(1), 1);
+        // The most nodes: one tile per point.
+        let most_nodes: u32 = occlusion_levels(point_count.max(1), 1).iter().sum();
         let occluder_bounds = empty(
             &mut bytes,
             "occluder bounds",
-            16 * OCCLUDER_BOUNDS_VEC4S as u64 * (most_tiles + most_supers) as u64,
+            16 * OCCLUDER_BOUNDS_VEC4S as u64 * most_nodes as u64,
         );
-        // Every point's disc in world space (centre, radius; normal), for the occlusion pass.
+        // Every point's disc in world space (centre, radius; normal), in walk order.
         let occluder_discs = empty(&mut bytes, "occluder discs", 32 * point_count.max(1) as u64);
+        // The walk order: the points' Morton order where the scene first stands, so that a
+        // tile of the walk is a compact patch across instances as within a mesh. Instances
+        // that move later keep their places (the bounds follow them; only culling loosens).
+        let world = scene.world_from_node();
+        let centres: Vec<Vec3> = points_model
+            .iter()
+            .zip(&point_instances)
+            .map(|(model, &instance)| {
+                let p = Vec3::new(
+                    f32::from_bits(model[0]),
+                    f32::from_bits(model[1]),
+                    f32::from_bits(model[2]),
+                );
+                world[scene.instances[instance].node].transform_point3(p)
+            })
+            .collect();
+        let occluder_walk = super::math::walk_order(&centres);
+        let occluder_walk_buffer = init(
+            &mut bytes,
+            "occluder walk",
+            bytemuck::cast_slice(&occluder_walk),
+        );
         let occluder_bounds_kernel = kernel(
             "occluder bounds",
             &pipelines.occluder_bounds,
-            &[&occluder_bounds, &occluder_discs],
+            &[&occluder_bounds, &occluder_discs, &occluder_walk_buffer],
         );
         let occlusion = kernel(
             "occlusion",
@@ -806,6 +840,7 @@ impl SparseGpu {
             renormalize,
             occlusion,
             occluder_bounds: occluder_bounds_kernel,
+            occluder_walk,
             interpolate,
             bvh,
             visibility_buffer,
@@ -952,38 +987,34 @@ impl SparseGpu {
     }
 
     /// The per-(point, cluster) visibility of the last recorded frame, V·255 per byte.
-    /// The occlusion pass's bounds of the last frame that ran it as
-    /// [`math::OccluderBounds`]: per tile (`tile` points each), then per super-tile
-    /// ([`OCCLUSION_SUPER_TILE`] tiles each).
+    /// The occlusion tree's bounds of the last frame that ran the pass, as
+    /// [`super::math::OccluderBounds`] per level: tiles (`tile` discs of the walk order
+    /// each), then each internal level up to the root.
     pub fn read_occluder_bounds(
         &self,
         ctx: &GpuContext,
         tile: u32,
-    ) -> Result<
-        (
-            Vec<super::math::OccluderBounds>,
-            Vec<super::math::OccluderBounds>,
-        ),
-        GpuError,
-    > {
+    ) -> Result<Vec<Vec<super::math::OccluderBounds>>, GpuError> {
         let buffer = &self.occluder_bounds.buffers[3];
         let raw: Vec<[f32; 4]> = crate::gpu::read_buffer(ctx, buffer)?;
-        let (tiles, supers) = occlusion_tiles(self.point_count, tile);
         let mut all = raw
             .chunks_exact(OCCLUDER_BOUNDS_VEC4S as usize)
             .map(|slot| super::math::OccluderBounds {
                 center: Vec3::new(slot[0][0], slot[0][1], slot[0][2]),
                 radius: slot[0][3],
-                max_disc_radius: slot[1][0],
-                area: slot[1][1],
-                count: slot[1][2] as u32,
-                half_extent: Vec3::new(slot[2][3], slot[3][3], slot[4][3]),
-                axes: Vec3::new(slot[2][0], slot[2][1], slot[2][2]),
-                tensor_diagonal: Vec3::new(slot[3][0], slot[3][1], slot[3][2]),
-                tensor_off: Vec3::new(slot[4][0], slot[4][1], slot[4][2]),
+                half_extent: Vec3::new(slot[1][0], slot[1][1], slot[1][2]),
+                max_disc_radius: slot[1][3],
             });
-        let tile_bounds = all.by_ref().take(tiles as usize).collect();
-        Ok((tile_bounds, all.take(supers as usize).collect()))
+        Ok(occlusion_levels(self.point_count, tile)
+            .iter()
+            .map(|&n| all.by_ref().take(n as usize).collect())
+            .collect())
+    }
+
+    /// Each point's place in the occlusion pass's walk order
+    /// ([`super::math::walk_order`], fixed when the solution is built).
+    pub fn occluder_walk(&self) -> &[u32] {
+        &self.occluder_walk
     }
 
     pub fn read_visibility(&self, ctx: &GpuContext) -> Result<Vec<u8>, GpuError> {
@@ -1028,8 +1059,6 @@ impl SparseGpu {
             } else {
                 0
             },
-            occlusion_far: options.occlusion_far,
-            _pad: [0; 3],
         }
     }
 
@@ -1183,19 +1212,32 @@ impl SparseGpu {
             compute(passes, &self.renormalize, renormalize, points)?;
         }
         let disc_occlusion = matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union);
-        if last >= Stage::Occlusion && disc_occlusion {
-            let (tiles, supers) = occlusion_tiles(self.point_count, options.tile);
+        if last >= Stage::Occlusion && disc_occlusion && self.point_count > 0 {
+            let levels = occlusion_levels(self.point_count, options.tile);
             let own = self
                 .occluder_bounds
                 .group
                 .as_ref()
                 .expect("bound at creation");
-            compute(
-                passes,
-                &self.occluder_bounds,
-                own,
-                (tiles + supers).div_ceil(POINT_GROUP),
-            )?;
+            // The discs in walk order, the tiles' bounds from them, then every internal node's
+            // from its tiles: three dispatches, each reading what the one before wrote.
+            let internal: u32 = levels[1..].iter().sum();
+            let stages = [
+                (&self.occluder_bounds.pipeline, self.point_count),
+                (&self.pipelines.occluder_stages[0], levels[0]),
+                (&self.pipelines.occluder_stages[1], internal),
+            ];
+            passes.compute(self.occluder_bounds.label, |pass| {
+                pass.set_bind_group(0, own, &[]);
+                for (pipeline, n) in stages {
+                    if n == 0 {
+                        continue;
+                    }
+                    let (x, y) = linear_groups(n.div_ceil(POINT_GROUP), max_groups);
+                    pass.set_pipeline(pipeline);
+                    pass.dispatch_workgroups(x, y, 1);
+                }
+            })?;
             compute(passes, &self.occlusion, occlusion, points)?;
         }
         if last >= Stage::Interpolate {
