@@ -395,6 +395,15 @@ pub fn tile_may_occlude(
 /// and `vals_occlusion.wgsl`).
 pub const OCCLUSION_FANOUT: usize = 8;
 
+/// Spreads the low 10 bits of `v` to every third bit: one axis of a 30-bit Morton code.
+pub fn morton_spread(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    (x | (x << 2)) & 0x0924_9249
+}
+
 /// Where each disc goes in the occlusion pass's walk order (`walk[i]`: disc i's place): the
 /// discs sorted by the Morton code of their centres in the cube around them (30 bits), ties
 /// by index, so that a tile of consecutive discs is a compact patch across instances too.
@@ -406,16 +415,11 @@ pub fn walk_order(centres: &[Vec3]) -> Vec<u32> {
     // One scale for all axes: cells are cubes, so a flat scene's runs are patches, not
     // slices.
     let scale = 1023.0 / (hi - lo).max_element().max(1e-20);
-    let spread = |v: u32| {
-        let mut x = v & 0x3ff;
-        x = (x | (x << 16)) & 0x0300_00ff;
-        x = (x | (x << 8)) & 0x0300_f00f;
-        x = (x | (x << 4)) & 0x030c_30c3;
-        (x | (x << 2)) & 0x0924_9249
-    };
     let code = |c: &Vec3| {
         let q = ((*c - lo) * scale).clamp(Vec3::ZERO, Vec3::splat(1023.0));
-        spread(q.x as u32) | (spread(q.y as u32) << 1) | (spread(q.z as u32) << 2)
+        morton_spread(q.x as u32)
+            | (morton_spread(q.y as u32) << 1)
+            | (morton_spread(q.z as u32) << 2)
     };
     let mut by_code: Vec<(u32, u32)> = centres
         .iter()

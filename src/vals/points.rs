@@ -14,7 +14,7 @@ use glam::{Mat3, Mat4, Vec3};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
 
-use super::math::link_weights;
+use super::math::{link_weights, morton_spread};
 use crate::sampling::Rng;
 use crate::scene::{Mesh, Scene};
 
@@ -229,17 +229,9 @@ fn sort_by_morton_code(indices: &mut [usize], positions: &[Vec3]) {
         |(lo, hi), &i| (lo.min(positions[i]), hi.max(positions[i])),
     );
     let scale = 1023.0 / (hi - lo).max(Vec3::splat(1e-12));
-    // Spreads the low 10 bits of v to every third bit.
-    let spread = |v: u32| {
-        let mut x = v & 0x3ff;
-        x = (x | (x << 16)) & 0x030000ff;
-        x = (x | (x << 8)) & 0x0300f00f;
-        x = (x | (x << 4)) & 0x030c30c3;
-        (x | (x << 2)) & 0x09249249
-    };
     let code = |i: usize| {
         let q = ((positions[i] - lo) * scale).round().as_uvec3();
-        spread(q.x) | (spread(q.y) << 1) | (spread(q.z) << 2)
+        morton_spread(q.x) | (morton_spread(q.y) << 1) | (morton_spread(q.z) << 2)
     };
     indices.sort_by_key(|&i| code(i));
 }
