@@ -97,21 +97,74 @@ fn cs_nodes(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgrou
     }
     let first = index * span;
     let end = min(first + span, tiles);
-    var lo = vec3<f32>(3.4e38);
-    var hi = vec3<f32>(-3.4e38);
-    var max_disc_radius = 0.0;
-    for (var t = first; t < end; t++) {
-        let sphere = occluder_bounds[BOUNDS_VEC4S * t];
-        let sizes = occluder_bounds[BOUNDS_VEC4S * t + 1u];
-        lo = min(lo, sphere.xyz - sizes.xyz);
-        hi = max(hi, sphere.xyz + sizes.xyz);
-        max_disc_radius = max(max_disc_radius, sizes.w);
+    // The root spans every tile; llvmpipe ends a loop after 65535 iterations per invocation,
+    // so each loop takes 16 tiles an iteration (a million tiles).
+    var node = Node(vec3<f32>(3.4e38), vec3<f32>(-3.4e38), 0.0);
+    for (var t = first; t < end; t += 16u) {
+        for_box(&node, t + 0u, end);
+        for_box(&node, t + 1u, end);
+        for_box(&node, t + 2u, end);
+        for_box(&node, t + 3u, end);
+        for_box(&node, t + 4u, end);
+        for_box(&node, t + 5u, end);
+        for_box(&node, t + 6u, end);
+        for_box(&node, t + 7u, end);
+        for_box(&node, t + 8u, end);
+        for_box(&node, t + 9u, end);
+        for_box(&node, t + 10u, end);
+        for_box(&node, t + 11u, end);
+        for_box(&node, t + 12u, end);
+        for_box(&node, t + 13u, end);
+        for_box(&node, t + 14u, end);
+        for_box(&node, t + 15u, end);
     }
-    let centre = 0.5 * (lo + hi);
+    let centre = 0.5 * (node.lo + node.hi);
     var radius = 0.0;
-    for (var t = first; t < end; t++) {
-        let sphere = occluder_bounds[BOUNDS_VEC4S * t];
-        radius = max(radius, length(sphere.xyz - centre) + sphere.w);
+    for (var t = first; t < end; t += 16u) {
+        radius = max(radius, reach(t + 0u, end, centre));
+        radius = max(radius, reach(t + 1u, end, centre));
+        radius = max(radius, reach(t + 2u, end, centre));
+        radius = max(radius, reach(t + 3u, end, centre));
+        radius = max(radius, reach(t + 4u, end, centre));
+        radius = max(radius, reach(t + 5u, end, centre));
+        radius = max(radius, reach(t + 6u, end, centre));
+        radius = max(radius, reach(t + 7u, end, centre));
+        radius = max(radius, reach(t + 8u, end, centre));
+        radius = max(radius, reach(t + 9u, end, centre));
+        radius = max(radius, reach(t + 10u, end, centre));
+        radius = max(radius, reach(t + 11u, end, centre));
+        radius = max(radius, reach(t + 12u, end, centre));
+        radius = max(radius, reach(t + 13u, end, centre));
+        radius = max(radius, reach(t + 14u, end, centre));
+        radius = max(radius, reach(t + 15u, end, centre));
     }
-    write_bounds(slot, centre, radius, 0.5 * (hi - lo), max_disc_radius);
+    write_bounds(slot, centre, radius, 0.5 * (node.hi - node.lo), node.max_disc_radius);
+}
+
+// A node's box of disc centres and largest disc, grown tile by tile.
+struct Node {
+    lo: vec3<f32>,
+    hi: vec3<f32>,
+    max_disc_radius: f32,
+}
+
+// Grows `node` by tile `t`'s box and discs when t < end.
+fn for_box(node: ptr<function, Node>, t: u32, end: u32) {
+    if (t >= end) {
+        return;
+    }
+    let sphere = occluder_bounds[BOUNDS_VEC4S * t];
+    let sizes = occluder_bounds[BOUNDS_VEC4S * t + 1u];
+    (*node).lo = min((*node).lo, sphere.xyz - sizes.xyz);
+    (*node).hi = max((*node).hi, sphere.xyz + sizes.xyz);
+    (*node).max_disc_radius = max((*node).max_disc_radius, sizes.w);
+}
+
+// How far tile `t`'s sphere reaches from `centre` (0 when t ≥ end).
+fn reach(t: u32, end: u32, centre: vec3<f32>) -> f32 {
+    if (t >= end) {
+        return 0.0;
+    }
+    let sphere = occluder_bounds[BOUNDS_VEC4S * t];
+    return length(sphere.xyz - centre) + sphere.w;
 }

@@ -97,6 +97,93 @@ fn add_occluder(shares: ptr<function, Shares>, rcv: Receiver, lights: PointLight
     }
 }
 
+// The walk's state: pending nodes (see the entry layout in `cs_main`) and where each level of
+// the tree starts among the nodes.
+struct Walk {
+    stack: array<u32, STACK_MAX>,
+    top: u32,
+    level_start: array<u32, LEVELS_MAX>,
+}
+
+// One node off the stack: each light still open for it opens or skips it; an opened tile's
+// discs count for the lights that opened it, an opened internal node's children go on the
+// stack, last first, so that they come off in order. Nothing when the stack is empty.
+fn walk_step(walk: ptr<function, Walk>, shares: ptr<function, Shares>, rcv: Receiver, lights: PointLights, tile: u32) {
+    if ((*walk).top == 0u) {
+        return;
+    }
+    (*walk).top -= 1u;
+    let entry = (*walk).stack[(*walk).top];
+    let k = entry & 0x3ffffffu;
+    let level = (entry >> 26u) & 0xfu;
+    let slot = (*walk).level_start[level] + k;
+    let open_d = (entry & (1u << 30u)) != 0u
+        && opens(slot, rcv, lights.diffuse_position, lights.diffuse_sphere);
+    let open_s = (entry & (1u << 31u)) != 0u
+        && opens(slot, rcv, lights.glossy_position, lights.glossy_sphere);
+    if (!open_d && !open_s) {
+        return;
+    }
+    if (level == 0u) {
+        // The point's own disc is in its tile: at distance 0 from the point, occluder_share
+        // gives it exactly 0, so it needs no test. Written out 16 at a time for llvmpipe's
+        // loop limit (above): this loop runs again for every tile the walk opens.
+        let first = k * tile;
+        let end = min(first + tile, params.point_count);
+        var j = first;
+        let full = first + (end - first) / 16u * 16u;
+        while (j < full) {
+            add_disc(shares, rcv, lights, j + 0u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 1u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 2u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 3u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 4u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 5u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 6u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 7u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 8u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 9u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 10u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 11u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 12u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 13u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 14u, open_d, open_s);
+            add_disc(shares, rcv, lights, j + 15u, open_d, open_s);
+            j += 16u;
+        }
+        while (j < end) {
+            add_disc(shares, rcv, lights, j, open_d, open_s);
+            j += 1u;
+        }
+        return;
+    }
+    let below = (*walk).level_start[level] - (*walk).level_start[level - 1u];
+    let first = k * FANOUT;
+    let flags = ((level - 1u) << 26u) | (select(0u, 1u, open_d) << 30u) | (select(0u, 1u, open_s) << 31u);
+    // FANOUT (8) children at most, written out rather than looped (the loop limit above).
+    let count = min(first + FANOUT, below) - min(first, below);
+    push_child(walk, flags, first, count, 7u);
+    push_child(walk, flags, first, count, 6u);
+    push_child(walk, flags, first, count, 5u);
+    push_child(walk, flags, first, count, 4u);
+    push_child(walk, flags, first, count, 3u);
+    push_child(walk, flags, first, count, 2u);
+    push_child(walk, flags, first, count, 1u);
+    push_child(walk, flags, first, count, 0u);
+}
+
+// Child `i` of the `count` children from `first`, if there is one.
+fn push_child(walk: ptr<function, Walk>, flags: u32, first: u32, count: u32, i: u32) {
+    if (i < count && (*walk).top < STACK_MAX) {
+        (*walk).stack[(*walk).top] = flags | (first + i);
+        (*walk).top += 1u;
+    }
+}
+
+fn add_disc(shares: ptr<function, Shares>, rcv: Receiver, lights: PointLights, j: u32, open_d: bool, open_s: bool) {
+    add_occluder(shares, rcv, lights, Disc(occluder_discs[2u * j], occluder_discs[2u * j + 1u]), open_d, open_s);
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let tile = clamp(params.tile, 1u, TILE_MAX);
@@ -115,7 +202,8 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     var shares = Shares(0.0, 1.0, 0.0, 1.0);
     // The tree's levels: where each starts among the nodes (the tiles at 0).
     let tiles = (params.point_count + tile - 1u) / tile;
-    var level_start: array<u32, LEVELS_MAX>;
+    var level_start = array<u32, LEVELS_MAX>();
+    level_start[0] = 0u;
     var level_size = tiles;
     var levels = 1u;
     var next_start = tiles;
@@ -128,42 +216,17 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let rcv = Receiver(point.position, point.normal, t, b);
     // Stack entries: node index within its level (bits 0–25), level (26–29), whether it is
     // open for the diffuse light (30) and for the glossy one (31).
-    var stack: array<u32, STACK_MAX>;
-    var top = 1u;
-    stack[0] = ((levels - 1u) << 26u) | (1u << 30u) | (select(0u, 1u, glossy_on) << 31u);
-    while (top > 0u) {
-        top -= 1u;
-        let entry = stack[top];
-        let k = entry & 0x3ffffffu;
-        let level = (entry >> 26u) & 0xfu;
-        let slot = level_start[level] + k;
-        let open_d = (entry & (1u << 30u)) != 0u
-            && opens(slot, rcv, lights.diffuse_position, lights.diffuse_sphere);
-        let open_s = (entry & (1u << 31u)) != 0u
-            && opens(slot, rcv, lights.glossy_position, lights.glossy_sphere);
-        if (!open_d && !open_s) {
-            continue;
-        }
-        if (level == 0u) {
-            // The point's own disc is in its tile: at distance 0 from the point,
-            // occluder_share gives it exactly 0, so it needs no test.
-            let end = min((k + 1u) * tile, params.point_count);
-            for (var j = k * tile; j < end; j++) {
-                let disc = Disc(occluder_discs[2u * j], occluder_discs[2u * j + 1u]);
-                add_occluder(&shares, rcv, lights, disc, open_d, open_s);
-            }
-            continue;
-        }
-        // Children last first, so that they come off the stack in order.
-        let below = level_start[level] - level_start[level - 1u];
-        let first = k * FANOUT;
-        let flags = ((level - 1u) << 26u) | (select(0u, 1u, open_d) << 30u) | (select(0u, 1u, open_s) << 31u);
-        var c = min(first + FANOUT, below);
-        while (c > first && top < STACK_MAX) {
-            c -= 1u;
-            stack[top] = flags | c;
-            top += 1u;
-        }
+    var walk: Walk;
+    walk.level_start = level_start;
+    walk.top = 1u;
+    walk.stack[0] = ((levels - 1u) << 26u) | (1u << 30u) | (select(0u, 1u, glossy_on) << 31u);
+    // Mesa's llvmpipe ends any loop after 65535 iterations per invocation (counted across
+    // re-entries): four steps written out per iteration let the walk visit 262 140 nodes.
+    while (walk.top > 0u) {
+        walk_step(&walk, &shares, rcv, lights, tile);
+        walk_step(&walk, &shares, rcv, lights, tile);
+        walk_step(&walk, &shares, rcv, lights, tile);
+        walk_step(&walk, &shares, rcv, lights, tile);
     }
     var od = min(shares.sum_d, 1.0);
     var os = min(shares.sum_s, 1.0);
