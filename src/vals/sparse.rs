@@ -170,6 +170,15 @@ struct RasterGather {
     target: wgpu::TextureView,
 }
 
+/// A point's model-space position from its `points model` record (xyz as f32 bits).
+fn model_position(model: &[u32; 4]) -> Vec3 {
+    Vec3::new(
+        f32::from_bits(model[0]),
+        f32::from_bits(model[1]),
+        f32::from_bits(model[2]),
+    )
+}
+
 /// Octahedral encoding of a unit vector in two snorm16 (`oct_decode` in the shader).
 pub fn oct_encode(n: Vec3) -> u32 {
     let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-30);
@@ -360,16 +369,23 @@ impl SparsePipelines {
     fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
         let device = &ctx.device;
         let cs = wgpu::ShaderStages::COMPUTE;
+        let entry_point = |name: &'static str,
+                           module: &wgpu::ShaderModule,
+                           groups: &[&wgpu::BindGroupLayout],
+                           entry: &str|
+         -> Result<wgpu::ComputePipeline, GpuError> {
+            ctx.scoped(
+                &format!("the {name} pipeline ({entry})"),
+                None,
+                crate::raster::PIPELINE_REMEDY,
+                || compute_pipeline_groups(device, name, module, groups, entry),
+            )
+        };
         let compute = |name: &'static str,
                        shader: &str,
                        groups: &[&wgpu::BindGroupLayout]|
          -> Result<wgpu::ComputePipeline, GpuError> {
-            ctx.scoped(
-                &format!("the {name} pipeline"),
-                None,
-                crate::raster::PIPELINE_REMEDY,
-                || compute_pipeline_groups(device, name, &ctx.shader(shader), groups, "cs_main"),
-            )
+            entry_point(name, &ctx.shader(shader), groups, "cs_main")
         };
         let kernel = |name: &'static str, shader: &str, slots: &'static [Slot]| {
             let layout = GroupLayout::new(device, name, cs, slots);
@@ -441,25 +457,27 @@ impl SparsePipelines {
             targets: &[RADIANCE_FORMAT],
         }
         .build(device);
-        let occluder_bounds = kernel(
-            "occluder bounds",
-            "vals_occluder_bounds.wgsl",
-            OCCLUDER_BOUNDS_BINDINGS,
-        )?;
+        // One module, three entry points on one layout.
+        let occluder_layout =
+            GroupLayout::new(device, "occluder bounds", cs, OCCLUDER_BOUNDS_BINDINGS);
+        let occluder_module = ctx.shader("vals_occluder_bounds.wgsl");
+        let occluder_stage = |entry: &str| {
+            entry_point(
+                "occluder bounds",
+                &occluder_module,
+                &[&occluder_layout.layout],
+                entry,
+            )
+        };
+        let occluder_stages = [occluder_stage("cs_tiles")?, occluder_stage("cs_nodes")?];
+        let occluder_discs = occluder_stage("cs_main")?;
+        let occluder_bounds = (occluder_layout, occluder_discs);
         Ok(Self {
             gather: (gather_layout, gather),
             gather_reduce,
             partials,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
-            occluder_stages: ["cs_tiles", "cs_nodes"].map(|entry| {
-                compute_pipeline_groups(
-                    device,
-                    "occluder bounds",
-                    &ctx.shader("vals_occluder_bounds.wgsl"),
-                    &[&occluder_bounds.0.layout],
-                    entry,
-                )
-            }),
+            occluder_stages,
             occluder_bounds,
             occlusion: kernel("occlusion", "vals_occlusion.wgsl", OCCLUSION_BINDINGS)?,
             interpolate: kernel(
@@ -744,12 +762,7 @@ impl SparseGpu {
             .iter()
             .zip(&point_instances)
             .map(|(model, &instance)| {
-                let p = Vec3::new(
-                    f32::from_bits(model[0]),
-                    f32::from_bits(model[1]),
-                    f32::from_bits(model[2]),
-                );
-                world[scene.instances[instance].node].transform_point3(p)
+                world[scene.instances[instance].node].transform_point3(model_position(model))
             })
             .collect();
         let occluder_walk = super::math::walk_order(&centres);
@@ -1303,11 +1316,7 @@ impl SparseGpu {
             .zip(&self.point_instances)
             .map(|((model, meta), &instance)| {
                 let world = world_from_node[scene.instances[instance].node];
-                let p = Vec3::new(
-                    f32::from_bits(model[0]),
-                    f32::from_bits(model[1]),
-                    f32::from_bits(model[2]),
-                );
+                let p = model_position(model);
                 let normal_from_model = Mat3::from_mat4(world).inverse().transpose();
                 let (k, disc_radius) = unpack_half2(meta[0]);
                 DecodedPoint {
