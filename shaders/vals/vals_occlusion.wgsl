@@ -18,6 +18,8 @@ const BOUNDS_VEC4S: u32 = 2u;
 const LEVELS_MAX: u32 = 9u;
 // Pending nodes at most: FANOUT − 1 siblings per level below the root, and the node itself.
 const STACK_MAX: u32 = 64u;
+// Below this visible fraction a light is closed under `union` (`vals::math::VISIBLE_CLOSED`).
+const VISIBLE_CLOSED: f32 = 9.5367431640625e-7;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
@@ -66,6 +68,21 @@ fn tile_may_occlude(x: vec3<f32>, n: vec3<f32>, t: vec3<f32>, b: vec3<f32>, ligh
 fn opens(slot: u32, rcv: Receiver, light: vec3<f32>, sphere: f32) -> bool {
     let sizes = occluder_bounds[BOUNDS_VEC4S * slot + 1u];
     return tile_may_occlude(rcv.x, rcv.n, rcv.t, rcv.b, light, sphere, occluder_bounds[BOUNDS_VEC4S * slot], sizes.w, sizes.xyz);
+}
+
+// Whether more discs can still change what a light keeps (`vals::math::light_still_open`; the
+// power test is only here, the CPU twin scales a powerless light to 0 all the same): a light
+// without power keeps nothing whatever hides it; under `sum` a light whose shares reach 1
+// is hidden whole; under `union` one whose visible part is below VISIBLE_CLOSED keeps less than
+// that fraction of its power, whatever comes next.
+fn still_open(intensity: vec3<f32>, sum: f32, visible: f32) -> bool {
+    if (max(intensity.x, max(intensity.y, intensity.z)) <= 0.0) {
+        return false;
+    }
+    if (params.occlusion_mode == 2u) {
+        return visible >= VISIBLE_CLOSED;
+    }
+    return sum < 1.0;
 }
 
 // Running occlusion of one point's two lights: Σo and Π(1 − o) per channel.
@@ -118,8 +135,10 @@ fn walk_step(walk: ptr<function, Walk>, shares: ptr<function, Shares>, rcv: Rece
     let level = (entry >> 26u) & 0xfu;
     let slot = (*walk).level_start[level] + k;
     let open_d = (entry & (1u << 30u)) != 0u
+        && still_open(lights.diffuse, (*shares).sum_d, (*shares).visible_d)
         && opens(slot, rcv, lights.diffuse_position, lights.diffuse_sphere);
     let open_s = (entry & (1u << 31u)) != 0u
+        && still_open(lights.glossy, (*shares).sum_s, (*shares).visible_s)
         && opens(slot, rcv, lights.glossy_position, lights.glossy_sphere);
     if (!open_d && !open_s) {
         return;
@@ -162,14 +181,73 @@ fn walk_step(walk: ptr<function, Walk>, shares: ptr<function, Shares>, rcv: Rece
     let flags = ((level - 1u) << 26u) | (select(0u, 1u, open_d) << 30u) | (select(0u, 1u, open_s) << 31u);
     // FANOUT (8) children at most, written out rather than looped (the loop limit above).
     let count = min(first + FANOUT, below) - min(first, below);
-    push_child(walk, flags, first, count, 7u);
-    push_child(walk, flags, first, count, 6u);
-    push_child(walk, flags, first, count, 5u);
-    push_child(walk, flags, first, count, 4u);
-    push_child(walk, flags, first, count, 3u);
-    push_child(walk, flags, first, count, 2u);
-    push_child(walk, flags, first, count, 1u);
-    push_child(walk, flags, first, count, 0u);
+    let child_start = (*walk).level_start[level - 1u] + first;
+    var order: ChildOrder;
+    set_child(&order, rcv, child_start, count, 0u);
+    set_child(&order, rcv, child_start, count, 1u);
+    set_child(&order, rcv, child_start, count, 2u);
+    set_child(&order, rcv, child_start, count, 3u);
+    set_child(&order, rcv, child_start, count, 4u);
+    set_child(&order, rcv, child_start, count, 5u);
+    set_child(&order, rcv, child_start, count, 6u);
+    set_child(&order, rcv, child_start, count, 7u);
+    // Batcher's 19-comparator network for 8 keys.
+    order_swap(&order, 0u, 2u);
+    order_swap(&order, 1u, 3u);
+    order_swap(&order, 4u, 6u);
+    order_swap(&order, 5u, 7u);
+    order_swap(&order, 0u, 4u);
+    order_swap(&order, 1u, 5u);
+    order_swap(&order, 2u, 6u);
+    order_swap(&order, 3u, 7u);
+    order_swap(&order, 0u, 1u);
+    order_swap(&order, 2u, 3u);
+    order_swap(&order, 4u, 5u);
+    order_swap(&order, 6u, 7u);
+    order_swap(&order, 2u, 4u);
+    order_swap(&order, 3u, 5u);
+    order_swap(&order, 1u, 4u);
+    order_swap(&order, 3u, 6u);
+    order_swap(&order, 1u, 2u);
+    order_swap(&order, 3u, 4u);
+    order_swap(&order, 5u, 6u);
+    // Farthest first on the stack, so the nearest comes off first.
+    push_child(walk, flags, first, count, order.id[7]);
+    push_child(walk, flags, first, count, order.id[6]);
+    push_child(walk, flags, first, count, order.id[5]);
+    push_child(walk, flags, first, count, order.id[4]);
+    push_child(walk, flags, first, count, order.id[3]);
+    push_child(walk, flags, first, count, order.id[2]);
+    push_child(walk, flags, first, count, order.id[1]);
+    push_child(walk, flags, first, count, order.id[0]);
+}
+
+// An opened node's children with their distances from the receiver, sorted nearest first.
+struct ChildOrder {
+    key: array<f32, 8>,
+    id: array<u32, 8>,
+}
+
+// Child `i`'s key: how far the receiver is from its sphere (`vals::math::child_order`); a
+// missing child sorts last.
+fn set_child(order: ptr<function, ChildOrder>, rcv: Receiver, child_start: u32, count: u32, i: u32) {
+    let bounds = occluder_bounds[BOUNDS_VEC4S * (child_start + min(i, count - 1u))];
+    (*order).key[i] = select(3.0e38, length(bounds.xyz - rcv.x) - bounds.w, i < count);
+    (*order).id[i] = i;
+}
+
+// One comparator: by key, ties by child index, so the order is the CPU's stable sort.
+fn order_swap(order: ptr<function, ChildOrder>, a: u32, b: u32) {
+    let ka = (*order).key[a];
+    let kb = (*order).key[b];
+    let ia = (*order).id[a];
+    let ib = (*order).id[b];
+    if (ka > kb || (ka == kb && ia > ib)) {
+        (*order).key[a] = kb;
+        (*order).key[b] = ka;
+        (*order).id[a] = ib;
+        (*order).id[b] = ia;
+    }
 }
 
 // Child `i` of the `count` children from `first`, if there is one.
@@ -222,7 +300,10 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     walk.stack[0] = ((levels - 1u) << 26u) | (1u << 30u) | (select(0u, 1u, glossy_on) << 31u);
     // Mesa's llvmpipe ends any loop after 65535 iterations per invocation (counted across
     // re-entries): four steps written out per iteration let the walk visit 262 140 nodes.
-    while (walk.top > 0u) {
+    // A walk ends early once neither light can change any more (`still_open`).
+    while (walk.top > 0u
+        && (still_open(lights.diffuse, shares.sum_d, shares.visible_d)
+            || (glossy_on && still_open(lights.glossy, shares.sum_s, shares.visible_s)))) {
         walk_step(&walk, &shares, rcv, lights, tile);
         walk_step(&walk, &shares, rcv, lights, tile);
         walk_step(&walk, &shares, rcv, lights, tile);

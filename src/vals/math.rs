@@ -492,6 +492,23 @@ pub fn occlusion_tree(discs: &[OccluderDisc], tile: usize) -> Vec<Vec<OccluderBo
     levels
 }
 
+/// Below this visible fraction (2⁻²⁰) a light is closed under `union`: it keeps less than a
+/// millionth of its power whatever the remaining discs do (`VISIBLE_CLOSED` in
+/// `vals_occlusion.wgsl`).
+pub const VISIBLE_CLOSED: f32 = 1.0 / 1_048_576.0;
+
+/// Whether more discs can still change a light's occlusion, given its running `sum` of shares
+/// and `visible` product: under `sum` the result is `min(1, Σ)`, final once Σ reaches 1; under
+/// `union` it is final to within [`VISIBLE_CLOSED`]. The walk stops there, which is what makes
+/// a receiver in a crowd cheap: its nearest discs hide the light and the rest are never read.
+pub fn light_still_open(mode: OcclusionMode, sum: f32, visible: f32) -> bool {
+    match mode {
+        OcclusionMode::Sum => sum < 1.0,
+        OcclusionMode::Union => visible >= VISIBLE_CLOSED,
+        OcclusionMode::Off | OcclusionMode::Rays => false,
+    }
+}
+
 /// How the occlusion pass combines and walks the discs: the mode and discs per tile.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OcclusionWalk {
@@ -501,9 +518,10 @@ pub struct OcclusionWalk {
 
 /// Occlusion at a receiver from `discs` (in walk order, the receiver's own among them: at
 /// distance 0 its share is exactly 0), as the occlusion pass takes them: depth first through
-/// `tree` ([`occlusion_tree`]), children in order, each node skipped when
-/// [`tile_may_occlude`] says no, else opened; an opened tile's discs one by one in order —
-/// every disc that may take a share, in walk order.
+/// `tree` ([`occlusion_tree`]), an opened node's children nearest first ([`child_order`]),
+/// each node skipped when [`tile_may_occlude`] says no, else opened; an opened tile's discs
+/// one by one in walk order — every disc that may take a share, until the light is closed
+/// ([`light_still_open`], tested as each node comes off the stack).
 pub fn occlusion(
     receiver: &Receiver,
     light: Vec3,
@@ -511,6 +529,19 @@ pub fn occlusion(
     discs: &[OccluderDisc],
     tree: &[Vec<OccluderBounds>],
     walk: OcclusionWalk,
+) -> f32 {
+    occlusion_walk(receiver, light, sphere, discs, tree, walk, |_| {})
+}
+
+/// [`occlusion`], showing `visit` each disc whose share it adds, in the order it adds them.
+pub fn occlusion_walk(
+    receiver: &Receiver,
+    light: Vec3,
+    sphere: f32,
+    discs: &[OccluderDisc],
+    tree: &[Vec<OccluderBounds>],
+    walk: OcclusionWalk,
+    mut visit: impl FnMut(usize),
 ) -> f32 {
     if matches!(walk.mode, OcclusionMode::Off | OcclusionMode::Rays) || discs.is_empty() {
         return 0.0;
@@ -520,21 +551,27 @@ pub fn occlusion(
     let mut stack = vec![(tree.len() - 1, 0usize)];
     let (x, n) = (receiver.position, receiver.normal);
     while let Some((level, k)) = stack.pop() {
+        if !light_still_open(walk.mode, sum, visible) {
+            break;
+        }
         let bounds = &tree[level][k];
         if !tile_may_occlude(x, n, light, sphere, bounds) {
             continue;
         }
         if level == 0 {
             let first = k * walk.tile;
-            for disc in &discs[first..(first + walk.tile).min(discs.len())] {
+            let last = (first + walk.tile).min(discs.len());
+            for (j, disc) in discs.iter().enumerate().take(last).skip(first) {
                 let o = occluder_share(x, n, light, sphere, disc);
                 sum += o;
                 visible *= 1.0 - o;
+                visit(j);
             }
         } else {
             let children =
                 k * OCCLUSION_FANOUT..((k + 1) * OCCLUSION_FANOUT).min(tree[level - 1].len());
-            stack.extend(children.rev().map(|c| (level - 1, c)));
+            let nearest_first = child_order(x, &tree[level - 1], children);
+            stack.extend(nearest_first.into_iter().rev().map(|c| (level - 1, c)));
         }
     }
     match walk.mode {
@@ -542,6 +579,21 @@ pub fn occlusion(
         OcclusionMode::Union => 1.0 - visible,
         OcclusionMode::Off | OcclusionMode::Rays => 0.0,
     }
+}
+
+/// The nodes `children` of one level, nearest to x first: by the distance from x to each
+/// node's sphere (negative inside it), ties by index (`order_swap` in `vals_occlusion.wgsl`
+/// sorts the same keys with a sorting network). Near discs hide the most of a light, so a
+/// light in a crowd closes ([`light_still_open`]) after a few nodes.
+pub fn child_order(
+    x: Vec3,
+    nodes: &[OccluderBounds],
+    children: std::ops::Range<usize>,
+) -> Vec<usize> {
+    let key = |c: usize| (nodes[c].center - x).length() - nodes[c].radius;
+    let mut order: Vec<usize> = children.collect();
+    order.sort_by(|&a, &b| key(a).total_cmp(&key(b)).then(a.cmp(&b)));
+    order
 }
 
 /// Step 3 — a vertex's lights from its linked points with normalized weights.
@@ -673,10 +725,11 @@ mod tests {
 
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
-        /// The tree only skips what takes no share: the walk gives exactly the plain sum over
-        /// every disc in walk order, for tiles of 1 to 9 discs.
+        /// The tree only skips what takes no share: until the light closes, every disc the
+        /// walk leaves out has a share of exactly 0, none is taken twice, and the result is
+        /// the visited shares combined, for tiles of 1 to 9 discs.
         #[test]
-        fn the_tree_walk_is_the_plain_sum(
+        fn the_tree_walk_skips_only_discs_without_a_share(
             x in proptest::array::uniform3(-1.0f32..1.0),
             n in proptest::array::uniform3(-1.0f32..1.0),
             light in proptest::array::uniform3(-3.0f32..3.0),
@@ -704,18 +757,84 @@ mod tests {
             let receiver = Receiver { position: Vec3::from(x), normal: n, k: 1.0 };
             let tree = occlusion_tree(&ordered, tile);
             for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
-                let got = occlusion(&receiver, Vec3::from(light), sphere, &ordered, &tree, OcclusionWalk { mode, tile });
-                let mut sum = 0.0f32;
-                let mut visible = 1.0f32;
-                for d in &ordered {
-                    let o = occluder_share(receiver.position, n, Vec3::from(light), sphere, d);
-                    sum += o;
-                    visible *= 1.0 - o;
-                }
+                let mut visited = vec![];
+                let walk = OcclusionWalk { mode, tile };
+                let got = occlusion_walk(&receiver, Vec3::from(light), sphere, &ordered, &tree, walk, |j| visited.push(j));
+                // The result is the visited discs' shares, combined in the order visited.
+                let share = |j: usize| occluder_share(receiver.position, n, Vec3::from(light), sphere, &ordered[j]);
+                let (sum, visible) = visited.iter().fold((0.0f32, 1.0f32), |(s, v), &j| (s + share(j), v * (1.0 - share(j))));
                 let want = if mode == OcclusionMode::Sum { sum.min(1.0) } else { 1.0 - visible };
                 proptest::prop_assert_eq!(got, want);
+                // Each disc at most once.
+                let mut once = visited.clone();
+                once.sort_unstable();
+                once.dedup();
+                proptest::prop_assert_eq!(once.len(), visited.len());
+                // Until the light closes, only discs without a share are left out: the tree
+                // skips nothing that counts.
+                if light_still_open(mode, sum, visible) {
+                    for j in (0..ordered.len()).filter(|j| once.binary_search(j).is_err()) {
+                        proptest::prop_assert_eq!(share(j), 0.0, "disc {} skipped", j);
+                    }
+                }
             }
         }
+    }
+
+    #[test]
+    fn a_light_behind_a_crowd_closes_after_its_nearest_discs() {
+        // Five layers of 20 × 20 discs between a receiver and its light, the nearest layer
+        // last in walk order (the Morton code grows with z): nearest first, `sum` ends after
+        // a few dozen discs of the two nearest layers.
+        let mut discs = vec![];
+        for layer in 1..=5 {
+            for i in 0..20 {
+                for j in 0..20 {
+                    discs.push(OccluderDisc {
+                        center: Vec3::new(
+                            0.1 * (i as f32 - 9.5),
+                            0.1 * (j as f32 - 9.5),
+                            layer as f32,
+                        ),
+                        normal: Vec3::Z,
+                        radius: 0.06,
+                    });
+                }
+            }
+        }
+        let walk = walk_order(&discs.iter().map(|d| d.center).collect::<Vec<_>>());
+        let mut ordered = discs.clone();
+        for (i, d) in discs.iter().enumerate() {
+            ordered[walk[i] as usize] = *d;
+        }
+        let tree = occlusion_tree(&ordered, 8);
+        let receiver = Receiver {
+            position: Vec3::new(0.0, 0.0, 6.0),
+            normal: -Vec3::Z,
+            k: 1.0,
+        };
+        let light = Vec3::new(0.0, 0.0, -4.0);
+        let every = |mode| {
+            let mut visited = vec![];
+            let walk = OcclusionWalk { mode, tile: 8 };
+            let o = occlusion_walk(&receiver, light, 1.0, &ordered, &tree, walk, |j| {
+                visited.push(j)
+            });
+            (o, visited)
+        };
+        let (sum, visited) = every(OcclusionMode::Sum);
+        assert_eq!(sum, 1.0);
+        assert!(
+            visited.len() <= discs.len() / 10,
+            "sum read {} discs",
+            visited.len()
+        );
+        assert!(visited.iter().all(|&j| ordered[j].center.z >= 4.0));
+        // `union` does not close here (the light stays 0.3 % visible): it reads every disc in
+        // the light's path, and the far layers' too.
+        let (union, visited) = every(OcclusionMode::Union);
+        assert!(union > 0.99 && 1.0 - union > VISIBLE_CLOSED, "{union}");
+        assert!(visited.iter().any(|&j| ordered[j].center.z == 1.0));
     }
 
     #[test]
