@@ -7,8 +7,10 @@
 // of consecutive discs in walk order, FANOUT-ary internal nodes above them). Each light of a
 // point skips a node none of whose discs can take a share of its sphere (`tile_may_occlude`,
 // CPU twin `vals::math::tile_may_occlude`: the result is the same to the bit) or opens it; an
-// opened tile's discs count for the lights that opened it. Each invocation walks on its own,
-// without barriers. The CPU twin of the whole walk is `vals::math::occlusion`.
+// opened tile's discs count for the lights that opened it, an opened node's children are taken
+// nearest first, and a light closes once more discs cannot change it (`still_open`). Each
+// invocation walks on its own, without barriers. The CPU twin of the whole walk is
+// `vals::math::occlusion`.
 #include "vals_common.wgsl"
 #include "vals_occluder_share.wgsl"
 
@@ -191,7 +193,7 @@ fn walk_step(walk: ptr<function, Walk>, shares: ptr<function, Shares>, rcv: Rece
     set_child(&order, rcv, child_start, count, 5u);
     set_child(&order, rcv, child_start, count, 6u);
     set_child(&order, rcv, child_start, count, 7u);
-    // Batcher's 19-comparator network for 8 keys.
+    // A 19-comparator sorting network for 8 keys (`vals::math`'s tests check that it sorts).
     order_swap(&order, 0u, 2u);
     order_swap(&order, 1u, 3u);
     order_swap(&order, 4u, 6u);

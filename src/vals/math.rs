@@ -838,6 +838,34 @@ mod tests {
     }
 
     #[test]
+    fn the_occlusion_pass_sorts_children_with_a_sorting_network() {
+        // The comparators `vals_occlusion.wgsl` applies, in order: by the 0-1 principle they
+        // sort every input if they sort every 0/1 input.
+        let source = crate::shaders::source("vals_occlusion.wgsl");
+        let comparators: Vec<(usize, usize)> = source
+            .lines()
+            .filter_map(|line| {
+                let args = line.trim().strip_prefix("order_swap(&order, ")?;
+                let (a, b) = args.strip_suffix("u);")?.split_once("u, ")?;
+                Some((a.parse().ok()?, b.parse().ok()?))
+            })
+            .collect();
+        assert_eq!(comparators.len(), 19, "{comparators:?}");
+        for bits in 0u32..256 {
+            let mut keys: Vec<u32> = (0..8).map(|i| (bits >> i) & 1).collect();
+            for &(a, b) in &comparators {
+                if keys[a] > keys[b] {
+                    keys.swap(a, b);
+                }
+            }
+            assert!(
+                keys.windows(2).all(|w| w[0] <= w[1]),
+                "{bits:08b} → {keys:?}"
+            );
+        }
+    }
+
+    #[test]
     fn walk_order_is_a_permutation_that_keeps_neighbours_together() {
         // Two clusters listed alternately: the walk puts each cluster's discs together.
         let centres: Vec<Vec3> = (0..20)
