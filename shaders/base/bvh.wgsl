@@ -76,49 +76,82 @@ fn bvh_ray_triangle(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, tri: BvhTrian
 
 fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
     let inv = bvh_safe_inverse(dir);
+    let root = bvh_nodes[first_node];
+    if (bvh_box_entry(origin, inv, root.min, root.max) < 0.0) {
+        return false;
+    }
     var stack: array<u32, BVH_STACK_DEPTH>;
     var top = 1u;
     stack[0] = 0u;
+    // Every node on the stack is one the segment enters; of two children, the one it enters
+    // first comes off first, so that a blocked ray stops at its nearest blocker sooner.
     while (top > 0u) {
         top -= 1u;
         let node = bvh_nodes[first_node + stack[top]];
-        if (!bvh_ray_box(origin, inv, 1.0, node.min, node.max)) {
-            continue;
-        }
         if (node.prim_count > 0u) {
             for (var i = 0u; i < node.prim_count; i++) {
                 if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + i])) {
                     return true;
                 }
             }
-        } else if (top + 2u <= BVH_STACK_DEPTH) {
-            stack[top] = node.first;
-            stack[top + 1u] = node.first + 1u;
-            top += 2u;
+            continue;
         }
+        let a = bvh_nodes[first_node + node.first];
+        let b = bvh_nodes[first_node + node.first + 1u];
+        top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(origin, inv, a.min, a.max), bvh_box_entry(origin, inv, b.min, b.max));
     }
     return false;
+}
+
+// Where the segment (t in [0, 1]) enters a box, or −1 when it misses it (`bvh_ray_box`).
+fn bvh_box_entry(origin: vec3<f32>, inv_dir: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
+    let t0 = (lo - origin) * inv_dir;
+    let t1 = (hi - origin) * inv_dir;
+    let a = min(t0, t1);
+    let b = max(t0, t1);
+    let near = max(max(max(a.x, a.y), a.z), 0.0);
+    let far = min(min(min(b.x, b.y), b.z), 1.0);
+    return select(-1.0, near, near <= far);
+}
+
+// Pushes the children `first` and `first + 1` the segment enters (entry ≥ 0), the nearer on
+// top; returns the new top. A child that finds the stack full is dropped, as it always was
+// (`SceneBvh` keeps trees within the stack's depth).
+fn bvh_push_entered(stack: ptr<function, array<u32, BVH_STACK_DEPTH>>, top: u32, first: u32, entry_a: f32, entry_b: f32) -> u32 {
+    var t = top;
+    let a_first = entry_a <= entry_b;
+    let far_entry = select(entry_a, entry_b, a_first);
+    let near_entry = select(entry_b, entry_a, a_first);
+    if (far_entry >= 0.0 && t < BVH_STACK_DEPTH) {
+        (*stack)[t] = select(first, first + 1u, a_first);
+        t += 1u;
+    }
+    if (near_entry >= 0.0 && t < BVH_STACK_DEPTH) {
+        (*stack)[t] = select(first + 1u, first, a_first);
+        t += 1u;
+    }
+    return t;
 }
 
 // True when a triangle lies on the segment from `start` to `end` (t in (0, 1)).
 fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     let d = end - start;
     let inv = bvh_safe_inverse(d);
+    let root = bvh_top[0];
+    if (bvh_box_entry(start, inv, root.min, root.max) < 0.0) {
+        return false;
+    }
     var stack: array<u32, BVH_STACK_DEPTH>;
     var top = 1u;
     stack[0] = 0u;
+    // As in `bvh_mesh_hit`: entered nodes only, the nearer child first.
     while (top > 0u) {
         top -= 1u;
         let node = bvh_top[stack[top]];
-        if (!bvh_ray_box(start, inv, 1.0, node.min, node.max)) {
-            continue;
-        }
         if (node.prim_count == 0u) {
-            if (top + 2u <= BVH_STACK_DEPTH) {
-                stack[top] = node.first;
-                stack[top + 1u] = node.first + 1u;
-                top += 2u;
-            }
+            let a = bvh_top[node.first];
+            let b = bvh_top[node.first + 1u];
+            top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(start, inv, a.min, a.max), bvh_box_entry(start, inv, b.min, b.max));
             continue;
         }
         for (var i = node.first; i < node.first + node.prim_count; i++) {
