@@ -76,29 +76,26 @@ fn bvh_ray_triangle(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, tri: BvhTrian
 
 fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
     let inv = bvh_safe_inverse(dir);
-    let root = bvh_nodes[first_node];
-    if (bvh_box_entry(origin, inv, root.min, root.max) < 0.0) {
-        return false;
-    }
     var stack: array<u32, BVH_STACK_DEPTH>;
     var top = 1u;
     stack[0] = 0u;
-    // Every node on the stack is one the segment enters; of two children, the one it enters
-    // first comes off first, so that a blocked ray stops at its nearest blocker sooner.
     while (top > 0u) {
         top -= 1u;
         let node = bvh_nodes[first_node + stack[top]];
+        if (!bvh_ray_box(origin, inv, 1.0, node.min, node.max)) {
+            continue;
+        }
         if (node.prim_count > 0u) {
             for (var i = 0u; i < node.prim_count; i++) {
                 if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + i])) {
                     return true;
                 }
             }
-            continue;
+        } else if (top + 2u <= BVH_STACK_DEPTH) {
+            stack[top] = node.first;
+            stack[top + 1u] = node.first + 1u;
+            top += 2u;
         }
-        let a = bvh_nodes[first_node + node.first];
-        let b = bvh_nodes[first_node + node.first + 1u];
-        top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(origin, inv, a.min, a.max), bvh_box_entry(origin, inv, b.min, b.max));
     }
     return false;
 }
@@ -144,7 +141,10 @@ fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     var stack: array<u32, BVH_STACK_DEPTH>;
     var top = 1u;
     stack[0] = 0u;
-    // As in `bvh_mesh_hit`: entered nodes only, the nearer child first.
+    // Every node on the stack is one the segment enters; of two children, the one it enters
+    // first comes off first, so that a blocked ray meets its nearest blocking instance before
+    // it walks the meshes behind it. (Within a mesh the same order measured slower: short
+    // unblocked rays pay for the sort and gain nothing.)
     while (top > 0u) {
         top -= 1u;
         let node = bvh_top[stack[top]];
