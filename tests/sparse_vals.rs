@@ -425,11 +425,7 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
             // The discs in the pass's walk order, and the tree it culls with against its
             // CPU twin.
             let tile = so.options.tile;
-            let walk = occluding.sparse.occluder_walk();
-            let mut walked = discs.clone();
-            for (i, d) in discs.iter().enumerate() {
-                walked[walk[i] as usize] = *d;
-            }
+            let walked = math::in_walk_order(&discs, occluding.sparse.occluder_walk());
             let tree = math::occlusion_tree(&walked, tile as usize);
             let levels = occluding.sparse.read_occluder_bounds(&ctx, tile).unwrap();
             assert_eq!(levels.len(), tree.len());

@@ -41,13 +41,18 @@ fn bvh_safe_inverse(d: vec3<f32>) -> vec3<f32> {
 }
 
 fn bvh_ray_box(origin: vec3<f32>, inv_dir: vec3<f32>, t_max: f32, lo: vec3<f32>, hi: vec3<f32>) -> bool {
+    return bvh_box_entry(origin, inv_dir, t_max, lo, hi) >= 0.0;
+}
+
+// Where the ray (t in [0, t_max]) enters a box, or −1 when it misses it.
+fn bvh_box_entry(origin: vec3<f32>, inv_dir: vec3<f32>, t_max: f32, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
     let t0 = (lo - origin) * inv_dir;
     let t1 = (hi - origin) * inv_dir;
     let a = min(t0, t1);
     let b = max(t0, t1);
     let near = max(max(max(a.x, a.y), a.z), 0.0);
     let far = min(min(min(b.x, b.y), b.z), t_max);
-    return near <= far;
+    return select(-1.0, near, near <= far);
 }
 
 // Möller–Trumbore, both faces: true for a hit at t in (0, t_max).
@@ -100,17 +105,6 @@ fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triang
     return false;
 }
 
-// Where the segment (t in [0, 1]) enters a box, or −1 when it misses it (`bvh_ray_box`).
-fn bvh_box_entry(origin: vec3<f32>, inv_dir: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> f32 {
-    let t0 = (lo - origin) * inv_dir;
-    let t1 = (hi - origin) * inv_dir;
-    let a = min(t0, t1);
-    let b = max(t0, t1);
-    let near = max(max(max(a.x, a.y), a.z), 0.0);
-    let far = min(min(min(b.x, b.y), b.z), 1.0);
-    return select(-1.0, near, near <= far);
-}
-
 // Pushes the children `first` and `first + 1` the segment enters (entry ≥ 0), the nearer on
 // top; returns the new top. A child that finds the stack full is dropped, as it always was
 // (`SceneBvh` keeps trees within the stack's depth).
@@ -135,7 +129,7 @@ fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     let d = end - start;
     let inv = bvh_safe_inverse(d);
     let root = bvh_top[0];
-    if (bvh_box_entry(start, inv, root.min, root.max) < 0.0) {
+    if (bvh_box_entry(start, inv, 1.0, root.min, root.max) < 0.0) {
         return false;
     }
     var stack: array<u32, BVH_STACK_DEPTH>;
@@ -151,7 +145,7 @@ fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
         if (node.prim_count == 0u) {
             let a = bvh_top[node.first];
             let b = bvh_top[node.first + 1u];
-            top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(start, inv, a.min, a.max), bvh_box_entry(start, inv, b.min, b.max));
+            top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(start, inv, 1.0, a.min, a.max), bvh_box_entry(start, inv, 1.0, b.min, b.max));
             continue;
         }
         for (var i = node.first; i < node.first + node.prim_count; i++) {

@@ -72,15 +72,10 @@ fn opens(slot: u32, rcv: Receiver, light: vec3<f32>, sphere: f32) -> bool {
     return tile_may_occlude(rcv.x, rcv.n, rcv.t, rcv.b, light, sphere, occluder_bounds[BOUNDS_VEC4S * slot], sizes.w, sizes.xyz);
 }
 
-// Whether more discs can still change what a light keeps (`vals::math::light_still_open`; the
-// power test is only here, the CPU twin scales a powerless light to 0 all the same): a light
-// without power keeps nothing whatever hides it; under `sum` a light whose shares reach 1
-// is hidden whole; under `union` one whose visible part is below VISIBLE_CLOSED keeps less than
-// that fraction of its power, whatever comes next.
-fn still_open(intensity: vec3<f32>, sum: f32, visible: f32) -> bool {
-    if (max(intensity.x, max(intensity.y, intensity.z)) <= 0.0) {
-        return false;
-    }
+// Whether more discs can still change what a light keeps (`vals::math::light_still_open`):
+// under `sum` a light whose shares reach 1 is hidden whole; under `union` one whose visible
+// part is below VISIBLE_CLOSED keeps less than that fraction of its power, whatever comes next.
+fn still_open(sum: f32, visible: f32) -> bool {
     if (params.occlusion_mode == 2u) {
         return visible >= VISIBLE_CLOSED;
     }
@@ -137,10 +132,10 @@ fn walk_step(walk: ptr<function, Walk>, shares: ptr<function, Shares>, rcv: Rece
     let level = (entry >> 26u) & 0xfu;
     let slot = (*walk).level_start[level] + k;
     let open_d = (entry & (1u << 30u)) != 0u
-        && still_open(lights.diffuse, (*shares).sum_d, (*shares).visible_d)
+        && still_open((*shares).sum_d, (*shares).visible_d)
         && opens(slot, rcv, lights.diffuse_position, lights.diffuse_sphere);
     let open_s = (entry & (1u << 31u)) != 0u
-        && still_open(lights.glossy, (*shares).sum_s, (*shares).visible_s)
+        && still_open((*shares).sum_s, (*shares).visible_s)
         && opens(slot, rcv, lights.glossy_position, lights.glossy_sphere);
     if (!open_d && !open_s) {
         return;
@@ -299,13 +294,17 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     var walk: Walk;
     walk.level_start = level_start;
     walk.top = 1u;
-    walk.stack[0] = ((levels - 1u) << 26u) | (1u << 30u) | (select(0u, 1u, glossy_on) << 31u);
+    // A light without power keeps nothing whatever hides it: it never opens a node (the CPU
+    // twin walks it and scales it to 0 all the same).
+    let lit_d = max(lights.diffuse.x, max(lights.diffuse.y, lights.diffuse.z)) > 0.0;
+    let lit_s = glossy_on && max(lights.glossy.x, max(lights.glossy.y, lights.glossy.z)) > 0.0;
+    walk.stack[0] = ((levels - 1u) << 26u) | (select(0u, 1u, lit_d) << 30u) | (select(0u, 1u, lit_s) << 31u);
     // Mesa's llvmpipe ends any loop after 65535 iterations per invocation (counted across
     // re-entries): four steps written out per iteration let the walk visit 262 140 nodes.
     // A walk ends early once neither light can change any more (`still_open`).
     while (walk.top > 0u
-        && (still_open(lights.diffuse, shares.sum_d, shares.visible_d)
-            || (glossy_on && still_open(lights.glossy, shares.sum_s, shares.visible_s)))) {
+        && ((lit_d && still_open(shares.sum_d, shares.visible_d))
+            || (lit_s && still_open(shares.sum_s, shares.visible_s)))) {
         walk_step(&walk, &shares, rcv, lights, tile);
         walk_step(&walk, &shares, rcv, lights, tile);
         walk_step(&walk, &shares, rcv, lights, tile);

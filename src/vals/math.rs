@@ -434,6 +434,16 @@ pub fn walk_order(centres: &[Vec3]) -> Vec<u32> {
     walk
 }
 
+/// `discs` placed in the walk order `walk` ([`walk_order`]: disc i goes to `walk[i]`), as the
+/// occlusion pass's first stage writes them.
+pub fn in_walk_order(discs: &[OccluderDisc], walk: &[u32]) -> Vec<OccluderDisc> {
+    let mut placed = discs.to_vec();
+    for (disc, &place) in discs.iter().zip(walk) {
+        placed[place as usize] = *disc;
+    }
+    placed
+}
+
 /// Bounds around the bounds `children` (`cs_nodes` in `vals_occluder_bounds.wgsl`): the box
 /// around their boxes, a sphere from its centre around their spheres, the largest disc. It
 /// holds every disc centre its children hold.
@@ -750,10 +760,7 @@ mod tests {
                 })
                 .collect();
             let walk = walk_order(&discs.iter().map(|d| d.center).collect::<Vec<_>>());
-            let mut ordered = discs.clone();
-            for (i, d) in discs.iter().enumerate() {
-                ordered[walk[i] as usize] = *d;
-            }
+            let ordered = in_walk_order(&discs, &walk);
             let receiver = Receiver { position: Vec3::from(x), normal: n, k: 1.0 };
             let tree = occlusion_tree(&ordered, tile);
             for mode in [OcclusionMode::Sum, OcclusionMode::Union] {
@@ -803,10 +810,7 @@ mod tests {
             }
         }
         let walk = walk_order(&discs.iter().map(|d| d.center).collect::<Vec<_>>());
-        let mut ordered = discs.clone();
-        for (i, d) in discs.iter().enumerate() {
-            ordered[walk[i] as usize] = *d;
-        }
+        let ordered = in_walk_order(&discs, &walk);
         let tree = occlusion_tree(&ordered, 8);
         let receiver = Receiver {
             position: Vec3::new(0.0, 0.0, 6.0),
