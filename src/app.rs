@@ -504,8 +504,9 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
 pub struct Tessellation {
     /// Longest triangle edge asked for, metres.
     pub max_edge: f32,
-    /// `"option"` (given), `"sparse spacing"` (an imported scene for a sparse method) or
-    /// `"default"` (the built-in scenes' 5 cm).
+    /// `"option"` (given), `"sparse spacing"` (for a sparse method: an imported scene, or a
+    /// built-in one's meshes built coarser than its 5 cm) or `"default"` (the built-in
+    /// scenes' 5 cm).
     pub source: &'static str,
     /// The edge the meshes were refined to: `max_edge` unless the triangle budget raised it
     /// (the scene's warnings say so); `None` when nothing was refined.

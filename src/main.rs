@@ -267,8 +267,10 @@ struct RenderArgs {
     #[command(flatten)]
     light_budgets: LightBudgetArgs,
     /// Tessellation: maximum triangle edge length in metres (positive; refused when a built-in
-    /// scene would exceed 4 million triangles). Default: 0.05, except for an imported scene
-    /// with the sparse methods: the sparse points' spacing √(area / sparse-points).
+    /// scene would exceed 4 million triangles). Default: 0.05, except with the sparse methods:
+    /// an imported scene is refined to 1/√2 of the sparse points' spacing √(area /
+    /// sparse-points), and so are a built-in scene's meshes built coarser than that (the
+    /// two-triangle walls of bunny-box and coarse-wall).
     #[arg(long)]
     max_edge: Option<f32>,
     /// Animation time in seconds (glTF animations); finite.
@@ -348,8 +350,9 @@ struct ViewArgs {
     shadow_res: u32,
     #[command(flatten)]
     light_budgets: LightBudgetArgs,
-    /// Longest triangle edge, metres (default: 0.05 for built-in scenes; an imported scene
-    /// viewed with a sparse method is refined to its sparse-point spacing, as in `render`).
+    /// Longest triangle edge, metres (default: 0.05 for built-in scenes; with a sparse method
+    /// an imported scene is refined to its sparse-point spacing, and a built-in one's coarser
+    /// meshes too, as in `render`).
     #[arg(long)]
     max_edge: Option<f32>,
     /// Animation time of the first frame, seconds.
@@ -452,8 +455,9 @@ struct EvalArgs {
     /// Frames per method (≥ 3 measures flicker); frame f is at time f/30 s.
     #[arg(long, default_value_t = 1)]
     frames: u32,
-    /// Longest triangle edge, metres (default: 0.05 for built-in scenes; an imported scene
-    /// with a sparse method is refined to its sparse-point spacing, as in `render`).
+    /// Longest triangle edge, metres (default: 0.05 for built-in scenes; with a sparse method
+    /// an imported scene is refined to its sparse-point spacing, and a built-in one's coarser
+    /// meshes too, as in `render`).
     #[arg(long)]
     max_edge: Option<f32>,
     /// Most lights the emissive surfaces become (0..=64, 0 = off): clusters of emissive

@@ -835,17 +835,22 @@ pub fn is_file_spec(spec: &str) -> bool {
 /// The tessellation [`load_choosing_max_edge`] settled on.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EdgeChoice {
-    /// What the `choose` callback returned: always `None` for built-in scenes, whose
-    /// tessellation is `params.max_edge`.
+    /// What the `choose` callback returned. A built-in scene is built at `params.max_edge`
+    /// first; a chosen edge, at least that long, then refines what is still coarser (walls
+    /// of two triangles).
     pub chosen: Option<f32>,
     /// The world-space edge the meshes were refined to: the one asked for unless the triangle
     /// budget raised it; `None` when nothing was refined.
     pub used: Option<f32>,
 }
 
-/// [`load_with`], except that an imported scene's tessellation may be chosen from the scene
-/// as read: `choose` sees it before tessellation and returns the longest edge to refine to,
-/// or `None` for `params.max_edge`. Returns the scene and the edges chosen and used.
+/// [`load_with`], except that the tessellation may be chosen from the scene as read: `choose`
+/// sees it before tessellation and returns the longest edge to refine to, or `None` for
+/// `params.max_edge`. A built-in scene is built at `params.max_edge` (some of its meshes are
+/// two triangles whatever it says: `bunny-box`'s walls, seed 002's scene, and `coarse-wall`'s
+/// wall), then refined to the chosen edge, or `params.max_edge` if that is longer, so that a
+/// method that lights vertices finds no mesh coarser than it would in an imported scene.
+/// Returns the scene and the edges chosen and used.
 pub fn load_choosing_max_edge(
     spec: &str,
     params: &LoadParams,
@@ -868,14 +873,18 @@ pub fn load_choosing_max_edge(
                 max_edge: params.max_edge,
             },
         )?;
+        // Never finer than the scene was built: the built-in scenes' measured figures are
+        // at `params.max_edge`, and only the meshes built coarser need the chosen edge.
+        let chosen = choose(&scene).map(|edge| edge.max(params.max_edge));
+        let mut used = Some(params.max_edge);
+        if let Some(edge) = chosen {
+            let outcome = mesh::tessellate_instanced(&mut scene, edge, spec);
+            scene.warnings.extend(outcome.warnings);
+            // Meshes built finer than `edge` stay so: the longest edge left is `edge`.
+            used = outcome.used_max_edge.or(used);
+        }
         emitters::add_emitter_lights(&mut scene, params.emitter_lights);
-        return Ok((
-            scene,
-            EdgeChoice {
-                chosen: None,
-                used: Some(params.max_edge),
-            },
-        ));
+        return Ok((scene, EdgeChoice { chosen, used }));
     }
     let policy = params.policy();
     let mut scene = match extension.as_deref() {
@@ -936,6 +945,32 @@ mod tests {
         assert_eq!(first.aspect, 1.5);
         let err = scene.camera_view(Some("nope"), 1.0, &world).unwrap_err();
         assert!(err.to_string().contains("toward -z"), "{err}");
+    }
+
+    #[test]
+    fn a_chosen_edge_refines_built_in_meshes_built_coarser_and_no_others() {
+        let params = LoadParams::default();
+        let longest = |scene: &Scene, name: &str| {
+            let mesh = scene.meshes.iter().find(|m| m.name == name).unwrap();
+            (mesh::longest_edge(mesh), mesh.triangle_count())
+        };
+        // bunny-box's walls are two triangles (seed 002's scene) whatever `max_edge` says.
+        let (built, _) = load_choosing_max_edge("bunny-box-empty", &params, |_| None).unwrap();
+        assert_eq!(longest(&built, "floor").1, 2);
+        let (refined, edges) =
+            load_choosing_max_edge("bunny-box-empty", &params, |_| Some(0.3)).unwrap();
+        let (edge, triangles) = longest(&refined, "floor");
+        assert!(
+            edge <= 0.3 && triangles > 100,
+            "{edge} m, {triangles} triangles"
+        );
+        assert_eq!((edges.chosen, edges.used), (Some(0.3), Some(0.3)));
+        // Never finer than the scene was built: Cornell at 5 cm stays as it is.
+        let asked = params.max_edge * 0.25;
+        let (cornell_refined, edges) =
+            load_choosing_max_edge("cornell", &params, |_| Some(asked)).unwrap();
+        assert_eq!(cornell_refined.triangle_count(), cornell().triangle_count());
+        assert_eq!(edges.chosen, Some(params.max_edge));
     }
 
     #[test]

@@ -527,7 +527,8 @@ fn door_room(name: &str, door_degrees: f32, moving: bool, max_edge: f32) -> Scen
 /// A 3 × 2 m wall made of exactly two triangles (whatever `max_edge` says: the point of the
 /// scene), a tessellated floor, and an orange block 0.3 m in front of the wall under a spot
 /// light. The wall's bounce light from the block is a small bright patch that per-vertex
-/// methods cannot resolve on two triangles.
+/// methods cannot resolve on two triangles (the sparse methods refine the wall to their
+/// points' spacing when loaded without `--max-edge`: `scene::load_choosing_max_edge`).
 fn coarse_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
     let mut b = SceneBuilder::new(name);
     let white = grey(&mut b, "white", 0.8);
