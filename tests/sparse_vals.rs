@@ -465,41 +465,79 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
             );
         }
 
-        // Interpolation, fed the GPU's final point lights and the quantized link weights.
-        let (method, _, final_points) = run_sparse(&ctx, &scene, 32, s, Stage::Interpolate);
-        let vertex_lights = method.sparse.read_vertex_lights(&ctx).unwrap();
-        let mut v = 0usize;
-        let mut point_offset = 0usize;
-        for instance in &scene.instances {
-            let mesh_points = &method.points[instance.mesh];
-            for row in &mesh_points.links {
-                let links: Vec<(usize, f32)> = row
-                    .iter()
-                    .map(|l| {
-                        let w = (l.weight.clamp(0.0, 1.0) * 65535.0).round() / 65535.0;
-                        (point_offset + l.point as usize, w)
-                    })
-                    .filter(|(_, w)| *w > 0.0)
-                    .collect();
-                let cpu = math::interpolate(&links, &final_points.lights);
-                let gpu = &vertex_lights[v];
-                assert!(
-                    close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
-                    "vertex {v}: {} vs {}",
-                    gpu.diffuse,
-                    cpu.diffuse
-                );
-                assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "vertex {v}");
-                assert!(
-                    (gpu.diffuse_position - cpu.diffuse_position).length() < 1e-4,
-                    "vertex {v}"
-                );
-                v += 1;
-            }
-            point_offset += mesh_points.positions.len();
-        }
-        assert_eq!(v, vertex_lights.len());
+        interpolation_against_cpu(&ctx, &scene, s);
     }
+}
+
+/// Interpolation, fed the GPU's final point lights and the quantized link weights, against
+/// its CPU twin at every instance vertex. Returns how many vertices the blend cap changed.
+fn interpolation_against_cpu(ctx: &GpuContext, scene: &Scene, s: SparseSettings) -> usize {
+    // Interpolation, fed the GPU's final point lights and the quantized link weights.
+    let (method, _, final_points) = run_sparse(ctx, scene, 32, s, Stage::Interpolate);
+    let vertex_lights = method.sparse.read_vertex_lights(ctx).unwrap();
+    let mut v = 0usize;
+    let mut point_offset = 0usize;
+    let world = scene.world_from_node();
+    let mut capped = 0;
+    for instance in &scene.instances {
+        let mesh = &scene.meshes[instance.mesh];
+        let mesh_points = &method.points[instance.mesh];
+        let world_from_model = world[instance.node];
+        let normal_from_model = glam::Mat3::from_mat4(world_from_model)
+            .inverse()
+            .transpose();
+        for (r, row) in mesh_points.links.iter().enumerate() {
+            // A two-sided sheet's back rows light the vertex's other face.
+            let i = r % mesh.positions.len();
+            let side = if r < mesh.positions.len() { 1.0 } else { -1.0 };
+            let position = world_from_model.transform_point3(mesh.positions[i]);
+            // The GPU reads the normal octahedral-encoded: the same input here.
+            let model_normal = side * mesh.normals[i];
+            let quantized =
+                valgi::vals::sparse::oct_decode(valgi::vals::sparse::oct_encode(model_normal));
+            let normal = (normal_from_model * quantized).normalize();
+            let links: Vec<(usize, f32)> = row
+                .iter()
+                .map(|l| {
+                    let w = (l.weight.clamp(0.0, 1.0) * 65535.0).round() / 65535.0;
+                    (point_offset + l.point as usize, w)
+                })
+                .filter(|(_, w)| *w > 0.0)
+                .collect();
+            let cpu = math::interpolate(position, normal, &links, &final_points.lights);
+            let blended = math::interpolate(Vec3::ZERO, Vec3::ZERO, &links, &final_points.lights);
+            if cpu.diffuse != blended.diffuse {
+                capped += 1;
+            }
+            let gpu = &vertex_lights[v];
+            assert!(
+                close(gpu.diffuse, cpu.diffuse, 1e-3, 1e-9),
+                "vertex {v}: {} vs {}",
+                gpu.diffuse,
+                cpu.diffuse
+            );
+            assert!(close(gpu.glossy, cpu.glossy, 1e-3, 1e-9), "vertex {v}");
+            assert!(
+                (gpu.diffuse_position - cpu.diffuse_position).length() < 1e-4,
+                "vertex {v}"
+            );
+            v += 1;
+        }
+        point_offset += mesh_points.positions.len();
+    }
+    assert_eq!(v, vertex_lights.len());
+    capped
+}
+
+/// The cap on a vertex's blended light (`math::BLEND_GAIN_MAX`) fires on a curved mesh, the
+/// GPU where the CPU twin does.
+#[test]
+fn interpolation_caps_blended_lights_on_the_bunny_as_its_cpu_twin_does() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("bunny-box", &BuiltinParams::default()).unwrap();
+    let s = sparse_settings(32, 2048, OcclusionMode::Off, true);
+    let capped = interpolation_against_cpu(&ctx, &scene, s);
+    assert!(capped > 0, "no vertex capped its diffuse light");
 }
 
 #[test]

@@ -54,6 +54,9 @@ const FLAG_ADAPTIVE_RAYS: u32 = 16u;
 const POSITION_EPSILON: f32 = 1e-12;
 const COS_MIN: f32 = 1e-2;
 const WEIGHT_EPSILON: f32 = 1e-6;
+// vals::math::BLEND_GAIN_MAX: the most a vertex's blended diffuse light may give it over the
+// mean of its links' lights evaluated there.
+const BLEND_GAIN_MAX: f32 = 2.0;
 
 // Octahedral unit-vector encoding in two snorm16 (the points' normals).
 fn oct_decode(packed: u32) -> vec3<f32> {

@@ -1,6 +1,9 @@
 // Step 3 — interpolate: every vertex of every instance takes the weighted mean of its 8 linked
 // points' lights (positions and intensities, weights of paper eq. 12 precomputed in model space
-// and stored normalized as unorm16 beside a mesh-local point index).
+// and stored normalized as unorm16 beside a mesh-local point index). The diffuse intensity is
+// then capped so that the blended light gives the vertex at most BLEND_GAIN_MAX times the mean
+// of its links' lights evaluated there (CPU twin: `vals::math::interpolate`): blending
+// positions of lights that lie in different directions puts the light near the surface.
 #include "vals_common.wgsl"
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
@@ -13,8 +16,10 @@
 @group(0) @binding(7) var<storage, read> ranges: array<InstanceRange>;
 // Two vec4 per mesh vertex: 8 × (point index | weight << 16).
 @group(0) @binding(8) var<storage, read> vertex_links: array<vec4<u32>>;
+// One vec4 per link row: the vertex's model position (f32 bits) and octahedral normal.
+@group(0) @binding(9) var<storage, read> link_vertices: array<vec4<u32>>;
 // Three vec4 per instance vertex: (l_d.xyz, I_d.r), (I_d.gb, l_s.xy), (l_s.z, I_s.rgb).
-@group(0) @binding(9) var<storage, read_write> vertex_lights: array<vec4<f32>>;
+@group(0) @binding(10) var<storage, read_write> vertex_lights: array<vec4<f32>>;
 
 // The instance whose vertex range holds `v` (ranges are sorted by vertex_offset).
 fn find_instance(v: u32) -> u32 {
@@ -41,7 +46,9 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let range = ranges[instance];
     let local = v - range.vertex_offset;
     let packed = array<vec4<u32>, 2>(vertex_links[(range.link_offset + local) * 2u], vertex_links[(range.link_offset + local) * 2u + 1u]);
+    let vertex = world_point(link_vertices[range.link_offset + local], vec2<u32>(0u, instance), instances[instance]);
     var total = 0.0;
+    var ed = vec3<f32>(0.0);
     var ld = vec3<f32>(0.0);
     var id = vec3<f32>(0.0);
     var ls = vec3<f32>(0.0);
@@ -59,6 +66,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         total += w;
         ld += w * lights.diffuse_position;
         id += w * lights.diffuse;
+        ed += w * lights.diffuse * diffuse_point_factor(vertex.position, vertex.normal, lights.diffuse_position);
         ls += w * lights.glossy_position;
         is += w * lights.glossy;
     }
@@ -72,6 +80,10 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     id /= total;
     ls /= total;
     is /= total;
+    let f = diffuse_point_factor(vertex.position, vertex.normal, ld);
+    if (f > 0.0) {
+        id = min(id, BLEND_GAIN_MAX * ed / (total * f));
+    }
     vertex_lights[v * 3u] = vec4<f32>(ld, id.r);
     vertex_lights[v * 3u + 1u] = vec4<f32>(id.gb, ls.xy);
     vertex_lights[v * 3u + 2u] = vec4<f32>(ls.z, is);

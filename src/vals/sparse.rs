@@ -5,8 +5,9 @@
 //! disc radius as f16 + instance index (8), and the solution: diffuse and glossy intensities
 //! as f32 RGB with the averaged positions as f16 offsets from the point (16 + 16), the offsets'
 //! z and the two occlusion spheres as f16 (8). Per vertex: the interpolated lights, 48 bytes
-//! (f32, they are varyings of the apply pass), plus 32 bytes of static links (8 × u16 point
-//! index + unorm16 weight) per mesh vertex.
+//! (f32, they are varyings of the apply pass), plus 48 bytes of static links per mesh vertex:
+//! 8 × (u16 point index + unorm16 weight), and the vertex's model position and octahedral
+//! normal for the interpolation's cap on blended lights.
 
 use std::sync::Arc;
 
@@ -332,7 +333,7 @@ const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R];
 /// world-space discs.
 const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R, R];
 /// Instances, points, point lights, instance ranges, links, the vertex lights it writes.
-const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, W];
+const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, R, W];
 /// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
 const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
 /// Group 2 of the visibility pass (`sensor_occluder.wgsl`): a depth sensor's parameters,
@@ -551,6 +552,7 @@ impl SparseGpu {
         let mut ranges = Vec::with_capacity(scene.instances.len());
         let mut link_offsets = Vec::with_capacity(scene.meshes.len());
         let mut links = Vec::<[u32; 4]>::new();
+        let mut vertex_model = Vec::<[u32; 4]>::new();
         for (mesh, mesh_points) in scene.meshes.iter().zip(points) {
             if mesh_points.positions.len() > u16::MAX as usize + 1 {
                 return Err(RenderError::Settings(format!(
@@ -560,6 +562,22 @@ impl SparseGpu {
                 )));
             }
             link_offsets.push((links.len() / 2) as u32);
+            // Each link row's vertex in model space (a two-sided sheet's back rows with the
+            // normal flipped), for the interpolation's renormalization at the vertex.
+            let n = mesh.positions.len().max(1);
+            for row in 0..mesh_points.links.len() {
+                let (position, normal) = (
+                    mesh.positions.get(row % n).copied().unwrap_or_default(),
+                    mesh.normals.get(row % n).copied().unwrap_or_default(),
+                );
+                let normal = if row >= n { -normal } else { normal };
+                vertex_model.push([
+                    position.x.to_bits(),
+                    position.y.to_bits(),
+                    position.z.to_bits(),
+                    oct_encode(normal),
+                ]);
+            }
             for row in &mesh_points.links {
                 let packed: Vec<u32> = row
                     .iter()
@@ -693,7 +711,12 @@ impl SparseGpu {
         let point_bytes = bytes.0;
         let ranges_buffer = init(&mut bytes, "instance ranges", bytemuck::cast_slice(&ranges));
         let links_buffer = init(&mut bytes, "vertex links", bytemuck::cast_slice(&links));
-        let link_bytes = (links.len() * 16) as u64;
+        let vertex_model_buffer = init(
+            &mut bytes,
+            "link vertices",
+            bytemuck::cast_slice(&vertex_model),
+        );
+        let link_bytes = (links.len() * 16 + vertex_model.len() * 16) as u64;
         let vertex_lights = ctx.scoped(
             &format!("the vertex lights ({vertex_count} instance vertices)"),
             Some(vertex_light_size),
@@ -786,7 +809,12 @@ impl SparseGpu {
             &pipelines.interpolate,
             &[
                 &lights[..],
-                &[&ranges_buffer, &links_buffer, &vertex_lights],
+                &[
+                    &ranges_buffer,
+                    &links_buffer,
+                    &vertex_model_buffer,
+                    &vertex_lights,
+                ],
             ]
             .concat(),
         );
