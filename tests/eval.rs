@@ -77,6 +77,44 @@ fn flicker_is_zero_for_linear_motion_and_known_for_alternation() {
 }
 
 #[test]
+fn static_flicker_leaves_out_the_pixels_a_moving_surface_crosses() {
+    use glam::Vec3;
+    // Pixel 0 keeps its surface; pixel 1 sees a moving one; pixel 2 misses in every frame;
+    // pixel 3 turns; pixel 4 hits, then misses.
+    let frames = 4;
+    let hit = |x: f32, n: Vec3| Some((Vec3::new(x, 0.0, 1.0), n));
+    let hits: Vec<Vec<Option<(Vec3, Vec3)>>> = (0..frames)
+        .map(|f| {
+            let t = f as f32;
+            vec![
+                hit(0.0, Vec3::Z),
+                hit(0.1 * t, Vec3::Z),
+                None,
+                hit(0.0, Vec3::new(0.0, 0.1 * t, 1.0).normalize()),
+                if f == 0 { hit(0.0, Vec3::Z) } else { None },
+            ]
+        })
+        .collect();
+    let mask = metrics::static_pixels(&hits, 1e-4);
+    assert_eq!(mask, vec![true, false, true, false, false]);
+    // Pixel 0 brightens linearly, pixel 1 (the moving surface) alternates: the static flicker
+    // is 0, the flicker of all pixels is not.
+    let images: Vec<Image> = (0..frames)
+        .map(|t| {
+            let mut image = constant(5, 1, 1.0);
+            let v = 1.0 + 0.1 * t as f32;
+            image.pixels[0] = [v, v, v, 1.0];
+            let v = if t % 2 == 0 { 2.0 } else { 0.0 };
+            image.pixels[1] = [v, v, v, 1.0];
+            image
+        })
+        .collect();
+    assert!(metrics::flicker(&images).unwrap() > 0.1);
+    assert!(metrics::flicker_where(&images, Some(&mask)).unwrap() < 1e-10);
+    assert!(metrics::flicker_where(&images, Some(&[false; 5])).is_none());
+}
+
+#[test]
 fn auto_exposure_maps_the_mean_to_mid_grey() {
     let e = metrics::auto_exposure(&constant(4, 4, 0.045));
     assert!((e - 2.0).abs() < 1e-4, "{e}");
@@ -198,6 +236,7 @@ fn eval_end_to_end_on_two_tiny_scenes() {
             "flip",
             "flip_indirect",
             "flicker",
+            "flicker_static",
             "total_ms",
         ] {
             let v: f64 = fields[col(metric)]

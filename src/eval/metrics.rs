@@ -90,17 +90,32 @@ pub fn auto_exposure(reference: &Image) -> f32 {
 /// Motion that is linear in time gives 0; frame-to-frame noise gives a large value. `None`
 /// with fewer than three frames; 0 for an all-black sequence.
 pub fn flicker(frames: &[Image]) -> Option<f64> {
+    flicker_where(frames, None)
+}
+
+/// [`flicker`] over the pixels where `mask` is true only (both means taken over them), or
+/// all pixels with `None`; `None` also when the mask keeps no pixel. With the pixels whose
+/// surface stands still ([`static_pixels`]) it leaves out the silhouettes of moving objects,
+/// whose sweep across a pixel is a second difference in every method and in the reference.
+pub fn flicker_where(frames: &[Image], mask: Option<&[bool]>) -> Option<f64> {
     if frames.len() < 3 {
         return None;
     }
     for f in &frames[1..] {
         same_size(&frames[0], f);
     }
-    let n = frames[0].pixels.len().max(1) as f64 * 3.0;
+    let keep = |i: usize| mask.is_none_or(|m| m.get(i).copied().unwrap_or(false));
+    let kept = (0..frames[0].pixels.len()).filter(|&i| keep(i)).count();
+    if kept == 0 {
+        return None;
+    }
+    let n = kept as f64 * 3.0;
     let mut mean = 0.0f64;
     for f in frames {
-        for p in &f.pixels {
-            mean += (p[0] + p[1] + p[2]) as f64;
+        for (i, p) in f.pixels.iter().enumerate() {
+            if keep(i) {
+                mean += (p[0] + p[1] + p[2]) as f64;
+            }
         }
     }
     mean /= n * frames.len() as f64;
@@ -108,7 +123,7 @@ pub fn flicker(frames: &[Image]) -> Option<f64> {
     for t in 1..frames.len() - 1 {
         let (prev, cur, next) = (&frames[t - 1], &frames[t], &frames[t + 1]);
         let mut sum = 0.0f64;
-        for i in 0..cur.pixels.len() {
+        for i in (0..cur.pixels.len()).filter(|&i| keep(i)) {
             for c in 0..3 {
                 let d = next.pixels[i][c] as f64 - 2.0 * cur.pixels[i][c] as f64
                     + prev.pixels[i][c] as f64;
@@ -122,4 +137,26 @@ pub fn flicker(frames: &[Image]) -> Option<f64> {
         return Some(if energy == 0.0 { 0.0 } else { f64::INFINITY });
     }
     Some(energy / (mean * mean))
+}
+
+/// Pixels whose camera ray meets the same surface point in every frame: `hits[f][px]` is
+/// frame f's first hit (position, shading normal), `None` for a miss. A pixel is static
+/// when it misses in every frame, or hits in every frame within `tolerance` of frame 0's
+/// position with a normal within 1e-3 of it.
+pub fn static_pixels(hits: &[Vec<Option<(glam::Vec3, glam::Vec3)>>], tolerance: f32) -> Vec<bool> {
+    let Some(first) = hits.first() else {
+        return vec![];
+    };
+    (0..first.len())
+        .map(|i| {
+            hits.iter()
+                .all(|frame| match (first[i], frame.get(i).copied().flatten()) {
+                    (None, None) => true,
+                    (Some((p0, n0)), Some((p, n))) => {
+                        p.distance(p0) <= tolerance && n.dot(n0) >= 1.0 - 1e-3
+                    }
+                    _ => false,
+                })
+        })
+        .collect()
 }

@@ -122,8 +122,44 @@ pub struct EvalRow {
     pub relmse_indirect: f64,
     pub flip_indirect: f64,
     pub flicker: Option<f64>,
+    /// [`metrics::flicker_where`] over the pixels whose surface stands still in every frame
+    /// (no moving object's silhouette; `None` when the camera moves or nothing stands still).
+    pub flicker_static: Option<f64>,
     pub exposure: f32,
     pub exposure_indirect: f32,
+}
+
+/// The pixels whose first surface stands still over the frames (`metrics::static_pixels`,
+/// within 1e-5 of the scene's diagonal): frame f's camera rays traced at time `f·frame_dt`.
+fn static_pixels(
+    scene: &Scene,
+    camera: Option<&str>,
+    (width, height): (u32, u32),
+    frames: u32,
+    frame_dt: f32,
+) -> Result<Vec<bool>, EvalError> {
+    let aspect = width as f32 / height as f32;
+    let mut hits = Vec::with_capacity(frames as usize);
+    let mut diagonal = 0.0f32;
+    for f in 0..frames {
+        let world = scene.world_from_node_at(f as f32 * frame_dt);
+        let view = scene.camera_view(camera, aspect, &world)?;
+        let bounds = scene.world_bounds(&world);
+        diagonal = diagonal.max((bounds.max - bounds.min).length());
+        let tracer = crate::trace::Tracer::new(scene, &world);
+        hits.push(
+            (0..width * height)
+                .map(|i| {
+                    let (x, y) = ((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
+                    let (o, d) = crate::reference::camera_ray(&view, width, height, x, y);
+                    tracer
+                        .intersect(o, d, f32::INFINITY)
+                        .map(|h| (h.position, h.normal))
+                })
+                .collect::<Vec<_>>(),
+        );
+    }
+    Ok(metrics::static_pixels(&hits, 1e-5 * diagonal.max(1e-6)))
 }
 
 /// What a run wrote.
@@ -143,7 +179,7 @@ pub struct EvalSummary {
     pub sweep_checks: Vec<sweep::AutoCheck>,
 }
 
-pub const CSV_HEADER: &str = "scene,method,settings,width,height,passes_ms,total_ms,gpu_bytes,rmse,relmse,flip,rmse_indirect,relmse_indirect,flip_indirect,flicker,exposure,exposure_indirect";
+pub const CSV_HEADER: &str = "scene,method,settings,width,height,passes_ms,total_ms,gpu_bytes,rmse,relmse,flip,rmse_indirect,relmse_indirect,flip_indirect,flicker,flicker_static,exposure,exposure_indirect";
 
 /// Splits `--methods` text into specs: commas separate methods, except that a `key=value`
 /// item without a `:` continues the previous method's options, so
@@ -393,6 +429,7 @@ impl EvalRow {
             num(self.relmse_indirect),
             num(self.flip_indirect),
             self.flicker.map(num).unwrap_or_default(),
+            self.flicker_static.map(num).unwrap_or_default(),
             format!("{:.3}", self.exposure),
             format!("{:.3}", self.exposure_indirect),
         ]
@@ -527,6 +564,17 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
         }
         let world0 = scene.world_from_node_at(0.0);
         let camera0 = scene.camera_view(camera.as_deref(), aspect, &world0)?;
+        let static_mask = if request.frames >= 3 {
+            Some(static_pixels(
+                scene,
+                camera.as_deref(),
+                (request.width, request.height),
+                request.frames,
+                request.frame_dt,
+            )?)
+        } else {
+            None
+        };
         let key = reference_key(
             &scene_key,
             camera.as_deref(),
@@ -655,6 +703,9 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
                 relmse_indirect: metrics::relmse(&frame.indirect, ref_indirect),
                 flip_indirect,
                 flicker: metrics::flicker(&indirect_frames),
+                flicker_static: static_mask
+                    .as_deref()
+                    .and_then(|mask| metrics::flicker_where(&indirect_frames, Some(mask))),
                 exposure,
                 exposure_indirect,
             };
