@@ -249,7 +249,7 @@ impl<'a> Tracer<'a> {
     /// Closest hit along `origin + t·dir`, t in (0, `t_max`).
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         let bvh = self.bvh.as_ref()?;
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let ray = obvhs_ray(origin, dir, 0.0, t_max);
         let mut hit = RayHit::none();
         let found = bvh.ray_traverse(ray, &mut hit, |ray, id| {
             self.triangles[bvh.primitive_indices[id] as usize].intersect(ray)
@@ -295,7 +295,7 @@ impl<'a> Tracer<'a> {
         if t_max <= 0.0 {
             return true;
         }
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, t_max);
+        let ray = obvhs_ray(origin, dir, 0.0, t_max);
         bvh.ray_traverse_miss(ray, |ray, id| {
             let tri = bvh.primitive_indices[id] as usize;
             if blocks(tri) {
@@ -472,4 +472,43 @@ pub fn diffuse_albedo_at(scene: &Scene, material: usize, uv: Vec2) -> Vec3 {
     };
     let (base, metallic, _) = base_metallic_roughness(scene, m, uv);
     Material::diffuse_albedo(base, metallic)
+}
+
+/// An obvhs ray. Its traversal finds nothing along a direction with a component of exactly
+/// −0.0, while +0.0 and any tiny value work: a negated direction in an axis plane (the shadow
+/// rays of a sun travelling along (0.5, −0.87, 0), whose `−direction` has z = −0.0) saw no
+/// blocker, and the path tracer drew `plane-directional` without its shadow. Adding +0.0
+/// turns −0.0 into +0.0 and leaves every other value as it is.
+pub fn obvhs_ray(origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Ray {
+    Ray::new(origin.into(), (dir + Vec3::ZERO).into(), t_min, t_max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shadow_rays_along_a_negated_axis_plane_direction_find_their_blocker() {
+        // plane-directional: a 0.4 m slab at 0.5 m over a plane, the sun travelling along
+        // (sin 30°, −cos 30°, 0): its shadow on the plane spans x ∈ [0.09, 0.49].
+        let scene = crate::scene::builtin::load(
+            "plane-directional",
+            &crate::scene::builtin::BuiltinParams::default(),
+        )
+        .unwrap();
+        let tracer = Tracer::new(&scene, &scene.world_from_node());
+        let (wi, _) = tracer.lights[0].incident(Vec3::ZERO);
+        assert!(wi.z == 0.0 && wi.z.is_sign_negative(), "the case: {wi}");
+        for z in [-0.13f32, 0.0, 0.05] {
+            let shadowed = tracer.direct_irradiance(Vec3::new(0.3, 0.0, z), Vec3::Y);
+            let lit = tracer.direct_irradiance(Vec3::new(0.7, 0.0, z), Vec3::Y);
+            assert_eq!(shadowed, Vec3::ZERO, "z {z}");
+            assert!(lit.min_element() > 1.7, "z {z}: {lit}");
+            let hit = tracer.intersect(Vec3::new(0.3, 1e-3, z), wi, f32::INFINITY);
+            assert!(
+                hit.is_some_and(|h| (h.position.y - 0.49).abs() < 1e-4),
+                "z {z}"
+            );
+        }
+    }
 }

@@ -602,7 +602,10 @@ fn the_reference_view_draws_the_difference_to_the_cached_reference() {
         .as_str()
         .unwrap_or_else(|| panic!("{report}"));
     assert!(
-        key.starts_with("v2 scene=cornell camera=- size=32x32 "),
+        key.starts_with(&format!(
+            "v{} scene=cornell camera=- size=32x32 ",
+            valgi::eval::REFERENCE_VERSION
+        )),
         "{key}"
     );
 

@@ -362,7 +362,7 @@ pub fn sheet_meshes(meshes: &[ChartMesh]) -> Vec<usize> {
     });
     let closest = |o: Vec3, d: Vec3| -> Option<(f32, Vec3)> {
         let bvh = bvh.as_ref()?;
-        let ray = obvhs::ray::Ray::new(o.into(), d.into(), eps, f32::INFINITY);
+        let ray = crate::trace::obvhs_ray(o, d, eps, f32::INFINITY);
         let mut hit = obvhs::ray::RayHit::none();
         let found = bvh.ray_traverse(ray, &mut hit, |ray, id| {
             bvh_tris[bvh.primitive_indices[id] as usize].intersect(ray)

@@ -232,6 +232,12 @@ impl CachedReference {
     }
 }
 
+/// The version of the path tracer's output in every reference cache key: raised when a fix
+/// changes its pixels, so that no cache keeps an image of the old one. 3: shadow rays along
+/// a direction with a −0.0 component (a negated axis-plane sun direction) found no blocker
+/// (`trace::obvhs_ray`).
+pub const REFERENCE_VERSION: u32 = 3;
+
 /// The reference's cache key: everything that changes its pixels.
 #[allow(clippy::too_many_arguments)]
 pub fn reference_key(
@@ -249,7 +255,7 @@ pub fn reference_key(
     // Keys of references with specular light (the default) are as they were before the
     // option existed, so caches stay valid.
     format!(
-        "v2 scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}{}",
+        "v{REFERENCE_VERSION} scene={scene} camera={} size={width}x{height} bounces={bounces} spp={spp} seed={seed} max_edge={max_edge} time={time}{}",
         camera.unwrap_or("-"),
         if specular { "" } else { " specular=off" }
     )
@@ -291,7 +297,7 @@ pub fn find_cached_reference(
         dir.to_path_buf()
     };
     let prefix = format!(
-        "v2 scene={scene_key} camera={} size={width}x{height} ",
+        "v{REFERENCE_VERSION} scene={scene_key} camera={} size={width}x{height} ",
         camera.unwrap_or("-")
     );
     let time_field = format!("time={time}");
