@@ -46,8 +46,10 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let range = ranges[instance];
     let local = v - range.vertex_offset;
     let packed = array<vec4<u32>, 2>(vertex_links[(range.link_offset + local) * 2u], vertex_links[(range.link_offset + local) * 2u + 1u]);
+    // The vertex in world space (a point's meta without k and radius, which are not read).
     let vertex = world_point(link_vertices[range.link_offset + local], vec2<u32>(0u, instance), instances[instance]);
     var total = 0.0;
+    // Σ w·I_j·f_d(v, l_j): what the links' own lights give the vertex.
     var ed = vec3<f32>(0.0);
     var ld = vec3<f32>(0.0);
     var id = vec3<f32>(0.0);
