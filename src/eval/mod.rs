@@ -131,7 +131,7 @@ pub struct EvalRow {
 
 /// The pixels whose first surface stands still over the frames (`metrics::static_pixels`,
 /// within 1e-5 of the scene's diagonal): frame f's camera rays traced at time `f·frame_dt`.
-fn static_pixels(
+pub fn static_pixels(
     scene: &Scene,
     camera: Option<&str>,
     (width, height): (u32, u32),
