@@ -64,15 +64,9 @@ fn pixels_seeing(
     keep: impl Fn(glam::Vec3) -> bool,
 ) -> Vec<bool> {
     let tracer = valgi::trace::Tracer::new(scene, &scene.world_from_node());
-    (0..WIDTH * HEIGHT)
-        .map(|i| {
-            let (x, y) = (i % WIDTH, i / WIDTH);
-            let (o, d) =
-                valgi::reference::camera_ray(camera, WIDTH, HEIGHT, x as f32 + 0.5, y as f32 + 0.5);
-            tracer
-                .intersect(o, d, f32::INFINITY)
-                .is_some_and(|h| keep(h.position))
-        })
+    valgi::reference::first_hits(&tracer, camera, WIDTH, HEIGHT)
+        .into_iter()
+        .map(|hit| hit.is_some_and(|h| keep(h.position)))
         .collect()
 }
 

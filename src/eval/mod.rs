@@ -138,6 +138,10 @@ pub fn static_pixels(
     frames: u32,
     frame_dt: f32,
 ) -> Result<Vec<bool>, EvalError> {
+    if scene.animations.is_empty() {
+        // Nothing moves, the camera included: every pixel stands still.
+        return Ok(vec![true; (width * height) as usize]);
+    }
     let aspect = width as f32 / height as f32;
     let mut hits = Vec::with_capacity(frames as usize);
     let mut diagonal = 0.0f32;
@@ -148,14 +152,9 @@ pub fn static_pixels(
         diagonal = diagonal.max((bounds.max - bounds.min).length());
         let tracer = crate::trace::Tracer::new(scene, &world);
         hits.push(
-            (0..width * height)
-                .map(|i| {
-                    let (x, y) = ((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
-                    let (o, d) = crate::reference::camera_ray(&view, width, height, x, y);
-                    tracer
-                        .intersect(o, d, f32::INFINITY)
-                        .map(|h| (h.position, h.normal))
-                })
+            crate::reference::first_hits(&tracer, &view, width, height)
+                .into_iter()
+                .map(|hit| hit.map(|h| (h.position, h.normal)))
                 .collect::<Vec<_>>(),
         );
     }

@@ -280,6 +280,24 @@ pub fn camera_ray(camera: &CameraView, width: u32, height: u32, px: f32, py: f32
     (origin, dir)
 }
 
+/// The surface each pixel's centre sees first (`None` where its ray leaves the scene), row by
+/// row: what a pixel of the image stands for, for masks over the image.
+pub fn first_hits(
+    tracer: &crate::trace::Tracer,
+    camera: &CameraView,
+    width: u32,
+    height: u32,
+) -> Vec<Option<crate::trace::Hit>> {
+    (0..width * height)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % width) as f32 + 0.5, (i / width) as f32 + 0.5);
+            let (o, d) = camera_ray(camera, width, height, x, y);
+            tracer.intersect(o, d, f32::INFINITY)
+        })
+        .collect()
+}
+
 /// Renders the scene at `world_from_node` through `camera`. Each pixel averages `spp` paths
 /// through uniformly jittered points of the pixel (a box filter, like the GPU's SSAA resolve).
 pub fn render(

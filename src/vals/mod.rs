@@ -563,7 +563,11 @@ impl SparseMethod {
             settings.rsm,
             val_source.as_ref().map(|s| s.external()),
         )?;
-        if let Some((mesh, count)) = points::oversized_mesh(scene, settings.sparse_points) {
+        let started = Instant::now();
+        // Measures each mesh's turn (`points::curvature_boost`): computed once, for the size
+        // check and the placement both.
+        let counts = points::points_per_mesh(scene, settings.sparse_points);
+        if let Some((mesh, count)) = points::oversized_mesh(scene, &counts) {
             return Err(RenderError::Settings(format!(
                 "--sparse-points {}: mesh '{mesh}' of scene '{}' would get {count} sparse \
                  points; links address at most {} per mesh: lower --sparse-points",
@@ -572,9 +576,7 @@ impl SparseMethod {
                 points::MAX_POINTS_PER_MESH
             )));
         }
-        let started = Instant::now();
-        let (points, meshes_computed) =
-            points::scene_points(scene, settings.sparse_points, settings.seed);
+        let (points, meshes_computed) = points::scene_points_for(scene, &counts, settings.seed);
         let (points, link_cut) = if settings.link_test {
             points::cut_links_through_walls(scene, &points)
         } else {

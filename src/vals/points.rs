@@ -447,31 +447,40 @@ pub fn is_two_sided(scene: &Scene, mesh: &Mesh) -> bool {
 /// Most sparse points one mesh may hold: vertex links address them with 16 bits.
 pub const MAX_POINTS_PER_MESH: usize = 1 << 16;
 
-/// The first mesh that `total` points would give more than [`MAX_POINTS_PER_MESH`] (both
-/// sides of a two-sided mesh count), with its count — checked before any placement, which at
-/// such counts takes minutes.
-pub fn oversized_mesh(scene: &Scene, total: usize) -> Option<(&str, usize)> {
+/// The first mesh whose count of `counts` ([`points_per_mesh`]) is more than
+/// [`MAX_POINTS_PER_MESH`] (both sides of a two-sided mesh count), with that count — checked
+/// before any placement, which at such counts takes minutes.
+pub fn oversized_mesh<'a>(scene: &'a Scene, counts: &[usize]) -> Option<(&'a str, usize)> {
     scene
         .meshes
         .iter()
-        .zip(points_per_mesh(scene, total))
-        .map(|(mesh, count)| {
+        .zip(counts)
+        .map(|(mesh, &count)| {
             let sides = if is_two_sided(scene, mesh) { 2 } else { 1 };
             (mesh.name.as_str(), count * sides)
         })
         .find(|&(_, count)| count > MAX_POINTS_PER_MESH)
 }
 
-/// Points for every mesh of the scene, from the process-wide cache where this mesh was
-/// already processed with the same count and seed. Returns the points and how many meshes
-/// were computed (not cached).
+/// Points for every mesh of the scene, `total` split by [`points_per_mesh`]: see
+/// [`scene_points_for`].
 pub fn scene_points(scene: &Scene, total: usize, seed: u64) -> (Vec<Arc<MeshPoints>>, usize) {
-    let counts = points_per_mesh(scene, total);
+    scene_points_for(scene, &points_per_mesh(scene, total), seed)
+}
+
+/// Points for every mesh of the scene, `counts[m]` on mesh m, from the process-wide cache
+/// where this mesh was already processed with the same count and seed. Returns the points
+/// and how many meshes were computed (not cached).
+pub fn scene_points_for(
+    scene: &Scene,
+    counts: &[usize],
+    seed: u64,
+) -> (Vec<Arc<MeshPoints>>, usize) {
     let mut computed = 0;
     let points = scene
         .meshes
         .iter()
-        .zip(&counts)
+        .zip(counts)
         .enumerate()
         .map(|(mi, (mesh, &count))| {
             let sides = if is_two_sided(scene, mesh) { 2 } else { 1 };
