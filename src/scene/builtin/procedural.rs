@@ -17,6 +17,9 @@
 //!   (cones 25°/35°); the camera stands inside at (0, 1.25, 1.45) looking at (0, 0.95, 0), 50°
 //!   vertical field of view. `bunny-box-empty` is the same box without the bunny,
 //!   `bunny-box-res4` the same with the 948-triangle `bun_zipper_res4.ply`.
+//! - `arcade`: a sunlit court and a roofed gallery behind five pillars; the sun reaches the
+//!   gallery floor in stripes between the pillars' shadows (seed 001's Fig. 9 case: bounces 1
+//!   and 2 land on different surfaces).
 //! - `cornell-bunny`: the Stanford bunny (ASCII PLY from the shared data folder) in the Cornell
 //!   box in place of the short block; a procedural stand-in, named as such, when absent.
 
@@ -84,6 +87,10 @@ pub const NAMES: &[(&str, &str)] = &[
     ),
     ("glossy-row-moving", "glossy-row with the light moving along the row"),
     (
+        "arcade",
+        "a sunlit court and a roofed gallery behind five pillars; the sun falls in stripes on the gallery floor",
+    ),
+    (
         "cornell-bunny",
         "Cornell box with the Stanford bunny (../shared/data/bunny; a procedural stand-in when absent)",
     ),
@@ -114,6 +121,7 @@ pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
         "aligned-occluders" => Ok(aligned_occluders(name, moving, max_edge)),
         "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
         "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
+        "arcade" if !moving => Ok(arcade(name, max_edge)),
         "cornell-bunny" => cornell_bunny(name, moving, max_edge),
         "bunny-box" => bunny_box(name, Some("bun_zipper.ply"), moving),
         "bunny-box-res4" => bunny_box(name, Some("bun_zipper_res4.ply"), moving),
@@ -749,6 +757,67 @@ fn thin_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
         swing_first_light(&mut scene, light_at, Vec3::new(0.0, 0.0, 0.7));
     }
     scene
+}
+
+/// An 8 × 8 m court (floor y = 0) closed by walls 4 m high on three sides (x = 0, x = 8,
+/// z = 0), with a gallery along the back wall: a roof slab y ∈ [3, 3.3] over z ∈ [0, 2.5]
+/// standing on five 0.4 m pillars at its front edge. The sun (3 W/m², travelling along
+/// (0.25, −1, −0.6)) lights the court and, between the pillars' shadows, the gallery floor
+/// from z ≈ 0.7 to 2.5; the back wall and the roof's underside get bounced light only. So the
+/// first bounce's light on the gallery floor comes in stripes whose gaps the second bounce
+/// fills: what clustering bounces jointly smears (seed 001, Fig. 9).
+fn arcade(name: &str, max_edge: f32) -> Scene {
+    let mut b = SceneBuilder::new(name);
+    let stone = b.material(Material::lambert("stone", Vec3::new(0.7, 0.65, 0.55)));
+    let floor_mat = b.material(Material::lambert("floor", Vec3::new(0.6, 0.55, 0.5)));
+    let (size, wall_h) = (8.0, 4.0);
+    let court = Vec3::new(size, wall_h, size);
+    let centre = court * 0.5;
+    let faces = [
+        ("floor", floor_mat, 1, false),
+        ("wall_-x", stone, 0, false),
+        ("wall_+x", stone, 0, true),
+        ("back_wall", stone, 2, false),
+    ];
+    for (object, material, axis, high) in faces {
+        let [p0, p1, p2, p3] = box_face(Vec3::ZERO, court, axis, high);
+        let mut mb = MeshBuilder::new(object, material);
+        mb.add_quad(p0, p1, p2, p3, centre, max_edge);
+        b.object(object, mb.build(), Trs::default());
+    }
+    let (roof_y, depth, pillar) = (3.0, 2.5, 0.4);
+    let mut gallery = MeshBuilder::new("gallery", stone);
+    solid_box(
+        &mut gallery,
+        Vec3::new(0.0, roof_y, 0.0),
+        Vec3::new(size, roof_y + 0.3, depth),
+        max_edge,
+    );
+    for i in 0..5 {
+        let x = 0.2 + 1.9 * i as f32;
+        solid_box(
+            &mut gallery,
+            Vec3::new(x - 0.5 * pillar, 0.0, depth - pillar),
+            Vec3::new(x + 0.5 * pillar, roof_y, depth),
+            max_edge,
+        );
+    }
+    b.object("gallery", gallery.build(), Trs::default());
+    b.light_along(
+        "sun",
+        Vec3::new(4.0, 6.0, 6.0),
+        Vec3::new(0.25, -1.0, -0.6),
+        LightKind::Directional,
+        3.0,
+    );
+    // From the court's far corner into the gallery: its floor, back wall and roof underside.
+    camera(
+        &mut b,
+        Vec3::new(6.2, 2.2, 6.5),
+        Vec3::new(2.5, 0.8, 1.0),
+        60.0,
+    );
+    b.scene
 }
 
 /// Roughness giving the Phong exponent `k` under DESIGN §3's mapping
