@@ -19,7 +19,7 @@
 //!   `bunny-box-res4` the same with the 948-triangle `bun_zipper_res4.ply`.
 //! - `arcade`: a sunlit court and a roofed gallery behind five pillars; the sun reaches the
 //!   gallery floor in stripes between the pillars' shadows (seed 001's Fig. 9 case: bounces 1
-//!   and 2 land on different surfaces).
+//!   and 2 land on different surfaces). In `arcade-moving` the sun turns about the vertical.
 //! - `cornell-bunny`: the Stanford bunny (ASCII PLY from the shared data folder) in the Cornell
 //!   box in place of the short block; a procedural stand-in, named as such, when absent.
 
@@ -91,6 +91,10 @@ pub const NAMES: &[(&str, &str)] = &[
         "a sunlit court and a roofed gallery behind five pillars; the sun falls in stripes on the gallery floor",
     ),
     (
+        "arcade-moving",
+        "arcade with the sun turning 15° either way about the vertical (the pillars' shadows sweep)",
+    ),
+    (
         "cornell-bunny",
         "Cornell box with the Stanford bunny (../shared/data/bunny; a procedural stand-in when absent)",
     ),
@@ -121,7 +125,7 @@ pub fn load(name: &str, max_edge: f32) -> Option<Result<Scene, SceneError>> {
         "aligned-occluders" => Ok(aligned_occluders(name, moving, max_edge)),
         "thin-wall" => Ok(thin_wall(name, moving, max_edge)),
         "glossy-row" => Ok(glossy_row(name, moving, max_edge)),
-        "arcade" if !moving => Ok(arcade(name, max_edge)),
+        "arcade" => Ok(arcade(name, moving, max_edge)),
         "cornell-bunny" => cornell_bunny(name, moving, max_edge),
         "bunny-box" => bunny_box(name, Some("bun_zipper.ply"), moving),
         "bunny-box-res4" => bunny_box(name, Some("bun_zipper_res4.ply"), moving),
@@ -766,7 +770,7 @@ fn thin_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
 /// from z ≈ 0.7 to 2.5; the back wall and the roof's underside get bounced light only. So the
 /// first bounce's light on the gallery floor comes in stripes whose gaps the second bounce
 /// fills: what clustering bounces jointly smears (seed 001, Fig. 9).
-fn arcade(name: &str, max_edge: f32) -> Scene {
+fn arcade(name: &str, moving: bool, max_edge: f32) -> Scene {
     let mut b = SceneBuilder::new(name);
     let stone = b.material(Material::lambert("stone", Vec3::new(0.7, 0.65, 0.55)));
     let floor_mat = b.material(Material::lambert("floor", Vec3::new(0.6, 0.55, 0.5)));
@@ -803,10 +807,11 @@ fn arcade(name: &str, max_edge: f32) -> Scene {
         );
     }
     b.object("gallery", gallery.build(), Trs::default());
+    let sun_direction = Vec3::new(0.25, -1.0, -0.6);
     b.light_along(
         "sun",
         Vec3::new(4.0, 6.0, 6.0),
-        Vec3::new(0.25, -1.0, -0.6),
+        sun_direction,
         LightKind::Directional,
         3.0,
     );
@@ -817,7 +822,25 @@ fn arcade(name: &str, max_edge: f32) -> Scene {
         Vec3::new(2.5, 0.8, 1.0),
         60.0,
     );
-    b.scene
+    let mut scene = b.scene;
+    if moving {
+        // The sun's azimuth sweeps ±15° (a time-of-day change), its elevation kept.
+        let node = scene.lights[0].node;
+        let at = |degrees: f32| {
+            let turned = Quat::from_rotation_y(degrees.to_radians()) * sun_direction;
+            Quat::from_rotation_arc(Vec3::NEG_Z, turned.normalize())
+        };
+        add_animation(
+            &mut scene,
+            "sun turns",
+            vec![channel(
+                node,
+                Property::Rotation,
+                rotations(&[at(0.0), at(15.0), at(0.0), at(-15.0), at(0.0)]),
+            )],
+        );
+    }
+    scene
 }
 
 /// Roughness giving the Phong exponent `k` under DESIGN §3's mapping
