@@ -1,12 +1,15 @@
 // Shadow rays against the scene's two-level BVH (`src/light/bvh.rs`, whose `SceneBvh::occluded`
 // is the CPU twin): the top level over the instances' world boxes, each instance at its leaves
 // tested against its box, then the ray in the instance's model space through its mesh's
-// binary BVH. The BVH is bind group 1 of every
-// includer (`SceneBvh::bind_group_layout`).
+// binary BVH. Both levels are threaded (`bvh::threaded`): preorder, an inner node's left child
+// next to it and its `first` the index past its subtree, so the walk keeps no stack (a private
+// array is zero-filled on every call, which on the software driver cost half the pass). The
+// BVH is bind group 1 of every includer (`SceneBvh::bind_group_layout`).
 
 struct BvhNode {
     min: vec3<f32>,
-    // > 0: a leaf with this many triangles from `first`; 0: children `first`, `first + 1`.
+    // > 0: a leaf with this many triangles (instances) from `first`; 0: an inner node whose
+    // left child is the next node and whose subtree ends before node `first`.
     prim_count: u32,
     max: vec3<f32>,
     first: u32,
@@ -31,8 +34,6 @@ struct BvhInstance {
 @group(1) @binding(2) var<storage, read> bvh_instances: array<BvhInstance>;
 // The top level: leaves hold `prim_count` instances from `first` (in `bvh_instances`).
 @group(1) @binding(3) var<storage, read> bvh_top: array<BvhNode>;
-
-const BVH_STACK_DEPTH: u32 = 64u;
 
 fn bvh_safe_inverse(d: vec3<f32>) -> vec3<f32> {
     let tiny = abs(d) < vec3<f32>(1e-20);
@@ -79,77 +80,54 @@ fn bvh_ray_triangle(origin: vec3<f32>, dir: vec3<f32>, t_max: f32, tri: BvhTrian
     return t > 0.0 && t < t_max;
 }
 
+// Where the walk over a threaded tree whose root is `root` ends.
+fn bvh_walk_end(root: BvhNode) -> u32 {
+    return select(root.first, 1u, root.prim_count > 0u);
+}
+
 fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
     let inv = bvh_safe_inverse(dir);
-    var stack: array<u32, BVH_STACK_DEPTH>;
-    var top = 1u;
-    stack[0] = 0u;
-    while (top > 0u) {
-        top -= 1u;
-        let node = bvh_nodes[first_node + stack[top]];
+    let end = bvh_walk_end(bvh_nodes[first_node]);
+    var i = 0u;
+    while (i < end) {
+        let node = bvh_nodes[first_node + i];
+        let leaf = node.prim_count > 0u;
         if (!bvh_ray_box(origin, inv, 1.0, node.min, node.max)) {
+            i = select(node.first, i + 1u, leaf);
             continue;
         }
-        if (node.prim_count > 0u) {
-            for (var i = 0u; i < node.prim_count; i++) {
-                if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + i])) {
-                    return true;
-                }
+        i += 1u;
+        if (!leaf) {
+            continue;
+        }
+        for (var k = 0u; k < node.prim_count; k++) {
+            if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + k])) {
+                return true;
             }
-        } else if (top + 2u <= BVH_STACK_DEPTH) {
-            stack[top] = node.first;
-            stack[top + 1u] = node.first + 1u;
-            top += 2u;
         }
     }
     return false;
-}
-
-// Pushes the children `first` and `first + 1` the segment enters (entry ≥ 0), the nearer on
-// top; returns the new top. A child that finds the stack full is dropped, as it always was
-// (`SceneBvh` keeps trees within the stack's depth).
-fn bvh_push_entered(stack: ptr<function, array<u32, BVH_STACK_DEPTH>>, top: u32, first: u32, entry_a: f32, entry_b: f32) -> u32 {
-    var t = top;
-    let a_first = entry_a <= entry_b;
-    let far_entry = select(entry_a, entry_b, a_first);
-    let near_entry = select(entry_b, entry_a, a_first);
-    if (far_entry >= 0.0 && t < BVH_STACK_DEPTH) {
-        (*stack)[t] = select(first, first + 1u, a_first);
-        t += 1u;
-    }
-    if (near_entry >= 0.0 && t < BVH_STACK_DEPTH) {
-        (*stack)[t] = select(first + 1u, first, a_first);
-        t += 1u;
-    }
-    return t;
 }
 
 // True when a triangle lies on the segment from `start` to `end` (t in (0, 1)).
 fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     let d = end - start;
     let inv = bvh_safe_inverse(d);
-    let root = bvh_top[0];
-    if (bvh_box_entry(start, inv, 1.0, root.min, root.max) < 0.0) {
-        return false;
-    }
-    var stack: array<u32, BVH_STACK_DEPTH>;
-    var top = 1u;
-    stack[0] = 0u;
-    // Every node on the stack is one the segment enters; of two children, the one it enters
-    // first comes off first, so that a blocked ray meets its nearest blocking instance before
-    // it walks the meshes behind it. (Within a mesh the same order measured slower: short
-    // unblocked rays pay for the sort and gain nothing.)
-    while (top > 0u) {
-        top -= 1u;
-        let node = bvh_top[stack[top]];
-        if (node.prim_count == 0u) {
-            let a = bvh_top[node.first];
-            let b = bvh_top[node.first + 1u];
-            top = bvh_push_entered(&stack, top, node.first, bvh_box_entry(start, inv, 1.0, a.min, a.max), bvh_box_entry(start, inv, 1.0, b.min, b.max));
+    let last = bvh_walk_end(bvh_top[0]);
+    var i = 0u;
+    while (i < last) {
+        let node = bvh_top[i];
+        let leaf = node.prim_count > 0u;
+        if (!bvh_ray_box(start, inv, 1.0, node.min, node.max)) {
+            i = select(node.first, i + 1u, leaf);
             continue;
         }
-        for (var i = node.first; i < node.first + node.prim_count; i++) {
-            let inst = bvh_instances[i];
+        i += 1u;
+        if (!leaf) {
+            continue;
+        }
+        for (var k = node.first; k < node.first + node.prim_count; k++) {
+            let inst = bvh_instances[k];
             if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
                 continue;
             }

@@ -821,14 +821,6 @@ impl SparseGpu {
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
         let bvh = SceneBvh::new(ctx, scene)?;
-        if bvh.max_depth() > crate::light::bvh::STACK_DEPTH {
-            return Err(RenderError::Settings(format!(
-                "scene '{}': a mesh BVH is {} levels deep; the visibility rays' stack holds {}",
-                scene.name,
-                bvh.max_depth(),
-                crate::light::bvh::STACK_DEPTH
-            )));
-        }
         bytes.add(GpuBytes(bvh.bytes.0));
         let sensor_group = match sensor {
             Some(sensor) => pipelines
