@@ -462,20 +462,7 @@ fn atlas_over_path_tracer(
     samples: u32,
     seed: u64,
 ) -> f32 {
-    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
-    let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
-    let reference = irradiance_at(
-        scene,
-        &scene.world_from_node(),
-        &points,
-        &IrradianceSettings {
-            direct: false,
-            bounces: Bounces::Limited(bounces),
-            samples,
-            seed,
-            specular: false,
-        },
-    );
+    let reference = common::texel_reference(scene, texels, bounces, samples, seed);
     let atlas: f32 = texels
         .iter()
         .flat_map(|t| (0..bounces as usize).map(|b| baked.irradiance[b][t.index as usize]))

@@ -158,7 +158,6 @@ fn clustering_error(
     seed: u64,
     region: impl Fn(glam::Vec3) -> bool,
 ) -> (f64, f64) {
-    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
     let mut settings = polygons(20_000, 2, atlas_res);
     settings.polygon.per_bounce = per_bounce;
     settings.seed = seed;
@@ -171,19 +170,8 @@ fn clustering_error(
         .step_by(step)
         .copied()
         .collect();
-    let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
-    let reference = irradiance_at(
-        scene,
-        &scene.world_from_node(),
-        &points,
-        &IrradianceSettings {
-            direct: false,
-            bounces: Bounces::Limited(2),
-            samples: 1024,
-            seed: 3,
-            specular: false,
-        },
-    );
+    let picked: Vec<_> = texels.iter().collect();
+    let reference = common::texel_reference(scene, &picked, 2, 1024, 3);
     let rel = |pick: &dyn Fn(glam::Vec3) -> bool| {
         let (mut sq, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
         for (t, r) in texels.iter().zip(&reference) {

@@ -85,26 +85,27 @@ fn bvh_walk_end(root: BvhNode) -> u32 {
     return select(root.first, 1u, root.prim_count > 0u);
 }
 
+// The threaded walk's next node after node `i`: the next one after a leaf or into an inner
+// node the segment enters, else past the inner node's subtree.
+fn bvh_next(i: u32, node: BvhNode, entered: bool) -> u32 {
+    return select(node.first, i + 1u, entered || node.prim_count > 0u);
+}
+
 fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
     let inv = bvh_safe_inverse(dir);
     let end = bvh_walk_end(bvh_nodes[first_node]);
     var i = 0u;
     while (i < end) {
         let node = bvh_nodes[first_node + i];
-        let leaf = node.prim_count > 0u;
-        if (!bvh_ray_box(origin, inv, 1.0, node.min, node.max)) {
-            i = select(node.first, i + 1u, leaf);
-            continue;
-        }
-        i += 1u;
-        if (!leaf) {
-            continue;
-        }
-        for (var k = 0u; k < node.prim_count; k++) {
-            if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + k])) {
-                return true;
+        let entered = bvh_ray_box(origin, inv, 1.0, node.min, node.max);
+        if (entered) {
+            for (var k = 0u; k < node.prim_count; k++) {
+                if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + k])) {
+                    return true;
+                }
             }
         }
+        i = bvh_next(i, node, entered);
     }
     return false;
 }
@@ -117,26 +118,21 @@ fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     var i = 0u;
     while (i < last) {
         let node = bvh_top[i];
-        let leaf = node.prim_count > 0u;
-        if (!bvh_ray_box(start, inv, 1.0, node.min, node.max)) {
-            i = select(node.first, i + 1u, leaf);
-            continue;
-        }
-        i += 1u;
-        if (!leaf) {
-            continue;
-        }
-        for (var k = node.first; k < node.first + node.prim_count; k++) {
-            let inst = bvh_instances[k];
-            if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
-                continue;
-            }
-            let origin = (inst.model_from_world * vec4<f32>(start, 1.0)).xyz;
-            let dir = (inst.model_from_world * vec4<f32>(d, 0.0)).xyz;
-            if (bvh_mesh_hit(origin, dir, bitcast<u32>(inst.world_min.w), bitcast<u32>(inst.world_max.w))) {
-                return true;
+        let entered = bvh_ray_box(start, inv, 1.0, node.min, node.max);
+        if (entered) {
+            for (var k = node.first; k < node.first + node.prim_count; k++) {
+                let inst = bvh_instances[k];
+                if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
+                    continue;
+                }
+                let origin = (inst.model_from_world * vec4<f32>(start, 1.0)).xyz;
+                let dir = (inst.model_from_world * vec4<f32>(d, 0.0)).xyz;
+                if (bvh_mesh_hit(origin, dir, bitcast<u32>(inst.world_min.w), bitcast<u32>(inst.world_max.w))) {
+                    return true;
+                }
             }
         }
+        i = bvh_next(i, node, entered);
     }
     return false;
 }

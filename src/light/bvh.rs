@@ -210,14 +210,13 @@ fn walk(
     while i < end {
         let node = &nodes[i as usize];
         let leaf = node.prim_count > 0;
-        if !ray_box(origin, inv, 1.0, node.min.into(), node.max.into()) {
-            i = if leaf { i + 1 } else { node.first };
-            continue;
-        }
-        if leaf && leaf_hit(node) {
+        let entered = ray_box(origin, inv, 1.0, node.min.into(), node.max.into());
+        if entered && leaf && leaf_hit(node) {
             return true;
         }
-        i += 1;
+        // `bvh_next`: the next node after a leaf or into an entered inner node, else past the
+        // inner node's subtree.
+        i = if entered || leaf { i + 1 } else { node.first };
     }
     false
 }

@@ -173,3 +173,28 @@ pub fn centre_bounce_mean(result: &valgi::atlas::Bake, bounce: u32) -> f64 {
         });
     sum / count.max(1) as f64
 }
+
+/// The path tracer's indirect irradiance (`bounces` bounces, diffuse only, `samples` paths
+/// each) at atlas texels, the reference the bake tests compare texels with.
+pub fn texel_reference(
+    scene: &valgi::scene::Scene,
+    texels: &[&valgi::atlas::layout::Texel],
+    bounces: u32,
+    samples: u32,
+    seed: u64,
+) -> Vec<glam::Vec3> {
+    use valgi::reference::{irradiance_at, Bounces, IrradianceSettings};
+    let points: Vec<_> = texels.iter().map(|t| (t.position, t.normal)).collect();
+    irradiance_at(
+        scene,
+        &scene.world_from_node(),
+        &points,
+        &IrradianceSettings {
+            direct: false,
+            bounces: Bounces::Limited(bounces),
+            samples,
+            seed,
+            specular: false,
+        },
+    )
+}
