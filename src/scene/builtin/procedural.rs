@@ -763,8 +763,8 @@ fn thin_wall(name: &str, moving: bool, max_edge: f32) -> Scene {
     scene
 }
 
-/// An 8 × 8 m court (floor y = 0) closed by walls 4 m high on three sides (x = 0, x = 8,
-/// z = 0), with a gallery along the back wall: a roof slab y ∈ [3, 3.3] over z ∈ [0, 2.5]
+/// An 8 × 8 m court (floor y = 0) closed by walls 4 m high and 0.25 m thick on three sides
+/// (x = 0, x = 8, z = 0), with a gallery along the back wall: a roof slab y ∈ [3, 3.3] over z ∈ [0, 2.5]
 /// standing on five 0.4 m pillars at its front edge. The sun (3 W/m², travelling along
 /// (0.25, −1, −0.6)) lights the court and, between the pillars' shadows, the gallery floor
 /// from z ≈ 0.7 to 2.5; the back wall and the roof's underside get bounced light only. So the
@@ -777,16 +777,34 @@ fn arcade(name: &str, moving: bool, max_edge: f32) -> Scene {
     let (size, wall_h) = (8.0, 4.0);
     let court = Vec3::new(size, wall_h, size);
     let centre = court * 0.5;
-    let faces = [
-        ("floor", floor_mat, 1, false),
-        ("wall_-x", stone, 0, false),
-        ("wall_+x", stone, 0, true),
-        ("back_wall", stone, 2, false),
+    let [p0, p1, p2, p3] = box_face(Vec3::ZERO, court, 1, false);
+    let mut floor = MeshBuilder::new("floor", floor_mat);
+    floor.add_quad(p0, p1, p2, p3, centre, max_edge);
+    b.object("floor", floor.build(), Trs::default());
+    // The walls are solid, 0.25 m thick outside the court: a sheet lit from behind would
+    // leave nothing beyond its foot in the sun's shadow map, and the filter taps there would
+    // let a line of light in along it.
+    let t = 0.25;
+    let walls = [
+        (
+            "wall_-x",
+            Vec3::new(-t, 0.0, 0.0),
+            Vec3::new(0.0, wall_h, size),
+        ),
+        (
+            "wall_+x",
+            Vec3::new(size, 0.0, 0.0),
+            Vec3::new(size + t, wall_h, size),
+        ),
+        (
+            "back_wall",
+            Vec3::new(-t, 0.0, -t),
+            Vec3::new(size + t, wall_h, 0.0),
+        ),
     ];
-    for (object, material, axis, high) in faces {
-        let [p0, p1, p2, p3] = box_face(Vec3::ZERO, court, axis, high);
-        let mut mb = MeshBuilder::new(object, material);
-        mb.add_quad(p0, p1, p2, p3, centre, max_edge);
+    for (object, min, max) in walls {
+        let mut mb = MeshBuilder::new(object, stone);
+        solid_box(&mut mb, min, max, max_edge);
         b.object(object, mb.build(), Trs::default());
     }
     let (roof_y, depth, pillar) = (3.0, 2.5, 0.4);
