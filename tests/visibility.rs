@@ -510,9 +510,13 @@ fn visibility_history_blends_last_frames_bytes_like_the_cpu_twin() {
 /// no sample reached those points, the cluster counted as fully seen, and the strip's light
 /// went through the wall in some frames and not in others: flicker 3.5e-3–4.0e-3 (8.2e-4
 /// before the stratum spans were fixed), 40× `sum`'s. The strata's corner candidates reach those points
-/// and their rays hit the wall: measured 1.5e-4 against `sum`'s 8.8e-5.
+/// and their rays hit the wall: measured 1.5e-4 against `sum`'s 8.8e-5. What was left came
+/// from the spot's map, whose texel rows ran along the room's x and z axes: as the light slid
+/// along z a whole row of 58 texels switched from the floor to the end wall every two or
+/// three frames. With the map rolled off the axes (`raster::shadows::MAP_ROLL`) texels switch
+/// a few at a time: rays 8.3e-7, `sum` 1.9e-5 (without the roll the assertion fails).
 #[test]
-fn a_light_moving_past_a_thin_wall_flickers_little_more_than_the_discs() {
+fn a_light_moving_past_a_thin_wall_flickers_no_more_than_the_discs() {
     if common::gpu().is_none() {
         return;
     }
@@ -542,7 +546,7 @@ fn a_light_moving_past_a_thin_wall_flickers_little_more_than_the_discs() {
     };
     let (rays, discs) = (flicker("rays"), flicker("sum"));
     eprintln!("thin-wall-moving flicker: rays {rays:.3e}, sum {discs:.3e}");
-    assert!(rays < 2.5 * discs, "rays {rays} against sum {discs}");
+    assert!(rays <= discs, "rays {rays} against sum {discs}");
 }
 
 /// The spot sweeping through the Cornell box (`cornell-moving`, the short block sliding too):
