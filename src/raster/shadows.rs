@@ -161,14 +161,13 @@ fn whole_layer() -> ShadowView {
     }
 }
 
-/// An up vector that is not parallel to `d`.
 /// Roll of a spot's or a sun's map (shadow map and RSM) about the light's axis, away from the
 /// world's axes: atan(1/φ²) = 20.9°. With image rows along the axes, a room's axis-aligned
 /// corner lines run along texel rows, and as the light moves a whole row of RSM texels
 /// switches from the floor to the wall in one frame (thin-wall-moving: 58 texels every two
-/// or three frames), a step in every VAL method's indirect light. At a slope of 1/φ², the
-/// least rational there is, no row follows such a line and the texels switch a few at a
-/// time.
+/// or three frames), a step in every VAL method's indirect light. At a slope of 1/φ² (φ the
+/// golden ratio, the number fractions approximate worst) no row follows such a line, and the
+/// texels switch a few at a time.
 pub const MAP_ROLL: f32 = 0.364_863;
 
 /// The up vector of a spot's or a sun's map looking along `direction`: [`any_perpendicular`]
@@ -178,6 +177,7 @@ fn map_up(direction: Vec3) -> Vec3 {
     Quat::from_axis_angle(axis, MAP_ROLL) * any_perpendicular(axis)
 }
 
+/// An up vector that is not parallel to `d`.
 fn any_perpendicular(d: Vec3) -> Vec3 {
     if d.y.abs() < 0.99 {
         Vec3::Y
