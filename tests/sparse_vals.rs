@@ -472,7 +472,6 @@ fn gpu_kernels_agree_with_their_cpu_twins() {
 /// Interpolation, fed the GPU's final point lights and the quantized link weights, against
 /// its CPU twin at every instance vertex. Returns how many vertices the blend cap changed.
 fn interpolation_against_cpu(ctx: &GpuContext, scene: &Scene, s: SparseSettings) -> usize {
-    // Interpolation, fed the GPU's final point lights and the quantized link weights.
     let (method, _, final_points) = run_sparse(ctx, scene, 32, s, Stage::Interpolate);
     let vertex_lights = method.sparse.read_vertex_lights(ctx).unwrap();
     let mut v = 0usize;
