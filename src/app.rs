@@ -36,6 +36,7 @@ pub const MAX_EXPOSURE_STOPS: f32 = 64.0;
 pub struct RenderRequest {
     /// Built-in scene name or a `.gltf`/`.glb` path.
     pub scene: String,
+    /// A registered method (`crate::method`); the default is `sparse`, the product's own.
     pub method: String,
     /// The method's knobs (`--rsm 64` becomes `rsm=64`).
     pub options: MethodOptions,
@@ -77,7 +78,7 @@ impl Default for RenderRequest {
     fn default() -> Self {
         Self {
             scene: "cornell".into(),
-            method: "direct".into(),
+            method: "sparse".into(),
             options: MethodOptions::default(),
             settings: RenderSettings::default(),
             camera: None,

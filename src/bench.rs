@@ -59,6 +59,7 @@ fn rsm_for(ctx: &GpuContext, scene: &Scene, target: u32) -> Result<u32, RenderEr
         },
         SparseSettings {
             rsm: probe,
+            rsm_texels: None,
             sparse_points: 64,
             ..Default::default()
         },
@@ -242,6 +243,8 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
             ] {
                 let mut settings = SparseSettings {
                     rsm,
+                    // The bench fits the side to a VAL count: no sharing.
+                    rsm_texels: None,
                     sparse_points: points,
                     ..Default::default()
                 };
@@ -271,6 +274,8 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
             for (config, slices, tile) in sweep {
                 let mut settings = SparseSettings {
                     rsm,
+                    // The bench fits the side to a VAL count: no sharing.
+                    rsm_texels: None,
                     sparse_points: points,
                     ..Default::default()
                 };
@@ -289,6 +294,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     let rsm = rsms[0];
     let settings = SparseSettings {
         rsm,
+        rsm_texels: None,
         sparse_points: request.points[0],
         ..Default::default()
     };

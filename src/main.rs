@@ -228,8 +228,9 @@ struct RenderArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
     #[arg(long, default_value = "cornell")]
     scene: String,
-    /// Rendering method (see `valgi methods`).
-    #[arg(long, default_value = "direct")]
+    /// Rendering method (see `valgi methods`). The default is the product's own: direct light
+    /// plus the sparse VALs' indirect light (`direct` is direct light alone).
+    #[arg(long, default_value = "sparse")]
     method: String,
     /// Output width in pixels (per view).
     #[arg(long, default_value_t = 512)]

@@ -50,9 +50,12 @@ fn render_writes_exr_and_png_and_reports_json() {
         assert!(report.get(key).is_some(), "missing key {key} in {line}");
     }
     assert_eq!(report["scene"], "plane-spot");
-    assert_eq!(report["method"], "direct");
+    // Without --method, render draws the product's own image: direct + sparse VALs.
+    assert_eq!(report["method"], "sparse");
     assert_eq!(report["width"], 48);
-    for pass in ["shadow", "gbuffer", "direct", "resolve"] {
+    for pass in [
+        "shadow", "gbuffer", "direct", "resolve", "rsm", "gather", "apply",
+    ] {
         assert!(
             report["passes"][pass].as_f64().is_some(),
             "no time for pass {pass}"

@@ -595,3 +595,60 @@ fn every_gpu_method_is_lit_by_the_emitter_proxies() {
         );
     }
 }
+
+/// Without `--rsm`, a scene's lights share one point light's RSM texels by power
+/// (`light::rsm::DEFAULT_SHARED_TEXELS`): the eight proxies of the emissive quad make a
+/// fraction of the VALs they make at 128² each, and the indirect light keeps its power (each
+/// VAL carries its share of the flux). Sparse and brute force gather the same VALs.
+#[test]
+fn lights_share_the_default_rsm_texels_and_keep_their_power() {
+    let Some(ctx) = common::gpu() else { return };
+    let size = 24;
+    let scene = load("emissive-quad", emitters::DEFAULT_EMITTER_LIGHTS);
+    assert!(scene.lights.len() > 1);
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).expect("camera");
+    let render = |method: &str, pairs: &[(&str, &str)]| {
+        let mut options = MethodOptions::default();
+        for (k, v) in pairs {
+            options.set(k, v);
+        }
+        let mut m = valgi::method::create(
+            method,
+            &ctx,
+            &scene,
+            common::small_render_settings(size),
+            &options,
+        )
+        .unwrap_or_else(|e| panic!("{method}: {e}"));
+        let frame = m.render(&ctx, &scene, &world, &camera).expect("render");
+        let vals = m.report()["vals"].as_u64().expect("vals");
+        (frame.indirect.mean_rgb()[0] as f64, vals, m.report())
+    };
+    let points = [("sparse-points", "256")];
+    let (shared, shared_vals, report) = render("sparse", &points);
+    let (full, full_vals, _) = render("sparse", &[points[0], ("rsm", "128")]);
+    let (brute, brute_vals, _) = render("brute", &[]);
+    let sides: Vec<u64> = report["rsm_light_sides"]
+        .as_array()
+        .expect("rsm_light_sides")
+        .iter()
+        .map(|s| s.as_u64().unwrap())
+        .collect();
+    eprintln!(
+        "shared: {shared_vals} VALs, sides {sides:?}, indirect {shared:.4e}; rsm 128: \
+         {full_vals} VALs, {full:.4e}; brute {brute_vals} VALs, {brute:.4e}"
+    );
+    let texels: u64 = sides.iter().map(|s| 6 * s * s).sum();
+    assert!(texels <= valgi::light::rsm::DEFAULT_SHARED_TEXELS as u64);
+    assert!(sides.iter().all(|&s| s < 128), "{sides:?}");
+    assert!(
+        full_vals > 2 * shared_vals,
+        "{full_vals} VALs at 128² against {shared_vals} shared"
+    );
+    assert_eq!(brute_vals, shared_vals, "brute force shares the same way");
+    assert!(
+        (shared / full - 1.0).abs() < 0.05,
+        "indirect mean shared {shared:.4e} against {full:.4e} at 128²"
+    );
+}

@@ -29,6 +29,7 @@ fn sparse_settings(
 ) -> SparseSettings {
     SparseSettings {
         rsm,
+        rsm_texels: None,
         sparse_points: points,
         seed: 3,
         options: SparseOptions {

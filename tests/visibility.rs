@@ -15,6 +15,7 @@ use valgi::vals::{visibility, SparseMethod, SparseSettings, Stage};
 fn settings(points: usize) -> SparseSettings {
     SparseSettings {
         rsm: 32,
+        rsm_texels: None,
         sparse_points: points,
         seed: 5,
         options: SparseOptions {

@@ -424,6 +424,13 @@ pub const BYTES_PER_VAL: u64 = 16 + 8 + 16 + 4 + std::mem::size_of::<GpuVal>() a
 /// built in fits at the methods' default `rsm`.
 pub const DEFAULT_MAX_VALS: u32 = 1 << 20;
 
+/// RSM texels a scene's lights share when a VAL method is not given `--rsm`: one point light's
+/// six views at the default side 128. One light keeps its full RSM; with several (a proxy per
+/// emissive patch, a room of lamps) each gets a side by its power ([`share_sides`]), so the
+/// VAL count, and with it the gather's time, follows the light there is, not the number of
+/// lights: an emissive quad's eight proxies made 303 265 VALs at 128² each.
+pub const DEFAULT_SHARED_TEXELS: u32 = 6 * 128 * 128;
+
 /// The RSMs of every light and the VAL buffer made from them.
 ///
 /// A *layer* here is one light view (six per point light) of its light's side² texels: every
@@ -557,16 +564,19 @@ impl Rsm {
         raster: &Rasterizer,
         resolution: u32,
     ) -> Result<Self, RenderError> {
-        Self::with_external(ctx, scene, raster, resolution, None)
+        Self::with_external(ctx, scene, raster, resolution, None, None)
     }
 
-    /// The RSMs, with room after their VALs for `external`'s valid candidates, which
-    /// [`Rsm::record`] appends every frame (see [`ExternalVals`]).
+    /// The RSMs, every view at most `requested_resolution`² and, with `shared_texels`, all
+    /// views together at most that many texels (shared by power, [`DEFAULT_SHARED_TEXELS`]),
+    /// with room after their VALs for `external`'s valid candidates, which [`Rsm::record`]
+    /// appends every frame (see [`ExternalVals`]).
     pub fn with_external(
         ctx: &GpuContext,
         scene: &Scene,
         raster: &Rasterizer,
         requested_resolution: u32,
+        shared_texels: Option<u32>,
         external: Option<&ExternalVals>,
     ) -> Result<Self, RenderError> {
         let scene_gpu = &raster.scene_gpu;
@@ -614,8 +624,12 @@ impl Rsm {
                 power: crate::raster::light_power(light),
             })
             .collect();
+        let total_views: u32 = requests.iter().map(|r| r.views).sum();
+        // The default share never asks for less than one texel a view: only a real budget
+        // (--max-vals, the device's binding) refuses a scene.
+        let shared_max = shared_texels.map_or(max_vals, |t| max_vals.min(t.max(total_views)));
         let light_sides =
-            share_sides(&requests, requested_resolution, max_vals).ok_or_else(|| {
+            share_sides(&requests, requested_resolution, shared_max).ok_or_else(|| {
                 let remedy = if binding_fit < settings_budget {
                     "use fewer lights".to_string()
                 } else {
@@ -632,19 +646,36 @@ impl Rsm {
             .iter()
             .filter(|&&side| side < requested_resolution)
             .count();
-        if reduced > 0 {
+        let requested_texels: u64 = requests
+            .iter()
+            .map(|r| r.views as u64 * requested_resolution as u64 * requested_resolution as u64)
+            .sum();
+        if reduced > 0 && requested_texels <= max_vals as u64 {
+            // Only the default share shrank them: nothing the user set was overruled.
+            log::info!(
+                "scene '{}': {} share {shared_max} RSM texels by power (views {}²–{}²; \
+                 --rsm {requested_resolution} gives every view {requested_resolution}²)",
+                scene.name,
+                crate::gpu::count_of(scene.lights.len(), "light"),
+                light_sides
+                    .iter()
+                    .min()
+                    .copied()
+                    .unwrap_or(requested_resolution),
+                light_sides
+                    .iter()
+                    .max()
+                    .copied()
+                    .unwrap_or(requested_resolution),
+            );
+        } else if reduced > 0 {
             log::warn!(
                 "scene '{}': {layer_count} RSM views at --rsm {requested_resolution} would make \
                  {} VALs, over {budget}; {reduced} of {} get smaller RSMs by \
                  power (down to {}²; each VAL carries its share of the flux, so every light's \
                  power is unchanged)",
                 scene.name,
-                requests
-                    .iter()
-                    .map(|r| r.views as u64
-                        * requested_resolution as u64
-                        * requested_resolution as u64)
-                    .sum::<u64>(),
+                requested_texels,
                 crate::gpu::count_of(scene.lights.len(), "light"),
                 light_sides
                     .iter()

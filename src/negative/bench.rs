@@ -315,7 +315,9 @@ pub fn run(request: &NegativeBenchRequest) -> Result<PathBuf, AppError> {
         request.frames,
     )?;
     let exposure = crate::eval::metrics::auto_exposure(&full.image);
-    let mut text = String::from("threshold_pos,threshold_normal,lowres_percent,rms_percent,ms\n");
+    let mut text = String::from(
+        "threshold_pos,threshold_normal,lowres_percent,rms_percent,ms,negative_passes_ms\n",
+    );
     let mut rows = vec![];
     for &(pos, normal) in &request.thresholds {
         let mut options = base.clone();
@@ -332,28 +334,39 @@ pub fn run(request: &NegativeBenchRequest) -> Result<PathBuf, AppError> {
         )?;
         let rms = display_rms(&t.image, &full.image, exposure);
         println!(
-            "Table 2  τ_x {pos:>10} τ_n {normal:>5}: low-res {:5.1} %, RMS {:.4} %, {:.2} ms",
+            "Table 2  τ_x {pos:>10} τ_n {normal:>5}: low-res {:5.1} %, RMS {:.4} %, {:.2} ms (negative passes {:.2} ms)",
             100.0 * t.lowres,
             100.0 * rms,
-            t.ms
+            t.ms,
+            t.indirect_ms
         );
         text += &format!(
-            "{pos},{normal},{},{},{}\n",
+            "{pos},{normal},{},{},{},{}\n",
             round3(100.0 * t.lowres),
             100.0 * rms,
-            round3(t.ms)
+            round3(t.ms),
+            round3(t.indirect_ms)
         );
-        rows.push((t.lowres, t.ms));
+        rows.push((t.lowres, t.ms, t.indirect_ms));
     }
     println!(
-        "Table 2  full resolution (unoptimized): 0.0 % low-res, RMS 0 %, {:.2} ms",
-        full.ms
+        "Table 2  full resolution (unoptimized): 0.0 % low-res, RMS 0 %, {:.2} ms (negative passes {:.2} ms)",
+        full.ms, full.indirect_ms
     );
-    text += &format!("full,full,0,0,{}\n", round3(full.ms));
-    if let Some(&(_, fastest)) = rows.iter().find(|r| r.0 >= 0.999) {
+    text += &format!(
+        "full,full,0,0,{},{}\n",
+        round3(full.ms),
+        round3(full.indirect_ms)
+    );
+    if let Some(&(_, fastest, fastest_passes)) = rows.iter().find(|r| r.0 >= 0.999) {
+        // The paper's frame spent ~6 % in fixed passes (its 0 % and 100 % rows fit 4.9 ms
+        // fixed + 18.6 ms per quarter-resolution pass); a software rasterizer spends far more
+        // on the G-buffer, shadow and RSM of the 69k-triangle bunny, so the method's own
+        // passes are reported beside the frame.
         println!(
-            "100 % low-res vs unoptimized: {:.2}× faster (paper 3.4×)",
-            full.ms / fastest
+            "100 % low-res vs unoptimized: frame {:.2}× faster, negative passes {:.2}× (paper's frame 3.4×)",
+            full.ms / fastest,
+            full.indirect_ms / fastest_passes
         );
     }
     write(&request.out.join("table2.csv"), &text)?;

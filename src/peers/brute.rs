@@ -35,7 +35,8 @@ pub static ENTRY: Entry = Entry {
             name: "rsm",
             kind: OptionKind::Int { min: 1, max: 2048 },
             default: "128",
-            help: "RSM resolution per light layer: R×R texels, six layers for a point light",
+            help: "RSM resolution per light layer: R×R texels, six layers for a point light \
+                   (not given: at most 128², the lights sharing 6·128² texels by power)",
         },
         OptionSpec {
             name: "tile",
@@ -89,7 +90,11 @@ impl BruteMethod {
             )));
         }
         let raster = Rasterizer::new(ctx, scene, render)?;
-        let rsm = Rsm::new(ctx, scene, &raster, rsm_resolution)?;
+        // Without --rsm the lights share one point light's texels, as in the sparse method:
+        // both gather the same VALs.
+        let shared_texels = (!options.entries().any(|(k, _)| k == "rsm"))
+            .then_some(crate::light::rsm::DEFAULT_SHARED_TEXELS);
+        let rsm = Rsm::with_external(ctx, scene, &raster, rsm_resolution, shared_texels, None)?;
         let device = &ctx.device;
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("brute params"),

@@ -30,8 +30,11 @@ use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions};
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SparseSettings {
-    /// RSM resolution per light layer.
+    /// RSM resolution per light layer (the largest, with `rsm_texels`).
     pub rsm: u32,
+    /// RSM texels all lights share by power (`light::rsm::DEFAULT_SHARED_TEXELS` when `rsm`
+    /// is not given; `None`: every layer gets `rsm`², within `--max-vals`).
+    pub rsm_texels: Option<u32>,
     /// Sparse points for the whole scene.
     pub sparse_points: usize,
     /// Placement seed.
@@ -47,6 +50,7 @@ impl Default for SparseSettings {
     fn default() -> Self {
         Self {
             rsm: 128,
+            rsm_texels: Some(crate::light::rsm::DEFAULT_SHARED_TEXELS),
             sparse_points: 4096,
             seed: 1,
             options: SparseOptions {
@@ -82,8 +86,10 @@ impl SparseSettings {
                 "--sparse-points must be at least 1".into(),
             ));
         }
+        let rsm_given = options.entries().any(|(k, _)| k == "rsm");
         Ok(Self {
             rsm: options.get("rsm", d.rsm)?,
+            rsm_texels: if rsm_given { None } else { d.rsm_texels },
             sparse_points,
             seed: options.get("seed", d.seed)?,
             options: SparseOptions {
@@ -268,7 +274,8 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "rsm",
         kind: OptionKind::Int { min: 1, max: 2048 },
         default: "128",
-        help: "RSM resolution per light layer: R×R texels, six layers for a point light",
+        help: "RSM resolution per light layer: R×R texels, six layers for a point light \
+               (not given: at most 128², the lights sharing 6·128² texels by power)",
     },
     OptionSpec {
         name: "sparse-points",
@@ -426,7 +433,9 @@ pub fn apply_budget(
         settings.sparse_points = choice.points;
     }
     if !given("rsm") {
+        // The side the model priced is every light's own.
         settings.rsm = choice.rsm;
+        settings.rsm_texels = None;
     }
     if !given("occlusion") {
         settings.options.occlusion = if choice.rays {
@@ -561,6 +570,7 @@ impl SparseMethod {
             scene,
             &raster,
             settings.rsm,
+            settings.rsm_texels,
             val_source.as_ref().map(|s| s.external()),
         )?;
         let started = Instant::now();
@@ -703,6 +713,8 @@ impl Method for SparseMethod {
             "table2": table2(&timings.merged()),
             "vals": vals,
             "rsm": self.settings.rsm,
+            // Each light's view side: below `rsm` where the lights share texels.
+            "rsm_light_sides": self.rsm.light_sides,
             "sparse_points": self.sparse.point_count,
             "instance_vertices": self.sparse.vertex_count,
             "tile": opts.tile,
