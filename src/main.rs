@@ -409,7 +409,8 @@ struct EvalArgs {
     #[arg(long, default_value = "cornell")]
     scenes: String,
     /// Comma-separated method specs: name[:key=value,...] (a key=value after a comma belongs
-    /// to the method before it). Default: direct,reference; none with --sweep.
+    /// to the method before it). Default: direct,sparse,reference (the product's method
+    /// between direct light alone and the path tracer); none with --sweep.
     #[arg(long)]
     methods: Option<String>,
     /// Also render the sparse method over the grid of its budget knobs (sparse points × RSM
@@ -1294,7 +1295,7 @@ fn run_eval(args: EvalArgs) -> ExitCode {
     let methods = match (&args.methods, args.sweep) {
         (Some(text), _) => text.as_str(),
         (None, true) => "",
-        (None, false) => "direct,reference",
+        (None, false) => "direct,sparse,reference",
     };
     let request = valgi::eval::EvalRequest {
         scenes: valgi::eval::split_list(&args.scenes),
