@@ -518,6 +518,28 @@ fn an_emitters_rsm_reflects_rho_times_pi_i0_in_a_closed_box() {
     assert_eq!(above, 0.0);
 }
 
+/// `method` with the options `pairs` at `size`² (the tests' small render settings).
+fn create_method(
+    ctx: &GpuContext,
+    scene: &Scene,
+    method: &str,
+    size: u32,
+    pairs: &[(&str, &str)],
+) -> Box<dyn valgi::method::Method> {
+    let mut options = MethodOptions::default();
+    for (k, v) in pairs {
+        options.set(k, v);
+    }
+    valgi::method::create(
+        method,
+        ctx,
+        scene,
+        common::small_render_settings(size),
+        &options,
+    )
+    .unwrap_or_else(|e| panic!("{method}: {e}"))
+}
+
 /// Every GPU method takes the emitter proxies: they share `direct`'s direct pass (same
 /// pixels), and their indirect light, which exists only through the proxies' RSMs in a scene
 /// lit by nothing else, is there and of the reference's one-bounce order.
@@ -562,18 +584,7 @@ fn every_gpu_method_is_lit_by_the_emitter_proxies() {
         ),
         ("negative", vec![("rsm", "16")], &vals),
     ] {
-        let mut opts = MethodOptions::default();
-        for (k, v) in &options {
-            opts.set(k, v);
-        }
-        let mut m = valgi::method::create(
-            method,
-            &ctx,
-            &scene,
-            common::small_render_settings(size),
-            &opts,
-        )
-        .unwrap_or_else(|e| panic!("{method}: {e}"));
+        let mut m = create_method(&ctx, &scene, method, size, &options);
         let frame = m.render(&ctx, &scene, &world, &camera).expect("render");
         let worst = frame
             .direct
@@ -609,21 +620,10 @@ fn lights_share_the_default_rsm_texels_and_keep_their_power() {
     let world = scene.world_from_node();
     let camera = scene.camera_view(None, 1.0, &world).expect("camera");
     let render = |method: &str, pairs: &[(&str, &str)]| {
-        let mut options = MethodOptions::default();
-        for (k, v) in pairs {
-            options.set(k, v);
-        }
-        let mut m = valgi::method::create(
-            method,
-            &ctx,
-            &scene,
-            common::small_render_settings(size),
-            &options,
-        )
-        .unwrap_or_else(|e| panic!("{method}: {e}"));
+        let mut m = create_method(&ctx, &scene, method, size, pairs);
         let frame = m.render(&ctx, &scene, &world, &camera).expect("render");
         let vals = m.report()["vals"].as_u64().expect("vals");
-        (frame.indirect.mean_rgb()[0] as f64, vals, m.report())
+        (frame.indirect.mean_rgb()[0], vals, m.report())
     };
     let points = [("sparse-points", "256")];
     let (shared, shared_vals, report) = render("sparse", &points);

@@ -650,6 +650,11 @@ impl Rsm {
             .iter()
             .map(|r| r.views as u64 * requested_resolution as u64 * requested_resolution as u64)
             .sum();
+        let smallest = light_sides
+            .iter()
+            .min()
+            .copied()
+            .unwrap_or(requested_resolution);
         if reduced > 0 && requested_texels <= max_vals as u64 {
             // Only the default share shrank them: nothing the user set was overruled.
             log::info!(
@@ -657,11 +662,7 @@ impl Rsm {
                  --rsm {requested_resolution} gives every view {requested_resolution}²)",
                 scene.name,
                 crate::gpu::count_of(scene.lights.len(), "light"),
-                light_sides
-                    .iter()
-                    .min()
-                    .copied()
-                    .unwrap_or(requested_resolution),
+                smallest,
                 light_sides
                     .iter()
                     .max()
@@ -677,11 +678,7 @@ impl Rsm {
                 scene.name,
                 requested_texels,
                 crate::gpu::count_of(scene.lights.len(), "light"),
-                light_sides
-                    .iter()
-                    .min()
-                    .copied()
-                    .unwrap_or(requested_resolution),
+                smallest,
             );
         }
         let view_sides: Vec<u32> = requests
