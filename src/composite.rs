@@ -4,7 +4,10 @@
 
 use std::path::Path;
 
-use crate::atlas::{load_atlas, AtlasLayer, AtlasOnVals, ATLAS_OPTION, FIRST_BOUNCE_ATTRIBUTE};
+use crate::atlas::{
+    bake_in_memory, load_atlas, AtlasLayer, AtlasOnVals, LoadedAtlas, ATLAS_OPTION,
+    FIRST_BOUNCE_ATTRIBUTE,
+};
 use crate::frame::Method;
 use crate::gpu::GpuContext;
 use crate::method::{Entry, MethodOptions, OptionSpec};
@@ -27,7 +30,7 @@ const SPARSE_ATLAS_OPTIONS: &[OptionSpec] = &[
 
 pub static SPARSE_ATLAS_ENTRY: Entry = Entry {
     name: "sparse+atlas",
-    help: "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2",
+    help: "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2 (without --atlas: baked in memory first)",
     options: SPARSE_ATLAS_OPTIONS,
     create: create_sparse_atlas,
 };
@@ -51,13 +54,11 @@ pub fn sparse_atlas(
     options: &MethodOptions,
 ) -> Result<SparseMethod, RenderError> {
     let path: String = options.get("atlas", String::new())?;
-    if path.is_empty() {
-        return Err(RenderError::Settings(
-            "method 'sparse+atlas' needs --atlas FILE.exr (from `valgi bake --from-bounce 2`)"
-                .into(),
-        ));
-    }
     let settings = SparseSettings::from_options(options)?;
+    if path.is_empty() {
+        let atlas = bake_in_memory(scene, 2)?;
+        return with_atlas(ctx, scene, render, settings, &atlas);
+    }
     let atlas = load_atlas(Path::new(&path))?;
     match &atlas.bounces {
         // The sparse method computes bounce 1 itself: an atlas holding it would count it twice.
@@ -74,8 +75,19 @@ pub fn sparse_atlas(
              header attribute); assuming it starts at bounce 2"
         ),
     }
+    with_atlas(ctx, scene, render, settings, &atlas)
+}
+
+/// The sparse method with `atlas` (bounces from 2) as its indirect layer.
+fn with_atlas(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    settings: SparseSettings,
+    atlas: &LoadedAtlas,
+) -> Result<SparseMethod, RenderError> {
     let mut sparse = SparseMethod::new(ctx, scene, render, settings)?;
-    let layer = AtlasLayer::from_loaded(ctx, scene, &atlas)?;
+    let layer = AtlasLayer::from_loaded(ctx, scene, atlas)?;
     sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
     Ok(sparse)
 }

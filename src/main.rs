@@ -1176,24 +1176,8 @@ fn bake(args: BakeArgs) -> ExitCode {
     valgi::progress::install_ctrl_c();
     let cancel = valgi::progress::cancel_flag();
     // One progress step per bake stage: a bar on a terminal, a summary line otherwise.
-    let stage_step = std::sync::Mutex::new(None::<(String, valgi::progress::Step)>);
-    let progress = |stage: &str, done: usize, total: usize| {
-        let Ok(mut current) = stage_step.lock() else {
-            return;
-        };
-        if current.as_ref().is_none_or(|(name, _)| name != stage) {
-            if let Some((_, step)) = current.take() {
-                step.finish();
-            }
-            *current = Some((
-                stage.to_string(),
-                valgi::progress::Step::new(true, total as u64, &format!("bake: {stage}")),
-            ));
-        }
-        if let Some((_, step)) = current.as_ref() {
-            step.set_position(done as u64, total as u64);
-        }
-    };
+    let stages = valgi::progress::Stages::new("bake");
+    let progress = |stage: &str, done: usize, total: usize| stages.report(stage, done, total);
     let request = valgi::atlas::BakeRequest {
         scene: args.scene,
         max_edge: args.max_edge,
@@ -1222,11 +1206,7 @@ fn bake(args: BakeArgs) -> ExitCode {
         out: args.out,
     };
     let result = valgi::atlas::bake_to_file(&request, &progress, cancel);
-    if let Ok(mut current) = stage_step.lock() {
-        if let Some((_, step)) = current.take() {
-            step.finish();
-        }
-    }
+    stages.finish();
     match result {
         Ok(summary) => {
             println!("{summary}");

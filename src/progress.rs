@@ -127,3 +127,46 @@ impl Drop for Step {
         self.end();
     }
 }
+
+/// Progress of a task reported as (stage, done, total), such as a bake: one [`Step`] per
+/// stage, the previous one finished when the stage changes. `report` is `Sync`, so it can be
+/// handed to code that reports from several threads.
+pub struct Stages {
+    prefix: String,
+    current: std::sync::Mutex<Option<(String, Step)>>,
+}
+
+impl Stages {
+    /// Steps named `prefix: stage`.
+    pub fn new(prefix: &str) -> Self {
+        Self {
+            prefix: prefix.to_string(),
+            current: std::sync::Mutex::new(None),
+        }
+    }
+
+    pub fn report(&self, stage: &str, done: usize, total: usize) {
+        let Ok(mut current) = self.current.lock() else {
+            return;
+        };
+        if current.as_ref().is_none_or(|(name, _)| name != stage) {
+            if let Some((_, step)) = current.take() {
+                step.finish();
+            }
+            *current = Some((
+                stage.to_string(),
+                Step::new(true, total as u64, &format!("{}: {stage}", self.prefix)),
+            ));
+        }
+        if let Some((_, step)) = current.as_ref() {
+            step.set_position(done as u64, total as u64);
+        }
+    }
+
+    /// Ends the last stage's step (its summary line comes now, not when `self` drops).
+    pub fn finish(&self) {
+        if let Some((_, step)) = self.current.lock().ok().and_then(|mut c| c.take()) {
+            step.finish();
+        }
+    }
+}

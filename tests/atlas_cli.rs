@@ -304,3 +304,56 @@ fn sparse_atlas_renders_evaluates_and_bake_bench_writes_its_files() {
     assert_eq!(curve.lines().count(), 3, "{curve}");
     assert!(bench.join("bake_box-point.png").is_file());
 }
+
+/// Without `--atlas`, `atlas` and `sparse+atlas` bake the scene's atlas in memory with
+/// `valgi bake`'s defaults: the image is the one rendered with the file `valgi bake` writes
+/// with its defaults (bounces from 1 for `atlas`, from 2 for `sparse+atlas`), bit for bit.
+#[test]
+fn atlas_methods_without_a_file_bake_the_default_atlas_in_memory() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-atlas-in-memory");
+    let read = |path: &std::path::Path| valgi::image_io::Image::read_exr(path).expect("EXR");
+    for (method, from_bounce) in [("atlas", "1"), ("sparse+atlas", "2")] {
+        let file = dir.join(format!("baked-{from_bounce}.exr"));
+        let output = valgi()
+            .args(["bake", "--scene", "box-point", "--max-edge", "0.25"])
+            .args(["--from-bounce", from_bounce, "--out"])
+            .arg(&file)
+            .output()
+            .expect("run valgi");
+        common::assert_success(&output);
+        let render = |atlas: Option<&std::path::Path>, out: &str| {
+            let mut command = valgi();
+            command
+                .args(["render", "--scene", "box-point", "--max-edge", "0.25"])
+                .args(["--method", method, "--width", "32", "--height", "32"]);
+            if method == "sparse+atlas" {
+                command.args(["--rsm", "32", "--sparse-points", "256"]);
+            }
+            if let Some(atlas) = atlas {
+                command.arg("--atlas").arg(atlas);
+            }
+            let output = command
+                .arg("--out")
+                .arg(dir.join(out))
+                .output()
+                .expect("run valgi");
+            common::assert_success(&output);
+            let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+            (read(&dir.join(out)), stderr)
+        };
+        let (from_file, _) = render(Some(&file), &format!("{method}-file.exr"));
+        let (in_memory, stderr) = render(None, &format!("{method}-memory.exr"));
+        assert!(
+            stderr.contains("atlas bake (no --atlas given)"),
+            "{method}: the in-memory bake reports its stages: {stderr}"
+        );
+        assert!(from_file.mean_rgb()[0] > 0.0);
+        assert_eq!(
+            from_file.pixels, in_memory.pixels,
+            "{method}: the in-memory atlas renders as the default bake's file does"
+        );
+    }
+}

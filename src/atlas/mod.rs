@@ -327,6 +327,47 @@ pub fn load_atlas(path: &Path) -> Result<LoadedAtlas, RenderError> {
     })
 }
 
+/// What an atlas method uses when it is given no `--atlas` file: `scene`'s atlas baked now, in
+/// memory, with `valgi bake`'s default settings, holding bounces `from_bounce..=B` (2 for
+/// `sparse+atlas`, whose VALs give bounce 1). The layout is the bake's own, so it matches the
+/// scene exactly; nothing is written. Progress goes to stderr as the bake's stages; Ctrl-C
+/// stops it. A bake the layout refuses (charts that need a larger atlas) is an error that
+/// says how to bake the file instead.
+pub fn bake_in_memory(scene: &Scene, from_bounce: u32) -> Result<LoadedAtlas, RenderError> {
+    let settings = BakeSettings::default();
+    let world_from_node = scene.world_from_node();
+    let stages = crate::progress::Stages::new("atlas bake (no --atlas given)");
+    let progress = |stage: &str, done: usize, total: usize| stages.report(stage, done, total);
+    let result = bake(
+        scene,
+        &world_from_node,
+        &settings,
+        &progress,
+        crate::progress::cancel_flag(),
+    );
+    stages.finish();
+    let result = result.map_err(|e| match e {
+        BakeError::Cancelled => RenderError::Cancelled(crate::progress::Cancelled),
+        e => RenderError::Settings(format!(
+            "no --atlas given, and baking one for scene '{}' failed: {e}; bake it with \
+             `valgi bake --scene … --out FILE.exr --from-bounce {from_bounce}` (its options \
+             set the atlas size) and pass --atlas FILE.exr",
+            scene.name
+        )),
+    })?;
+    let bounces = from_bounce..=settings.bounces;
+    let layout = stored_layout::StoredLayout::of_bake(&result, scene, &world_from_node, None);
+    Ok(LoadedAtlas {
+        path: std::path::PathBuf::from("(baked in memory)"),
+        image: result.atlas(*bounces.start(), *bounces.end()),
+        bounces: Some(bounces),
+        layout: AtlasLayoutFile::Stored {
+            path: std::path::PathBuf::from("(the bake's own layout)"),
+            layout: Box::new(layout),
+        },
+    })
+}
+
 fn check_square(atlas: &Image) -> Result<(), RenderError> {
     if atlas.width != atlas.height {
         return Err(RenderError::Settings(format!(
@@ -826,7 +867,8 @@ pub const ATLAS_OPTION: OptionSpec = OptionSpec {
     name: "atlas",
     kind: OptionKind::Path,
     default: "",
-    help: "baked light atlas (.exr from `valgi bake`)",
+    help: "baked light atlas (.exr from `valgi bake`); not given: baked in memory first with \
+           `valgi bake`'s defaults",
 };
 
 pub static ENTRY: Entry = Entry {
@@ -853,14 +895,13 @@ impl AtlasMethod {
         options: &MethodOptions,
     ) -> Result<Self, RenderError> {
         let path: String = options.get("atlas", String::new())?;
-        if path.is_empty() {
-            return Err(RenderError::Settings(
-                "method 'atlas' needs --atlas FILE.exr (from `valgi bake`)".into(),
-            ));
-        }
         let ms = |since: std::time::Instant| since.elapsed().as_secs_f64() * 1000.0;
         let started = std::time::Instant::now();
-        let atlas = load_atlas(Path::new(&path))?;
+        let atlas = if path.is_empty() {
+            bake_in_memory(scene, 1)?
+        } else {
+            load_atlas(Path::new(&path))?
+        };
         let read_ms = ms(started);
         if let Some(bounces) = atlas.bounces.as_ref().filter(|b| *b.start() > 1) {
             log::warn!(
