@@ -185,8 +185,10 @@ fn bake_and_atlas_errors_are_clear() {
     if common::gpu().is_none() {
         return;
     }
+    // A missing atlas file is an error naming it (no --atlas at all bakes one in memory).
     let output = valgi()
         .args(["render", "--scene", "box-point", "--method", "atlas"])
+        .args(["--atlas", "/tmp/valgi-no-such-atlas.exr"])
         .args([
             "--width",
             "16",
@@ -199,7 +201,10 @@ fn bake_and_atlas_errors_are_clear() {
         .unwrap();
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(stderr.contains("--atlas"), "{stderr}");
+    assert!(
+        stderr.contains("--atlas") && stderr.contains("valgi-no-such-atlas.exr"),
+        "{stderr}"
+    );
 }
 
 /// Ctrl-C (SIGINT) during a long bake stops it with exit code 130 and leaves no file.

@@ -136,17 +136,17 @@ fn sparse_plus_atlas_is_the_sum_of_its_layers() {
         "sparse+atlas differs from sparse + atlas by {worst}"
     );
     assert!(atlas.mean_rgb()[0] > 0.0 && vals.mean_rgb()[0] > 0.0);
-    let err = method::create(
-        "sparse+atlas",
-        &ctx,
-        &scene,
-        render_settings(),
-        &MethodOptions::default(),
-    )
-    .err()
-    .unwrap()
-    .to_string();
-    assert!(err.contains("--atlas"), "{err}");
+    // A missing file is an error naming it (no `atlas` option at all bakes one in memory).
+    let mut missing = MethodOptions::default();
+    missing.set("atlas", "/tmp/valgi-no-such-atlas.exr");
+    let err = method::create("sparse+atlas", &ctx, &scene, render_settings(), &missing)
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        err.contains("--atlas") && err.contains("valgi-no-such-atlas.exr"),
+        "{err}"
+    );
 }
 
 /// On `cornell`, against the 4-bounce reference: `sparse+atlas` (bounce 1 from the VALs,
