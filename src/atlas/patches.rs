@@ -366,7 +366,8 @@ fn bake_patches(
         .map(|(s, e)| crate::shading::luminance(s.rho * *e))
         .collect();
     let sites = choose_sites(&reflected, settings.vpls, &mut rng);
-    let owner = assign_samples(&raw, &sites, total_area, sites.len(), tracer);
+    let grid = SiteGrid::new(&raw, &sites, total_area, sites.len());
+    let owner = assign_samples(&raw, &sites, &grid, tracer);
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); sites.len()];
     for (s, &o) in owner.iter().enumerate() {
         members[o].push(s);
@@ -766,65 +767,134 @@ fn mutually_visible(tracer: &Tracer, a: &SurfaceSample, b: &SurfaceSample) -> bo
 }
 
 /// Each sample's patch: the nearest site with a compatible normal that it can see (grid
-/// search).
+/// search, ring by ring, up to [`ASSIGN_RINGS`] cells away; a sample no compatible site sees
+/// takes the nearest site of any kind in that reach).
 fn assign_samples(
     raw: &[SurfaceSample],
     sites: &[usize],
-    total_area: f64,
-    n: usize,
+    grid: &SiteGrid,
     tracer: &Tracer,
 ) -> Vec<usize> {
-    let cell = ((total_area / n as f64).sqrt() as f32).max(1e-6);
-    let key = |p: Vec3| {
-        let q = (p / cell).floor();
-        (q.x as i64, q.y as i64, q.z as i64)
-    };
-    let mut grid: std::collections::HashMap<(i64, i64, i64), Vec<usize>> = Default::default();
-    for (j, &s) in sites.iter().enumerate() {
-        grid.entry(key(raw[s].position)).or_default().push(j);
-    }
+    let (lo, hi) = (grid.lo, grid.hi);
     raw.par_iter()
         .map(|s| {
-            let (cx, cy, cz) = key(s.position);
+            let c = grid.key(s.position);
             let mut best: Option<(f32, usize)> = None;
             let mut fallback: Option<(f32, usize)> = None;
-            for ring in 0..64i64 {
-                for dx in -ring..=ring {
-                    for dy in -ring..=ring {
-                        for dz in -ring..=ring {
-                            if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
-                                continue;
+            for ring in 0..ASSIGN_RINGS {
+                // Only the ring's shell, and of it only the cells inside the sites' bounds:
+                // the full cube of a far ring is mostly empty cells (a sample that no
+                // compatible site sees went through 2·64⁴ of them).
+                let span = |a: usize| ((lo[a] - c[a]).max(-ring), (hi[a] - c[a]).min(ring));
+                let ((x0, x1), (y0, y1), (z0, z1)) = (span(0), span(1), span(2));
+                if x0 > x1 || y0 > y1 || z0 > z1 {
+                    // The sites' box lies wholly beyond this ring: look further out.
+                    continue;
+                }
+                let mut visit = |dx: i64, dy: i64, dz: i64| {
+                    let Some(list) = grid.cells.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
+                        return;
+                    };
+                    for &j in list {
+                        consider_site(raw, sites, j, s, tracer, &mut best, &mut fallback);
+                    }
+                };
+                // The same order as a scan of the whole cube (x, then y, then z ascending),
+                // so that ties between equally near sites go the same way.
+                for dx in x0..=x1 {
+                    for dy in y0..=y1 {
+                        if dx.abs() == ring || dy.abs() == ring {
+                            for dz in z0..=z1 {
+                                visit(dx, dy, dz);
                             }
-                            let Some(list) = grid.get(&(cx + dx, cy + dy, cz + dz)) else {
-                                continue;
-                            };
-                            for &j in list {
-                                let site = &raw[sites[j]];
-                                let d = site.position.distance_squared(s.position);
-                                if fallback.is_none_or(|(bd, _)| d < bd) {
-                                    fallback = Some((d, j));
-                                }
-                                if site.normal.dot(s.normal) > 0.8
-                                    && best.is_none_or(|(bd, _)| d < bd)
-                                    && mutually_visible(tracer, site, s)
-                                {
-                                    best = Some((d, j));
+                        } else {
+                            // |dx|, |dy| < ring, so ring > 0: the two caps differ.
+                            for dz in [-ring, ring] {
+                                if (z0..=z1).contains(&dz) {
+                                    visit(dx, dy, dz);
                                 }
                             }
                         }
                     }
                 }
-                // Stop once no closer site can lie in the next ring.
+                // Stop once no closer site can lie in the next ring, or once the ring holds
+                // the sites' whole box (no ring beyond has a site).
                 if let Some((d, _)) = best {
-                    let reach = ring as f32 * cell;
+                    let reach = ring as f32 * grid.cell;
                     if d <= reach * reach {
                         break;
                     }
+                }
+                let covered = (0..3).all(|a| c[a] - ring <= lo[a] && hi[a] <= c[a] + ring);
+                if covered {
+                    break;
                 }
             }
             best.or(fallback).map(|(_, j)| j).unwrap_or(0)
         })
         .collect()
+}
+
+/// The VPL sites in a hash grid of cells about one patch wide (`total_area / n` each), with
+/// the bounds of the cells that hold any.
+struct SiteGrid {
+    cell: f32,
+    /// Cell → indices into `sites`.
+    cells: std::collections::HashMap<[i64; 3], Vec<usize>>,
+    lo: [i64; 3],
+    hi: [i64; 3],
+}
+
+impl SiteGrid {
+    fn new(raw: &[SurfaceSample], sites: &[usize], total_area: f64, n: usize) -> Self {
+        let mut grid = Self {
+            cell: ((total_area / n as f64).sqrt() as f32).max(1e-6),
+            cells: Default::default(),
+            lo: [i64::MAX; 3],
+            hi: [i64::MIN; 3],
+        };
+        for (j, &s) in sites.iter().enumerate() {
+            let k = grid.key(raw[s].position);
+            grid.lo = std::array::from_fn(|a| grid.lo[a].min(k[a]));
+            grid.hi = std::array::from_fn(|a| grid.hi[a].max(k[a]));
+            grid.cells.entry(k).or_default().push(j);
+        }
+        grid
+    }
+
+    /// The cell holding `p`.
+    fn key(&self, p: Vec3) -> [i64; 3] {
+        let q = (p / self.cell).floor();
+        [q.x as i64, q.y as i64, q.z as i64]
+    }
+}
+
+/// How many grid rings [`assign_samples`] searches for a sample's site.
+const ASSIGN_RINGS: i64 = 64;
+
+/// Site `j` as sample `s`'s patch: the nearest so far of any kind (`fallback`), and the
+/// nearest with a compatible normal (within ~37°) that `s` sees (`best`); both as
+/// (squared distance, site).
+fn consider_site(
+    raw: &[SurfaceSample],
+    sites: &[usize],
+    j: usize,
+    s: &SurfaceSample,
+    tracer: &Tracer,
+    best: &mut Option<(f32, usize)>,
+    fallback: &mut Option<(f32, usize)>,
+) {
+    let site = &raw[sites[j]];
+    let d = site.position.distance_squared(s.position);
+    if fallback.is_none_or(|(bd, _)| d < bd) {
+        *fallback = Some((d, j));
+    }
+    if site.normal.dot(s.normal) > 0.8
+        && best.is_none_or(|(bd, _)| d < bd)
+        && mutually_visible(tracer, site, s)
+    {
+        *best = Some((d, j));
+    }
 }
 
 #[cfg(test)]
@@ -880,6 +950,99 @@ mod tests {
         // Half the strata fall on it; the other half stay spread by area.
         assert!((s.len() as i64 - 51).abs() <= 1, "{} sites", s.len());
         assert!(s.iter().all(|&k| k < 1000));
+    }
+
+    /// The search before it kept to the sites' bounds: every cell of every ring's cube.
+    fn assign_samples_whole_cubes(
+        raw: &[SurfaceSample],
+        sites: &[usize],
+        grid: &SiteGrid,
+        tracer: &Tracer,
+    ) -> Vec<usize> {
+        raw.iter()
+            .map(|s| {
+                let [cx, cy, cz] = grid.key(s.position);
+                let mut best: Option<(f32, usize)> = None;
+                let mut fallback: Option<(f32, usize)> = None;
+                for ring in 0..ASSIGN_RINGS {
+                    for dx in -ring..=ring {
+                        for dy in -ring..=ring {
+                            for dz in -ring..=ring {
+                                if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
+                                    continue;
+                                }
+                                let Some(list) = grid.cells.get(&[cx + dx, cy + dy, cz + dz])
+                                else {
+                                    continue;
+                                };
+                                for &j in list {
+                                    consider_site(
+                                        raw,
+                                        sites,
+                                        j,
+                                        s,
+                                        tracer,
+                                        &mut best,
+                                        &mut fallback,
+                                    );
+                                }
+                            }
+                        }
+                    }
+                    if let Some((d, _)) = best {
+                        let reach = ring as f32 * grid.cell;
+                        if d <= reach * reach {
+                            break;
+                        }
+                    }
+                }
+                best.or(fallback).map(|(_, j)| j).unwrap_or(0)
+            })
+            .collect()
+    }
+
+    /// The shell search within the sites' bounds assigns every sample as the whole-cube scan
+    /// does, including samples no compatible site sees (the fallback, which used to scan all
+    /// 64 rings) and samples outside the sites' box.
+    #[test]
+    fn the_bounded_shell_search_assigns_as_the_whole_cube_scan() {
+        let scene = crate::scene::builtin::load(
+            "box-point",
+            &crate::scene::builtin::BuiltinParams::default(),
+        )
+        .unwrap();
+        let tracer = Tracer::new(&scene, &scene.world_from_node());
+        let mut rng = Rng::from_state(11);
+        let normals = [Vec3::X, Vec3::NEG_X, Vec3::Y, Vec3::Z, Vec3::NEG_Z];
+        let mut raw: Vec<SurfaceSample> = (0..1500)
+            .map(|_| {
+                let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 1.6 - 0.8;
+                SurfaceSample {
+                    position: p,
+                    normal: normals[(rng.next_f32() * 5.0) as usize % 5],
+                    material: 0,
+                    rho: Vec3::splat(0.5),
+                }
+            })
+            .collect();
+        // Facing down: no site does (fallback), and a corner cluster outside most rings.
+        for k in 0..5 {
+            raw.push(SurfaceSample {
+                position: Vec3::new(0.85, -0.85, 0.8) - Vec3::splat(k as f32 * 0.002),
+                normal: Vec3::NEG_Y,
+                material: 0,
+                rho: Vec3::splat(0.5),
+            });
+        }
+        let sites: Vec<usize> = (0..1500).step_by(15).collect();
+        // A cell of about 4 cm: the box spans 40 rings.
+        let total_area = 0.04f64.powi(2) * sites.len() as f64;
+        let grid = SiteGrid::new(&raw, &sites, total_area, sites.len());
+        let bounded = assign_samples(&raw, &sites, &grid, &tracer);
+        let whole = assign_samples_whole_cubes(&raw, &sites, &grid, &tracer);
+        assert_eq!(bounded, whole);
+        // The case the bound is for: samples facing away from every site get one anyway.
+        assert!(bounded[1500..].iter().all(|&j| j < sites.len()));
     }
 
     #[test]
