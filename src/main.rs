@@ -228,10 +228,12 @@ struct RenderArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
     #[arg(long, default_value = "cornell")]
     scene: String,
-    /// Rendering method (see `valgi methods`). The default is the product's own: direct light
-    /// plus the sparse VALs' indirect light (`direct` is direct light alone).
-    #[arg(long, default_value = "sparse")]
-    method: String,
+    /// Rendering method (see `valgi methods`). Default: sparse+atlas, the product's image:
+    /// direct light, the sparse VALs' bounce 1 and bounces 2.. from an atlas baked in memory
+    /// (or --atlas FILE); `sparse` alone, with a warning, for a scene whose atlas the default
+    /// bake refuses. `sparse` is one dynamic bounce, `direct` direct light alone.
+    #[arg(long)]
+    method: Option<String>,
     /// Output width in pixels (per view).
     #[arg(long, default_value_t = 512)]
     width: u32,
@@ -892,9 +894,16 @@ fn main() -> ExitCode {
                     return ExitCode::FAILURE;
                 }
             };
+            let method_fallback = match args.method {
+                Some(_) => None,
+                None => Some(valgi::app::DEFAULT_METHOD_FALLBACK.to_string()),
+            };
             let request = RenderRequest {
                 scene: args.scene,
-                method: args.method,
+                method: args
+                    .method
+                    .unwrap_or_else(|| valgi::app::DEFAULT_METHOD.to_string()),
+                method_fallback,
                 options,
                 settings: RenderSettings {
                     width: args.width,

@@ -50,11 +50,19 @@ fn render_writes_exr_and_png_and_reports_json() {
         assert!(report.get(key).is_some(), "missing key {key} in {line}");
     }
     assert_eq!(report["scene"], "plane-spot");
-    // Without --method, render draws the product's own image: direct + sparse VALs.
-    assert_eq!(report["method"], "sparse");
+    // Without --method, render draws the product's image: direct + the sparse VALs' bounce
+    // + the later bounces of an atlas baked in memory.
+    assert_eq!(report["method"], "sparse+atlas");
     assert_eq!(report["width"], 48);
     for pass in [
-        "shadow", "gbuffer", "direct", "resolve", "rsm", "gather", "apply",
+        "shadow",
+        "gbuffer",
+        "direct",
+        "resolve",
+        "rsm",
+        "gather",
+        "apply",
+        "atlas add",
     ] {
         assert!(
             report["passes"][pass].as_f64().is_some(),
@@ -824,4 +832,62 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     ] {
         assert_refused(&[tiny_render(out, &sparse), extra].concat(), &["--"]);
     }
+}
+
+/// The default method's atlas is baked in memory; a scene whose charts the default bake
+/// cannot fit (3000 separate triangles need a 274² atlas, the bake's is 256²) renders the
+/// sparse method alone with a warning, while `--method sparse+atlas` asked for by name is
+/// refused with the size the bake needs.
+#[test]
+fn the_default_renders_without_the_atlas_where_the_bake_refuses_it() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-default-fallback");
+    let mut obj = String::new();
+    for k in 0..3000 {
+        let (x, z) = ((k % 60) as f32 * 0.05, (k / 60) as f32 * 0.05);
+        obj += &format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0 {}\n", x + 0.04, z + 0.04);
+    }
+    for k in 0..3000 {
+        let v = 3 * k + 1;
+        obj += &format!("f {v} {} {}\n", v + 2, v + 1);
+    }
+    let scene = dir.join("pieces.obj");
+    std::fs::write(&scene, obj).unwrap();
+    let render = |method: Option<&str>| {
+        let mut command = valgi();
+        command
+            .args(["render", "--scene"])
+            .arg(&scene)
+            .args([
+                "--light",
+                "point:1.5,1,1.25,1",
+                "--width",
+                "16",
+                "--height",
+                "16",
+            ])
+            .args(["--sparse-points", "256", "--rsm", "16", "--out"])
+            .arg(dir.join("out.exr"));
+        if let Some(m) = method {
+            command.args(["--method", m]);
+        }
+        command.output().expect("run valgi")
+    };
+    let output = render(None);
+    common::assert_success(&output);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value =
+        serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
+    assert_eq!(report["method"], "sparse", "{stderr}");
+    assert!(
+        stderr.contains("rendering 'sparse' without the atlas"),
+        "{stderr}"
+    );
+    let output = render(Some("sparse+atlas"));
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("--atlas-res"), "{stderr}");
 }

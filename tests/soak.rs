@@ -103,6 +103,7 @@ fn no_method_grows_over_a_long_run() {
         let request = RenderRequest {
             scene: scene_name.into(),
             method: method.into(),
+            method_fallback: None,
             options,
             settings: common::small_render_settings(16),
             frames: Some(FRAMES),

@@ -348,7 +348,7 @@ pub fn bake_in_memory(scene: &Scene, from_bounce: u32) -> Result<LoadedAtlas, Re
     stages.finish();
     let result = result.map_err(|e| match e {
         BakeError::Cancelled => RenderError::Cancelled(crate::progress::Cancelled),
-        e => RenderError::Settings(format!(
+        e => RenderError::AtlasBake(format!(
             "no --atlas given, and baking one for scene '{}' failed: {e}; bake it with \
              `valgi bake --scene … --out FILE.exr --from-bounce {from_bounce}` (its options \
              set the atlas size) and pass --atlas FILE.exr",

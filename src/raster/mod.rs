@@ -120,6 +120,11 @@ pub enum RenderError {
     SceneTooLarge(#[from] SceneTooLarge),
     #[error("{0}")]
     Settings(String),
+    /// An atlas method given no `--atlas` could not bake one in memory (its charts need a
+    /// larger atlas than the default bake's, …): `valgi render`'s default method then
+    /// renders without the atlas.
+    #[error("{0}")]
+    AtlasBake(String),
     #[error(transparent)]
     Cancelled(#[from] crate::progress::Cancelled),
 }
