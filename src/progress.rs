@@ -59,7 +59,35 @@ pub struct Step {
     started: Instant,
     /// Print the summary line at the end (enabled and stderr is not a terminal).
     summary: bool,
+    enabled: bool,
     finished: bool,
+}
+
+/// Where an enabled [`Step`] stands: what a window shows while a worker thread builds a
+/// method (an atlas bake's stages).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepProgress {
+    pub message: String,
+    pub done: u64,
+    pub len: u64,
+}
+
+impl StepProgress {
+    /// done / len in [0, 1] (0 for an empty step).
+    pub fn fraction(&self) -> f32 {
+        if self.len == 0 {
+            0.0
+        } else {
+            (self.done as f64 / self.len as f64).clamp(0.0, 1.0) as f32
+        }
+    }
+}
+
+static LATEST: std::sync::Mutex<Option<StepProgress>> = std::sync::Mutex::new(None);
+
+/// The enabled step that moved last, on any thread, until it ends.
+pub fn latest() -> Option<StepProgress> {
+    LATEST.lock().ok().and_then(|latest| latest.clone())
 }
 
 impl Step {
@@ -86,17 +114,35 @@ impl Step {
             message: message.to_string(),
             started: Instant::now(),
             summary: enabled && !terminal,
+            enabled,
             finished: false,
         }
     }
 
     pub fn inc(&self, units: u64) {
         self.bar.inc(units);
+        self.publish();
     }
 
     pub fn set_position(&self, done: u64, len: u64) {
         self.bar.set_length(len);
         self.bar.set_position(done);
+        self.publish();
+    }
+
+    /// Makes this step the one [`latest`] reports (enabled steps only: the silent ones of
+    /// library callers and tests stay out of a window's way).
+    fn publish(&self) {
+        if !self.enabled {
+            return;
+        }
+        if let Ok(mut latest) = LATEST.lock() {
+            *latest = Some(StepProgress {
+                message: self.message.clone(),
+                done: self.bar.position(),
+                len: self.bar.length().unwrap_or(0),
+            });
+        }
     }
 
     /// Clears the bar, or prints `message: done/len in T s`.
@@ -110,6 +156,11 @@ impl Step {
         }
         self.finished = true;
         self.bar.finish_and_clear();
+        if let Ok(mut latest) = LATEST.lock() {
+            if latest.as_ref().is_some_and(|l| l.message == self.message) {
+                *latest = None;
+            }
+        }
         if self.summary {
             let (done, len) = (self.bar.position(), self.bar.length().unwrap_or(0));
             let state = if cancelled() { ", cancelled" } else { "" };
@@ -168,5 +219,37 @@ impl Stages {
         if let Some((_, step)) = self.current.lock().ok().and_then(|mut c| c.take()) {
             step.finish();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An enabled step is what `latest` reports while it moves, and nothing once it ends; a
+    /// silent one is never reported.
+    #[test]
+    fn latest_follows_the_enabled_step_that_moved() {
+        let silent = Step::new(false, 4, "progress test: silent");
+        silent.set_position(1, 4);
+        assert_ne!(
+            latest().map(|l| l.message),
+            Some("progress test: silent".to_string())
+        );
+        let step = Step::new(true, 10, "progress test: loud");
+        // Other tests' enabled steps may move in between on other threads: try again then.
+        let seen = (0..1000)
+            .find_map(|_| {
+                step.set_position(3, 10);
+                latest().filter(|l| l.message == "progress test: loud")
+            })
+            .expect("the step in progress");
+        assert_eq!((seen.done, seen.len), (3, 10));
+        assert!((seen.fraction() - 0.3).abs() < 1e-6);
+        step.finish();
+        assert_ne!(
+            latest().map(|l| l.message),
+            Some("progress test: loud".to_string())
+        );
     }
 }

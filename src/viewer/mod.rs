@@ -1767,6 +1767,14 @@ impl PanelData<'_> {
                     p.started.elapsed().as_secs_f32()
                 ));
             });
+            // The worker's own step, where it reports one (an atlas bake's stages): how much
+            // of it is done.
+            if let Some(step) = crate::progress::latest() {
+                ui.add(
+                    egui::ProgressBar::new(step.fraction())
+                        .text(format!("{} {}/{}", step.message, step.done, step.len)),
+                );
+            }
         } else if let Some(r) = &self.state.rebuilds.last {
             ui.label(format!(
                 "last build {:.0} ms, longest UI frame meanwhile {:.0} ms",
