@@ -180,7 +180,11 @@ impl Default for BakeSettings {
         Self {
             lights: Lights::Patches,
             vpls: 400,
-            bounces: 4,
+            // Enough for a closed room: with 4 the door room kept 20 % of its light unshot,
+            // and the render default (sparse+atlas) was 0.237 FLIP from the all-bounce path
+            // tracer there, 0.084 with 16 (cornell 0.137 → 0.078, corridor 0.282 → 0.057);
+            // shooting stops earlier where the unshot power falls below `threshold`.
+            bounces: 16,
             atlas_res: 256,
             samples_per_vpl: 10,
             cube_res: 32,
