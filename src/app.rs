@@ -82,7 +82,7 @@ pub struct RenderRequest {
 /// What `valgi render` draws without `--method`: the product's image, direct light + the sparse
 /// VALs' bounce 1 + bounces 2.. from an atlas baked in memory for the scene (`--atlas FILE`
 /// takes a baked one). Against the all-bounce path tracer on the Cornell box (128², FLIP):
-/// 0.127, against 0.376 for `sparse` alone and 0.630 for `direct`.
+/// 0.075, against 0.376 for `sparse` alone and 0.630 for `direct` (README, "Rendering").
 pub const DEFAULT_METHOD: &str = "sparse+atlas";
 
 /// The default method without its atlas, for scenes whose atlas the in-memory bake refuses.
