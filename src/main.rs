@@ -318,8 +318,9 @@ struct ViewArgs {
     /// Built-in scene name (see `valgi scenes`) or a .gltf/.glb file.
     #[arg(long, default_value = "cornell", conflicts_with = "preview")]
     scene: String,
-    /// Rendering method (see `valgi methods`); switchable in the panel. Default: direct, or
-    /// sparse with --preview.
+    /// Rendering method (see `valgi methods`); switchable in the panel. Default: render's,
+    /// sparse+atlas (sparse where the in-memory atlas bake is refused), or sparse with
+    /// --preview.
     #[arg(long)]
     method: Option<String>,
     /// The material preview room of `valgi preview` instead of --scene, with the ball's base
@@ -969,8 +970,18 @@ fn main() -> ExitCode {
                 };
                 Ok::<_, valgi::raster::RenderError>(valgi::viewer::ViewerRequest {
                     scene: args.scene,
+                    // The default is render's (the product's image); the preview's is sparse.
+                    method_fallback: match (&args.method, args.preview) {
+                        (None, false) => Some(valgi::app::DEFAULT_METHOD_FALLBACK.to_string()),
+                        _ => None,
+                    },
                     method: args.method.unwrap_or_else(|| {
-                        if args.preview { "sparse" } else { "direct" }.to_string()
+                        if args.preview {
+                            "sparse"
+                        } else {
+                            valgi::app::DEFAULT_METHOD
+                        }
+                        .to_string()
                     }),
                     preview: preview.map(|material| valgi::viewer::ViewerPreview {
                         material,

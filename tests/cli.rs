@@ -844,17 +844,7 @@ fn the_default_renders_without_the_atlas_where_the_bake_refuses_it() {
         return;
     }
     let dir = common::temp_dir("cli-default-fallback");
-    let mut obj = String::new();
-    for k in 0..3000 {
-        let (x, z) = ((k % 60) as f32 * 0.05, (k / 60) as f32 * 0.05);
-        obj += &format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0 {}\n", x + 0.04, z + 0.04);
-    }
-    for k in 0..3000 {
-        let v = 3 * k + 1;
-        obj += &format!("f {v} {} {}\n", v + 2, v + 1);
-    }
-    let scene = dir.join("pieces.obj");
-    std::fs::write(&scene, obj).unwrap();
+    let scene = common::separate_triangles_obj(&dir, 3000);
     let render = |method: Option<&str>| {
         let mut command = valgi();
         command

@@ -1003,3 +1003,50 @@ fn the_panel_layer_is_reused_while_the_panel_is_unchanged_and_shown_every_frame(
     assert!(mean > 15.0, "the panel region is black (mean {mean:.1})");
     assert!(bright > 100, "no panel text ({bright} bright pixels)");
 }
+
+/// Without `--method` the viewer opens on `render`'s default, `sparse+atlas` (its atlas baked
+/// in memory on the worker), and on a scene whose atlas the bake refuses (3000 separate
+/// triangles need a 274² atlas) on `sparse`, with a warning.
+#[test]
+fn the_viewer_opens_on_renders_default_method() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("viewer_default_method");
+    let pieces = common::separate_triangles_obj(&dir, 3000);
+    let pieces = pieces.to_str().unwrap();
+    for (scene, expected) in [("cornell", "sparse+atlas"), (pieces, "sparse")] {
+        let args = [
+            "view",
+            "--scene",
+            scene,
+            "--light",
+            "point:1.5,1,1.25,1",
+            "--sparse-points",
+            "256",
+            "--rsm",
+            "16",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--frames",
+            "2",
+        ];
+        let Some(mut command) = windowed(&args) else {
+            return;
+        };
+        let output = command.output().expect("run valgi");
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{scene}: {stderr}");
+        let report = report_of(&stdout);
+        assert_eq!(report["method"], expected, "{scene}: {stderr}");
+        if expected == "sparse" {
+            assert!(
+                stderr.contains("viewing 'sparse' without the atlas"),
+                "{stderr}"
+            );
+        }
+    }
+}

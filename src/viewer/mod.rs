@@ -82,6 +82,9 @@ impl From<crate::gpu::GpuError> for ViewerError {
 pub struct ViewerRequest {
     pub scene: String,
     pub method: String,
+    /// Built instead at start-up when `method` cannot bake its atlas in memory (as
+    /// `RenderRequest::method_fallback`): `sparse` for the default `sparse+atlas`.
+    pub method_fallback: Option<String>,
     pub options: MethodOptions,
     /// Size of each view's region and the method's quality settings.
     pub settings: RenderSettings,
@@ -745,7 +748,11 @@ impl Running {
         running.make_views((s.width, s.height), scene)?;
         // The first build runs on the worker too: the window opens (and redraws its panel)
         // while the scene is preprocessed.
-        running.start_rebuild(method_entry.name, request.options.clone(), scene);
+        let fallback = match &request.method_fallback {
+            Some(name) => Some(method::entry(name)?.name),
+            None => None,
+        };
+        running.start_rebuild_or(method_entry.name, fallback, request.options.clone(), scene);
         Ok(running)
     }
 
@@ -913,6 +920,18 @@ impl Running {
     /// Builds method `name` with `options` on a worker thread; the running method keeps
     /// drawing until it is in. A newer request supersedes this one (its method is dropped).
     fn start_rebuild(&mut self, name: &'static str, options: MethodOptions, scene: &Arc<Scene>) {
+        self.start_rebuild_or(name, None, options, scene);
+    }
+
+    /// [`Self::start_rebuild`], building `fallback` instead when `name` cannot bake its atlas
+    /// in memory (`RenderError::AtlasBake`, with a warning).
+    fn start_rebuild_or(
+        &mut self,
+        name: &'static str,
+        fallback: Option<&'static str>,
+        options: MethodOptions,
+        scene: &Arc<Scene>,
+    ) {
         let size = self.views.first().map_or(
             (self.request.settings.width, self.request.settings.height),
             |v| (v.width, v.height),
@@ -928,9 +947,17 @@ impl Running {
         let spawned = std::thread::Builder::new()
             .name("valgi-rebuild".into())
             .spawn(move || {
-                let built = method::create(name, &ctx, &scene, settings, &options)
-                    .map(|m| (m, scene))
-                    .map_err(|e| e.to_string());
+                let created = match (
+                    method::create(name, &ctx, &scene, settings, &options),
+                    fallback,
+                ) {
+                    (Err(RenderError::AtlasBake(why)), Some(fallback)) => {
+                        log::warn!("{why}; viewing '{fallback}' without the atlas's later bounces");
+                        method::create(fallback, &ctx, &scene, settings, &options)
+                    }
+                    (created, _) => created,
+                };
+                let built = created.map(|m| (m, scene)).map_err(|e| e.to_string());
                 // The window may have closed, or a newer rebuild superseded this one.
                 let _ = sender.send(built);
             });
@@ -964,8 +991,9 @@ impl Running {
         let done = self.state.rebuilds.finish(generation, built.is_ok())?;
         let landed = match built {
             Ok((m, scene)) => {
+                // The method built: the request's, or its fallback.
+                self.method_name = m.name();
                 self.method = Some(m);
-                self.method_name = done.method;
                 self.options = done.options;
                 self.method_error = None;
                 Some(scene)

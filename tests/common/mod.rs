@@ -198,3 +198,21 @@ pub fn texel_reference(
         },
     )
 }
+
+/// An OBJ of `count` separate 4 cm triangles on the floor (y = 0, facing up) in rows of 60, 5 cm
+/// apart, written into `dir`: each is a light-map chart of its own, so 3000 of them need a
+/// 274² atlas (`atlas::layout::min_resolution_for_charts`), more than the default bake's 256².
+pub fn separate_triangles_obj(dir: &std::path::Path, count: usize) -> std::path::PathBuf {
+    let mut obj = String::new();
+    for k in 0..count {
+        let (x, z) = ((k % 60) as f32 * 0.05, (k / 60) as f32 * 0.05);
+        obj += &format!("v {x} 0 {z}\nv {} 0 {z}\nv {x} 0 {}\n", x + 0.04, z + 0.04);
+    }
+    for k in 0..count {
+        let v = 3 * k + 1;
+        obj += &format!("f {v} {} {}\n", v + 2, v + 1);
+    }
+    let path = dir.join("pieces.obj");
+    std::fs::write(&path, obj).expect("write the OBJ");
+    path
+}
