@@ -19,20 +19,20 @@ SIZE="--width $W --height $H --auto-exposure"
 
 # name | valgi arguments (a scene file and what it needs: lights, camera, method)
 JOBS=(
-  "bunny|render --scene $D/bunny/bun_zipper.ply --method sparse --light headlight:2"
-  "bunny-res2|render --scene $D/bunny/bun_zipper_res2.ply --method sparse --light headlight:2"
-  "bunny-res4|render --scene $D/bunny/bun_zipper_res4.ply --method sparse --light headlight:2"
-  "damaged-helmet|render --scene $D/gltf-samples/DamagedHelmet/DamagedHelmet.glb --method sparse --light headlight:30"
+  "bunny|render --scene $D/bunny/bun_zipper.ply --light headlight:2"
+  "bunny-res2|render --scene $D/bunny/bun_zipper_res2.ply --light headlight:2"
+  "bunny-res4|render --scene $D/bunny/bun_zipper_res4.ply --light headlight:2"
+  "damaged-helmet|render --scene $D/gltf-samples/DamagedHelmet/DamagedHelmet.glb --light headlight:30"
   "metal-rough-spheres|render --scene $D/gltf-samples/MetalRoughSpheresNoTextures/MetalRoughSpheresNoTextures.glb --method direct --light headlight:30"
-  "specular-test|render --scene $D/gltf-samples/SpecularTest/SpecularTest.glb --method sparse --light headlight:30"
-  "emissive-strength|render --scene $D/gltf-samples/EmissiveStrengthTest/EmissiveStrengthTest.glb --method sparse"
-  "environment-test|render --scene $D/gltf-samples/EnvironmentTest/glTF/EnvironmentTest.gltf --method sparse --light sun:-0.3,-0.6,-1,3"
-  "clear-coat|render --scene $D/gltf-samples/ClearCoatTest/ClearCoatTest.glb --method sparse --light headlight:30"
-  "sponza|render --scene $D/sponza/Sponza.gltf --method sparse --light sun:-0.3,-1,-0.2,5 --camera-eye -11,1.8,-0.4 --camera-target 10,3.5,-0.4 --fov 60"
-  "veach-ajar|render --scene $D/veach-ajar/scene.xml --method sparse"
-  "cornell-measured|render --scene $D/cornell-measured/cbox.xml --method sparse"
-  "cornell-measured-rgb|render --scene $D/cornell-measured/cbox-rgb.xml --method sparse"
-  "cornell-measured-spectral|render --scene $D/cornell-measured/cbox-spectral.xml --method sparse"
+  "specular-test|render --scene $D/gltf-samples/SpecularTest/SpecularTest.glb --light headlight:30"
+  "emissive-strength|render --scene $D/gltf-samples/EmissiveStrengthTest/EmissiveStrengthTest.glb"
+  "environment-test|render --scene $D/gltf-samples/EnvironmentTest/glTF/EnvironmentTest.gltf --light sun:-0.3,-0.6,-1,3"
+  "clear-coat|render --scene $D/gltf-samples/ClearCoatTest/ClearCoatTest.glb --light headlight:30"
+  "sponza|render --scene $D/sponza/Sponza.gltf --light sun:-0.3,-1,-0.2,5 --camera-eye -11,1.8,-0.4 --camera-target 10,3.5,-0.4 --fov 60"
+  "veach-ajar|render --scene $D/veach-ajar/scene.xml"
+  "cornell-measured|render --scene $D/cornell-measured/cbox.xml"
+  "cornell-measured-rgb|render --scene $D/cornell-measured/cbox-rgb.xml"
+  "cornell-measured-spectral|render --scene $D/cornell-measured/cbox-spectral.xml"
 )
 
 printf '| file | command | wall (s) | mean luminance | dark pixels |\n|---|---|---|---|---|\n'
