@@ -13,25 +13,23 @@ use crate::gpu::GpuContext;
 use crate::method::{Entry, MethodOptions, OptionSpec};
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::Scene;
-use crate::vals::{SparseMethod, SparseSettings};
+use crate::vals::SparseMethod;
 
-/// The sparse method's options plus the atlas file.
-const SPARSE_ATLAS_OPTIONS: &[OptionSpec] = &[
-    crate::vals::OPTIONS[0],
-    crate::vals::OPTIONS[1],
-    crate::vals::OPTIONS[2],
-    crate::vals::OPTIONS[3],
-    crate::vals::OPTIONS[4],
-    crate::vals::OPTIONS[5],
-    crate::vals::OPTIONS[6],
-    crate::vals::OPTIONS[7],
-    ATLAS_OPTION,
-];
+/// Every option of the sparse method, plus the atlas file.
+const SPARSE_ATLAS_OPTIONS: [OptionSpec; crate::vals::OPTIONS.len() + 1] = {
+    let mut all = [ATLAS_OPTION; crate::vals::OPTIONS.len() + 1];
+    let mut i = 0;
+    while i < crate::vals::OPTIONS.len() {
+        all[i] = crate::vals::OPTIONS[i];
+        i += 1;
+    }
+    all
+};
 
 pub static SPARSE_ATLAS_ENTRY: Entry = Entry {
     name: "sparse+atlas",
     help: "direct + bounce 1 from the VALs (the sparse method and its options) + bounces 2.. from an atlas baked with --from-bounce 2 (without --atlas: baked in memory first)",
-    options: SPARSE_ATLAS_OPTIONS,
+    options: &SPARSE_ATLAS_OPTIONS,
     create: create_sparse_atlas,
 };
 
@@ -54,10 +52,9 @@ pub fn sparse_atlas(
     options: &MethodOptions,
 ) -> Result<SparseMethod, RenderError> {
     let path: String = options.get("atlas", String::new())?;
-    let settings = SparseSettings::from_options(options)?;
     if path.is_empty() {
         let atlas = bake_in_memory(scene, 2)?;
-        return with_atlas(ctx, scene, render, settings, &atlas);
+        return with_atlas(ctx, scene, render, options, &atlas);
     }
     let atlas = load_atlas(Path::new(&path))?;
     match &atlas.bounces {
@@ -75,19 +72,42 @@ pub fn sparse_atlas(
              header attribute); assuming it starts at bounce 2"
         ),
     }
-    with_atlas(ctx, scene, render, settings, &atlas)
+    with_atlas(ctx, scene, render, options, &atlas)
 }
 
-/// The sparse method with `atlas` (bounces from 2) as its indirect layer.
+/// The sparse method (every one of its options, `--quality auto` included) with `atlas`
+/// (bounces from 2) as its indirect layer.
 fn with_atlas(
     ctx: &GpuContext,
     scene: &Scene,
     render: RenderSettings,
-    settings: SparseSettings,
+    options: &MethodOptions,
     atlas: &LoadedAtlas,
 ) -> Result<SparseMethod, RenderError> {
-    let mut sparse = SparseMethod::new(ctx, scene, render, settings)?;
+    let mut sparse = SparseMethod::from_options(ctx, scene, render, options)?;
     let layer = AtlasLayer::from_loaded(ctx, scene, atlas)?;
     sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
     Ok(sparse)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `sparse+atlas` is the sparse method with a layer: it takes every sparse option (a
+    /// user of `render`'s default passes `--occlusion`, `--quality` and the rest), and the
+    /// atlas file.
+    #[test]
+    fn sparse_atlas_takes_every_sparse_option() {
+        let names: Vec<&str> = SPARSE_ATLAS_ENTRY.options.iter().map(|o| o.name).collect();
+        for spec in crate::vals::OPTIONS {
+            assert!(
+                names.contains(&spec.name),
+                "sparse+atlas lacks {}",
+                spec.name
+            );
+        }
+        assert!(names.contains(&"atlas"));
+        assert_eq!(names.len(), crate::vals::OPTIONS.len() + 1);
+    }
 }

@@ -582,10 +582,7 @@ fn a_light_and_camera_from_the_command_line_light_an_unlit_scene() {
         ))
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value =
-        serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
+    let report = common::success_report(&output);
     assert_eq!(report["lights"], 3, "{report}");
 }
 
@@ -613,10 +610,7 @@ fn the_measured_cornell_box_renders_from_its_mitsuba_3_file() {
         .args(["--out", &out])
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value =
-        serde_json::from_str(stdout.lines().last().expect("a JSON line")).expect("JSON");
+    let report = common::success_report(&output);
     assert!(report["lights"].as_u64().unwrap_or(0) >= 1, "{report}");
     let image = valgi::image_io::Image::read_exr(std::path::Path::new(&out)).unwrap();
     assert!(
@@ -880,4 +874,29 @@ fn the_default_renders_without_the_atlas_where_the_bake_refuses_it() {
     assert!(!output.status.success());
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("--atlas-res"), "{stderr}");
+}
+
+/// `render`'s default method takes every option of the sparse method it is built on: the
+/// occlusion and budget flags as well as the atlas.
+#[test]
+fn the_default_method_takes_the_sparse_options() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-default-options");
+    let flags = "--occlusion off --quality auto --target-flip 0.1 --width 16 --height 16";
+    let output = valgi()
+        .args(["render", "--scene", "plane-spot"])
+        .args(flags.split(' '))
+        .arg("--out")
+        .arg(dir.join("x.exr"))
+        .output()
+        .expect("run valgi");
+    let report = common::success_report(&output);
+    assert_eq!(
+        (&report["method"], &report["occlusion"]),
+        (&"sparse+atlas".into(), &"off".into())
+    );
+    // Budget mode ran (manual settings report no `budget`).
+    assert!(report["budget"]["met"].is_boolean(), "{report}");
 }

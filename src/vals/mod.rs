@@ -794,30 +794,45 @@ fn create(
     render: RenderSettings,
     options: &MethodOptions,
 ) -> Result<Box<dyn Method>, RenderError> {
-    let mut settings = SparseSettings::from_options(options)?;
-    let budget = match budget_target(options)? {
-        Some(target) => {
-            // A time budget is predicted for this device: the fitted times scaled by the
-            // FMA peak measured here. An error target's choice does not depend on it.
-            let peak = match target {
-                budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::device_fma_peak(ctx)?),
-                budget::BudgetTarget::Flip(_) => None,
-            };
-            Some(apply_budget(
-                scene,
-                (
-                    render.camera,
-                    render.width as f32 / render.height.max(1) as f32,
-                ),
-                options,
-                target,
-                peak,
-                &mut settings,
-            )?)
-        }
-        None => None,
-    };
-    let mut method = SparseMethod::new(ctx, scene, render, settings)?;
-    method.budget = budget;
-    Ok(Box::new(method))
+    Ok(Box::new(SparseMethod::from_options(
+        ctx, scene, render, options,
+    )?))
+}
+
+impl SparseMethod {
+    /// The sparse method as its registry options describe it, `--quality auto` included
+    /// (methods composed on it, e.g. `sparse+atlas`, take every one of them).
+    pub fn from_options(
+        ctx: &GpuContext,
+        scene: &Scene,
+        render: RenderSettings,
+        options: &MethodOptions,
+    ) -> Result<Self, RenderError> {
+        let mut settings = SparseSettings::from_options(options)?;
+        let budget = match budget_target(options)? {
+            Some(target) => {
+                // A time budget is predicted for this device: the fitted times scaled by the
+                // FMA peak measured here. An error target's choice does not depend on it.
+                let peak = match target {
+                    budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::device_fma_peak(ctx)?),
+                    budget::BudgetTarget::Flip(_) => None,
+                };
+                Some(apply_budget(
+                    scene,
+                    (
+                        render.camera,
+                        render.width as f32 / render.height.max(1) as f32,
+                    ),
+                    options,
+                    target,
+                    peak,
+                    &mut settings,
+                )?)
+            }
+            None => None,
+        };
+        let mut method = SparseMethod::new(ctx, scene, render, settings)?;
+        method.budget = budget;
+        Ok(method)
+    }
 }

@@ -216,3 +216,11 @@ pub fn separate_triangles_obj(dir: &std::path::Path, count: usize) -> std::path:
     std::fs::write(&path, obj).expect("write the OBJ");
     path
 }
+
+/// The JSON report of a `valgi` run that must have succeeded (its last stdout line).
+pub fn success_report(output: &std::process::Output) -> serde_json::Value {
+    assert_success(output);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let line = stdout.lines().last().expect("a JSON line");
+    serde_json::from_str(line).unwrap_or_else(|e| panic!("{e}: {line}"))
+}
