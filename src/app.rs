@@ -303,14 +303,15 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         ..request.settings
     };
     let preparing = crate::progress::Step::new(true, 1, &format!("preparing {}", request.method));
-    let created = method::create(&request.method, &ctx, &scene, settings, &request.options);
-    let mut method = match (created, &request.method_fallback) {
-        (Err(RenderError::AtlasBake(why)), Some(fallback)) => {
-            log::warn!("{why}; rendering '{fallback}' without the atlas's later bounces");
-            method::create(fallback, &ctx, &scene, settings, &request.options)?
-        }
-        (created, _) => created?,
-    };
+    let mut method = method::create_or(
+        &request.method,
+        request.method_fallback.as_deref(),
+        "rendering",
+        &ctx,
+        &scene,
+        settings,
+        &request.options,
+    )?;
     preparing.inc(1);
     preparing.finish();
     crate::progress::check()?;

@@ -167,6 +167,27 @@ pub fn create(
     Ok(method)
 }
 
+/// [`create`], or `fallback` when `name` cannot bake its atlas in memory
+/// ([`RenderError::AtlasBake`], with a warning naming `context`): how `render` and `view` build
+/// their default, `sparse+atlas`, on a scene whose atlas the default bake refuses.
+pub fn create_or(
+    name: &str,
+    fallback: Option<&str>,
+    context: &str,
+    ctx: &GpuContext,
+    scene: &Scene,
+    settings: RenderSettings,
+    options: &MethodOptions,
+) -> Result<Box<dyn Method>, RenderError> {
+    match (create(name, ctx, scene, settings, options), fallback) {
+        (Err(RenderError::AtlasBake(why)), Some(fallback)) => {
+            log::warn!("{why}; {context} '{fallback}' without the atlas's later bounces");
+            create(fallback, ctx, scene, settings, options)
+        }
+        (created, _) => created,
+    }
+}
+
 /// The method's registry entry, once every option given is one it takes with a valid value
 /// (checked before any GPU work).
 pub fn check_options(name: &str, options: &MethodOptions) -> Result<&'static Entry, RenderError> {
@@ -238,6 +259,11 @@ impl MethodOptions {
 
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
+    }
+
+    /// Whether `key` was given (a default applies otherwise).
+    pub fn given(&self, key: &str) -> bool {
+        self.entries.contains_key(key)
     }
 
     /// The `key=value` pairs given.

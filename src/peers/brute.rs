@@ -92,8 +92,8 @@ impl BruteMethod {
         let raster = Rasterizer::new(ctx, scene, render)?;
         // Without --rsm the lights share one point light's texels, as in the sparse method:
         // both gather the same VALs.
-        let shared_texels = (!options.entries().any(|(k, _)| k == "rsm"))
-            .then_some(crate::light::rsm::DEFAULT_SHARED_TEXELS);
+        let shared_texels =
+            (!options.given("rsm")).then_some(crate::light::rsm::DEFAULT_SHARED_TEXELS);
         let rsm = Rsm::with_external(ctx, scene, &raster, rsm_resolution, shared_texels, None)?;
         let device = &ctx.device;
         let params_buffer = device.create_buffer(&wgpu::BufferDescriptor {

@@ -361,7 +361,7 @@ pub fn preview_options(method: &str, options: &MethodOptions) -> MethodOptions {
     let entry = method::entry(method).ok();
     for (key, value) in defaults {
         let takes = entry.is_some_and(|e| e.options.iter().any(|o| o.name == key));
-        if takes && !options.entries().any(|(k, _)| k == key) {
+        if takes && !options.given(key) {
             options.set(key, value);
         }
     }

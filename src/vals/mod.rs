@@ -86,7 +86,7 @@ impl SparseSettings {
                 "--sparse-points must be at least 1".into(),
             ));
         }
-        let rsm_given = options.entries().any(|(k, _)| k == "rsm");
+        let rsm_given = options.given("rsm");
         Ok(Self {
             rsm: options.get("rsm", d.rsm)?,
             rsm_texels: if rsm_given { None } else { d.rsm_texels },
@@ -142,7 +142,7 @@ fn gather_slices_option(options: &MethodOptions) -> Result<u32, RenderError> {
 /// Whether [`default_max_edge`] surveys the scene for these options (budget mode with a FLIP
 /// target choosing the point count), so that the caller can hand it the edited scene.
 pub fn surveys_for_tessellation(options: &MethodOptions) -> Result<bool, RenderError> {
-    let given = options.entries().any(|(k, _)| k == "sparse-points");
+    let given = options.given("sparse-points");
     Ok(!given && matches!(budget_target(options)?, Some(budget::BudgetTarget::Flip(_))))
 }
 
@@ -181,7 +181,7 @@ pub fn default_max_edge(
             "--sparse-points must be at least 1".into(),
         ));
     }
-    let given = options.entries().any(|(k, _)| k == "sparse-points");
+    let given = options.given("sparse-points");
     match (budget_target(options)?, given) {
         (Some(budget::BudgetTarget::Flip(flip)), false) => {
             // Budget mode chooses the point count, and so the tessellation, before the scene
@@ -426,7 +426,7 @@ pub fn apply_budget(
     if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
     }
-    let given = |key: &str| options.entries().any(|(k, _)| k == key);
+    let given = |key: &str| options.given(key);
     let choice = survey.choose(target);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
     if !given("sparse-points") {

@@ -947,17 +947,10 @@ impl Running {
         let spawned = std::thread::Builder::new()
             .name("valgi-rebuild".into())
             .spawn(move || {
-                let created = match (
-                    method::create(name, &ctx, &scene, settings, &options),
-                    fallback,
-                ) {
-                    (Err(RenderError::AtlasBake(why)), Some(fallback)) => {
-                        log::warn!("{why}; viewing '{fallback}' without the atlas's later bounces");
-                        method::create(fallback, &ctx, &scene, settings, &options)
-                    }
-                    (created, _) => created,
-                };
-                let built = created.map(|m| (m, scene)).map_err(|e| e.to_string());
+                let built =
+                    method::create_or(name, fallback, "viewing", &ctx, &scene, settings, &options)
+                        .map(|m| (m, scene))
+                        .map_err(|e| e.to_string());
                 // The window may have closed, or a newer rebuild superseded this one.
                 let _ = sender.send(built);
             });
