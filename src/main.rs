@@ -107,6 +107,12 @@ struct MrArgs {
     /// without.
     #[arg(long)]
     real_vals: Option<u32>,
+    /// Merge the sensor's pixels into the coarsest blocks (2×2 up to 32×32) that every virtual
+    /// receiver sees smaller than RATIO (block radius over its gap to the objects' bounding
+    /// sphere). Default 0.1 unless --real-vals or --accumulate is given; 0: one VAL per pixel.
+    /// See src/mixed_reality/README.md.
+    #[arg(long, value_name = "RATIO")]
+    real_cut: Option<f32>,
     /// The VAL disc area: the facing footprint, or the true (tilted) patch area.
     #[arg(long, default_value = "facing", value_parser = ["facing", "true"])]
     real_area: String,
@@ -1424,6 +1430,14 @@ fn mr_request(
         real_scale: args.real_scale,
         true_area: args.real_area == "true",
         real_vals: args.real_vals,
+        real_cut: match args.real_cut {
+            Some(0.0) => None,
+            Some(ratio) => Some(ratio),
+            None if args.real_vals.is_none() && args.accumulate <= 1 => {
+                Some(valgi::mixed_reality::depth_vals::DEFAULT_REAL_CUT)
+            }
+            None => None,
+        },
         accumulate: args.accumulate,
         voxel: args.voxel,
         real_occluders: args.real_occluders == "on",

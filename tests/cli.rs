@@ -453,6 +453,32 @@ fn mr_refuses_a_sparse_point_count_out_of_range() {
 }
 
 #[test]
+fn mr_refuses_a_real_cut_that_is_not_a_ratio_or_meets_another_reduction() {
+    for ratio in ["-0.1", "NaN", "inf", "2"] {
+        assert_mr_refuses("cli-mr-cut", "--real-cut", ratio, &["--real-cut", "ratio"]);
+    }
+    let dir = common::temp_dir("cli-mr-cut-vals");
+    for other in [["--real-vals", "4096"], ["--accumulate", "3"]] {
+        assert_refused(
+            &[
+                "mr",
+                "--color",
+                "no-color.png",
+                "--depth",
+                "no-depth.png",
+                "--real-cut",
+                "0.1",
+                other[0],
+                other[1],
+                "--out",
+                dir.to_str().unwrap(),
+            ],
+            &["--real-cut", other[0], "give one"],
+        );
+    }
+}
+
+#[test]
 fn mr_refuses_a_real_thickness_that_is_not_a_length() {
     for thickness in ["0", "-1", "NaN", "inf", "1e9"] {
         assert_mr_refuses(

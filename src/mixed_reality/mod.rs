@@ -46,7 +46,12 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             radius,
             area_mode,
             cluster_tiles,
-            pad1
+            pad1,
+            receivers,
+            cut_ratio,
+            pad2,
+            pad3,
+            pad4
         ]
     )]
 }

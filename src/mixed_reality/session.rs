@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::{Mat4, Quat, Vec3};
 use rayon::prelude::*;
 
-use super::depth_vals::{DepthValSettings, DepthVals, FrameSlot};
+use super::depth_vals::{DepthValSettings, DepthVals, FrameSlot, ReceiverSlot};
 use super::math;
 use super::rgbd::{Intrinsics, RgbdFrame};
 use crate::frame::{record_frame, View};
@@ -206,6 +206,7 @@ pub struct MixedReality {
     pub intrinsics: Intrinsics,
     pub settings: MrSettings,
     slot: FrameSlot,
+    receivers: ReceiverSlot,
     view: Option<View>,
 }
 
@@ -218,6 +219,7 @@ impl MixedReality {
     ) -> Result<Self, RenderError> {
         let source = DepthVals::new(ctx, intrinsics, settings.depth)?;
         let slot = source.slot.clone();
+        let receivers = source.receivers.clone();
         let render = RenderSettings {
             width: intrinsics.width,
             height: intrinsics.height,
@@ -238,6 +240,7 @@ impl MixedReality {
             intrinsics,
             settings,
             slot,
+            receivers,
             view: None,
         })
     }
@@ -282,6 +285,17 @@ impl MixedReality {
                 frame.width, frame.height, k.width, k.height
             )));
         }
+        let world = self.scene.world_from_node();
+        // The sparse points lie on the virtual objects: `--real-cut` measures from their box.
+        let bounds = self.scene.world_bounds(&world);
+        *self
+            .receivers
+            .lock()
+            .map_err(|_| RenderError::Settings("the receivers' slot was poisoned".into()))? =
+            (!bounds.is_empty()).then(|| math::Receivers {
+                centre: bounds.center(),
+                radius: 0.5 * bounds.extent().length(),
+            });
         *self
             .slot
             .lock()
@@ -295,7 +309,6 @@ impl MixedReality {
             }
             None => View::new(ctx, "sensor", camera, (k.width, k.height), 1)?,
         };
-        let world = self.scene.world_from_node();
         let recorded = record_frame(
             &mut self.method,
             ctx,
