@@ -116,6 +116,11 @@ fn workgroup_sizes_match_the_dispatches() {
         ("depth_vals.wgsl", "reduce", [reduce, 1, 1]),
         (
             "depth_vals.wgsl",
+            "cut",
+            [valgi::mixed_reality::depth_vals::CUT_GROUP, 1, 1],
+        ),
+        (
+            "depth_vals.wgsl",
             "samples_of_surfels",
             [valgi::mixed_reality::depth_vals::SAMPLES_GROUP, 1, 1],
         ),

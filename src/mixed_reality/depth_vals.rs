@@ -35,6 +35,10 @@ const BINDINGS: &[Slot] = &[
 /// Blocks per workgroup of the `reduce` pass (`@workgroup_size(64, 1, 1)`).
 pub const REDUCE_GROUP: u32 = 64;
 
+/// Invocations of a `cut` workgroup (`@workgroup_size(64, 1, 1)`): one per 4×4 pixels of
+/// its `CUT_BLOCK`² block, which the dispatch counts.
+pub const CUT_GROUP: u32 = (math::CUT_BLOCK / 4) * (math::CUT_BLOCK / 4);
+
 /// Sample slots per workgroup of the `samples_of_surfels` pass (`@workgroup_size(64, 1, 1)`).
 pub const SAMPLES_GROUP: u32 = 64;
 
