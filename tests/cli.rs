@@ -423,21 +423,16 @@ fn sparse_handles_a_scene_without_faces_and_refuses_oversized_meshes_early() {
 /// `valgi mr` with `option value` and frames that do not exist is refused for the option,
 /// before any file is read.
 fn assert_mr_refuses(name: &str, option: &str, value: &str, expected: &[&str]) {
+    assert_mr_refuses_all(name, &[option, value], expected);
+}
+
+/// The same with any options.
+fn assert_mr_refuses_all(name: &str, options: &[&str], expected: &[&str]) {
     let dir = common::temp_dir(name);
-    assert_refused(
-        &[
-            "mr",
-            "--color",
-            "no-color.png",
-            "--depth",
-            "no-depth.png",
-            option,
-            value,
-            "--out",
-            dir.to_str().unwrap(),
-        ],
-        expected,
-    );
+    let mut args = vec!["mr", "--color", "no-color.png", "--depth", "no-depth.png"];
+    args.extend_from_slice(options);
+    args.extend_from_slice(&["--out", dir.to_str().unwrap()]);
+    assert_refused(&args, expected);
 }
 
 #[test]
@@ -457,22 +452,10 @@ fn mr_refuses_a_real_cut_that_is_not_a_ratio_or_meets_another_reduction() {
     for ratio in ["-0.1", "NaN", "inf", "2"] {
         assert_mr_refuses("cli-mr-cut", "--real-cut", ratio, &["--real-cut", "ratio"]);
     }
-    let dir = common::temp_dir("cli-mr-cut-vals");
     for other in [["--real-vals", "4096"], ["--accumulate", "3"]] {
-        assert_refused(
-            &[
-                "mr",
-                "--color",
-                "no-color.png",
-                "--depth",
-                "no-depth.png",
-                "--real-cut",
-                "0.1",
-                other[0],
-                other[1],
-                "--out",
-                dir.to_str().unwrap(),
-            ],
+        assert_mr_refuses_all(
+            "cli-mr-cut-vals",
+            &["--real-cut", "0.1", other[0], other[1]],
             &["--real-cut", other[0], "give one"],
         );
     }

@@ -272,6 +272,30 @@ fn assert_vals_match(gpu: &[Val], cpu: &[Val]) {
     }
 }
 
+/// The `w × h` crop at (x0, y0) of the Open3D frame 0, with the crop's principal point.
+fn real_crop(x0: u32, y0: u32, w: u32, h: u32) -> (RgbdFrame, Intrinsics) {
+    let real = read(
+        "color/00000.jpg",
+        "depth/00000.png",
+        DepthFormat::PrimeSense,
+    );
+    let idx = |x: u32, y: u32| ((y0 + y) * real.width + x0 + x) as usize;
+    let crop = RgbdFrame {
+        width: w,
+        height: h,
+        depth: (0..w * h).map(|i| real.depth[idx(i % w, i / w)]).collect(),
+        color: (0..w * h).map(|i| real.color[idx(i % w, i / w)]).collect(),
+    };
+    let k = Intrinsics {
+        width: w,
+        height: h,
+        cx: 319.5 - x0 as f32,
+        cy: 239.5 - y0 as f32,
+        ..Intrinsics::primesense_default()
+    };
+    (crop, k)
+}
+
 #[test]
 fn depth_vals_on_the_device_match_their_cpu_twins() {
     let Some(ctx) = common::gpu() else { return };
@@ -324,26 +348,8 @@ fn depth_vals_on_the_device_match_their_cpu_twins() {
         }
     }
     // A crop of a real frame, with the crop's principal point.
-    let real = read(
-        "color/00000.jpg",
-        "depth/00000.png",
-        DepthFormat::PrimeSense,
-    );
-    let (x0, y0, w, h) = (300u32, 200u32, 32u32, 24u32);
-    let idx = |x: u32, y: u32| ((y0 + y) * real.width + x0 + x) as usize;
-    let crop = RgbdFrame {
-        width: w,
-        height: h,
-        depth: (0..w * h).map(|i| real.depth[idx(i % w, i / w)]).collect(),
-        color: (0..w * h).map(|i| real.color[idx(i % w, i / w)]).collect(),
-    };
-    let k = Intrinsics {
-        width: w,
-        height: h,
-        cx: 319.5 - x0 as f32,
-        cy: 239.5 - y0 as f32,
-        ..Intrinsics::primesense_default()
-    };
+    let (crop, k) = real_crop(300, 200, 32, 24);
+    let (w, h) = (k.width, k.height);
     let s = DepthValSettings::default();
     let gpu = run_gpu(&ctx, &crop, k, s);
     let cpu = depth_vals_cpu(&crop, &gpu.kernel_params(pose()));
@@ -451,28 +457,11 @@ fn the_cut_conserves_flux_and_keeps_what_the_receivers_gather() {
 fn the_cut_on_the_device_matches_its_cpu_twin() {
     let Some(ctx) = common::gpu() else { return };
     let receivers = cut_receivers();
-    let real = read(
-        "color/00000.jpg",
-        "depth/00000.png",
-        DepthFormat::PrimeSense,
-    );
-    // A 100×70 crop of a real frame (partial blocks at two edges), with its principal point.
-    let (x0, y0, w, h) = (250u32, 180u32, 100u32, 70u32);
-    let idx = |x: u32, y: u32| ((y0 + y) * real.width + x0 + x) as usize;
-    let crop = RgbdFrame {
-        width: w,
-        height: h,
-        depth: (0..w * h).map(|i| real.depth[idx(i % w, i / w)]).collect(),
-        color: (0..w * h).map(|i| real.color[idx(i % w, i / w)]).collect(),
-    };
-    let crop_k = Intrinsics {
-        width: w,
-        height: h,
-        cx: 319.5 - x0 as f32,
-        cy: 239.5 - y0 as f32,
-        ..Intrinsics::primesense_default()
-    };
-    for (frame, k) in [synthetic_frame(100, 70, 1, 0.01), (crop, crop_k)] {
+    // A 100×70 crop of a real frame: partial blocks at two edges.
+    for (frame, k) in [
+        synthetic_frame(100, 70, 1, 0.01),
+        real_crop(250, 180, 100, 70),
+    ] {
         let s = DepthValSettings {
             real_scale: 2.5,
             real_cut: Some(0.1),
