@@ -12,7 +12,7 @@ use crate::method::Method;
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::Scene;
 use crate::vals::math::OcclusionMode;
-use crate::vals::sparse::GatherForm;
+use crate::vals::sparse::{GatherForm, GlossyGather};
 use crate::vals::{SparseMethod, SparseSettings};
 
 /// Arithmetic per point-VAL pair in the diffuse + glossy gather, in FMA-equivalents (an FMA, a
@@ -22,6 +22,10 @@ use crate::vals::{SparseMethod, SparseSettings};
 /// weight A·g (1), Σ E (3), diffuse moments Σw, Σw·l, Σw·l² (7), r·ω̂ (3), pow (1),
 /// Σ lobe·E (3), glossy weight (1), glossy moments (7).
 pub const GATHER_OPS_PER_PAIR: f64 = 55.0;
+
+/// The same for a diffuse-only gather (`glossy off`, or `auto` on an all-Lambert scene): the
+/// 55 less the glossy half's r·ω̂, pow, Σ lobe·E, weight and moments (15).
+pub const GATHER_DIFFUSE_OPS_PER_PAIR: f64 = 40.0;
 
 #[derive(Clone, Debug)]
 pub struct BenchRequest {
@@ -45,6 +49,21 @@ pub struct BenchRequest {
 }
 
 pub use crate::gpu::peak::{fma_peak, FmaParams, FMA_GROUP};
+
+/// The sparse method's default configuration (diffuse + glossy + visibility rays) at `rsm`
+/// per view and `points`. The glossy gather is forced on: the bench times it on Lambert
+/// scenes too, where `glossy auto` would leave it out.
+fn full_configuration(rsm: u32, points: usize) -> SparseSettings {
+    let mut settings = SparseSettings {
+        rsm,
+        // The bench fits the side to a VAL count: no sharing.
+        rsm_texels: None,
+        sparse_points: points,
+        ..Default::default()
+    };
+    settings.options.glossy = GlossyGather::On;
+    settings
+}
 
 /// The RSM resolution that gives about `target` VALs on this scene, from one probe render.
 fn rsm_for(ctx: &GpuContext, scene: &Scene, target: u32) -> Result<u32, RenderError> {
@@ -84,6 +103,9 @@ struct Row {
     table2: serde_json::Value,
     sparse_ms: f64,
     pairs_per_s: f64,
+    /// [`GATHER_OPS_PER_PAIR`], or [`GATHER_DIFFUSE_OPS_PER_PAIR`] where no glossy light
+    /// was gathered.
+    ops_per_pair: f64,
     bytes_per_point: f64,
 }
 
@@ -98,7 +120,13 @@ impl Row {
         let number = |key: &str| report.get(key).and_then(|v| v.as_f64()).unwrap_or(0.0);
         let (vals, points) = (number("vals") as u32, number("sparse_points") as u32);
         let gather_ms = crate::vals::gather_ms(timings).max(1e-6);
+        let glossy = report.get("glossy_gathered").and_then(|v| v.as_bool());
         Self {
+            ops_per_pair: if glossy == Some(false) {
+                GATHER_DIFFUSE_OPS_PER_PAIR
+            } else {
+                GATHER_OPS_PER_PAIR
+            },
             config: config.into(),
             vals,
             points,
@@ -241,14 +269,10 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                     GatherForm::Raster,
                 ),
             ] {
-                let mut settings = SparseSettings {
-                    rsm,
-                    // The bench fits the side to a VAL count: no sharing.
-                    rsm_texels: None,
-                    sparse_points: points,
-                    ..Default::default()
-                };
-                settings.options.glossy = glossy;
+                let mut settings = full_configuration(rsm, points);
+                if !glossy {
+                    settings.options.glossy = GlossyGather::Off;
+                }
                 settings.options.occlusion = occlusion;
                 settings.options.gather = gather;
                 let (report, timings) = render(settings, request.width, request.height)?;
@@ -272,13 +296,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                         .map(|&t| (format!("+rays tile {t}"), 0, Some(t))),
                 );
             for (config, slices, tile) in sweep {
-                let mut settings = SparseSettings {
-                    rsm,
-                    // The bench fits the side to a VAL count: no sharing.
-                    rsm_texels: None,
-                    sparse_points: points,
-                    ..Default::default()
-                };
+                let mut settings = full_configuration(rsm, points);
                 settings.options.gather_slices = slices;
                 if let Some(tile) = tile {
                     settings.options.tile = tile;
@@ -292,12 +310,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     }
     // Resolution independence: the full configuration at a small square size.
     let rsm = rsms[0];
-    let settings = SparseSettings {
-        rsm,
-        rsm_texels: None,
-        sparse_points: request.points[0],
-        ..Default::default()
-    };
+    let settings = full_configuration(rsm, request.points[0]);
     let (report, timings) = render(settings, request.small, request.small)?;
     let small_row = Row::new("+rays", &report, &timings, request.small, request.small);
     print_row(&small_row, peak);
@@ -386,7 +399,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
             stages.join(","),
             r.sparse_ms,
             r.pairs_per_s,
-            r.pairs_per_s * GATHER_OPS_PER_PAIR / peak,
+            r.pairs_per_s * r.ops_per_pair / peak,
             r.bytes_per_point,
             brute_ms.map(|b| format!("{b:.3}")).unwrap_or_default()
         ));
@@ -431,7 +444,7 @@ fn print_row(r: &Row, peak: f64) {
         r.height,
         stages.join(" "),
         r.pairs_per_s,
-        100.0 * r.pairs_per_s * GATHER_OPS_PER_PAIR / peak
+        100.0 * r.pairs_per_s * r.ops_per_pair / peak
     );
 }
 

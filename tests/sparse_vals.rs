@@ -16,7 +16,9 @@ use valgi::scene::{
     Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
 };
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
-use valgi::vals::sparse::{GatherForm, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH};
+use valgi::vals::sparse::{
+    GatherForm, GlossyGather, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH,
+};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
 
 use common::small_render_settings as settings;
@@ -35,7 +37,11 @@ fn sparse_settings(
         options: SparseOptions {
             tile: 64,
             gather: Default::default(),
-            glossy,
+            glossy: if glossy {
+                GlossyGather::On
+            } else {
+                GlossyGather::Off
+            },
             occlusion,
             weights: Weights::Geometric,
             visibility_history: 0,
@@ -1064,6 +1070,52 @@ fn glossy_highlight_follows_the_eye_and_vanishes_when_glossy_is_off() {
         centroids[0] < -0.05 && centroids[1] > 0.05,
         "highlight centroids {centroids:?}"
     );
+}
+
+#[test]
+fn glossy_auto_gathers_only_where_a_material_reflects_glossily() {
+    let Some(ctx) = common::gpu() else { return };
+    let size = 32;
+    let with = |glossy: GlossyGather| {
+        let mut s = sparse_settings(32, 400, OcclusionMode::Off, true);
+        s.options.glossy = glossy;
+        s
+    };
+    // The Lambert floor (specular factor 0) and the glossy one.
+    for (specular, gathers) in [(0.0f32, false), (1.0, true)] {
+        let scene = glossy_scene(0.5, specular);
+        let (auto, auto_frame, auto_points) =
+            run_sparse(&ctx, &scene, size, with(GlossyGather::Auto), Stage::Apply);
+        let (_, on_frame, on_points) =
+            run_sparse(&ctx, &scene, size, with(GlossyGather::On), Stage::Apply);
+        let report = valgi::frame::Method::report(&auto);
+        assert_eq!(report["glossy"], "auto");
+        assert_eq!(report["glossy_gathered"], gathers, "specular {specular}");
+        // The same image either way: with no glossy material the glossy term is zero at
+        // every pixel, gathered or not.
+        for y in 0..size {
+            for x in 0..size {
+                assert_eq!(
+                    auto_frame.indirect.get(x, y),
+                    on_frame.indirect.get(x, y),
+                    "specular {specular}, pixel ({x},{y})"
+                );
+            }
+        }
+        // The diffuse-only pipeline writes the full gather's diffuse lights and no glossy.
+        for (a, o) in auto_points.lights.iter().zip(&on_points.lights) {
+            assert_eq!(a.diffuse, o.diffuse);
+            if gathers {
+                assert_eq!(a.glossy, o.glossy);
+            } else {
+                assert_eq!(a.glossy, Vec3::ZERO);
+            }
+        }
+        assert!(on_points
+            .lights
+            .iter()
+            .any(|l| l.glossy.max_element() > 0.0));
+    }
 }
 
 /// Light from a lit ceiling patch reaches the floor through where a blocker hangs.

@@ -18,6 +18,11 @@
 @group(0) @binding(9) var<storage, read> visibility: array<u32>;
 
 const VISIBILITY_WORDS: u32 = 8u;
+
+// False in the diffuse-only pipeline (`SparsePipelines::gather_diffuse`), which then has no
+// glossy code at all: the uniform FLAG_GLOSSY alone leaves it in, and a CPU device (llvmpipe
+// runs both sides of every branch under a mask) paid for the lobes with the flag off.
+override GLOSSY_GATHER: bool = true;
 const POINT_SLOTS: u32 = 4u;
 
 // Weighted moments Σw, Σw·l, Σw·l² of the VAL positions.
@@ -77,7 +82,7 @@ fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: V
     (*sums).md.weight += wd;
     (*sums).md.sum += wd * l;
     (*sums).md.sum_squares += wd * l * l;
-    if (glossy_on) {
+    if (glossy_on && GLOSSY_GATHER) {
         var lobe_j = 0.0;
         if (g > 0.0) {
             lobe_j = lobe(r, gw.yzw, point.k);

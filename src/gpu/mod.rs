@@ -76,6 +76,20 @@ pub fn compute_pipeline_groups(
     layouts: &[&wgpu::BindGroupLayout],
     entry: &str,
 ) -> wgpu::ComputePipeline {
+    compute_pipeline_specialized(device, label, module, layouts, entry, &[])
+}
+
+/// The same with the module's pipeline-overridable constants (`override` in WGSL) set:
+/// code behind a constant-false condition is compiled out, which a uniform flag does not
+/// achieve on a CPU device (llvmpipe runs both sides of every branch under a mask).
+pub fn compute_pipeline_specialized(
+    device: &wgpu::Device,
+    label: &str,
+    module: &wgpu::ShaderModule,
+    layouts: &[&wgpu::BindGroupLayout],
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
     let groups: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|l| Some(*l)).collect();
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(label),
@@ -87,7 +101,10 @@ pub fn compute_pipeline_groups(
         layout: Some(&pipeline_layout),
         module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants,
+            ..Default::default()
+        },
         cache: None,
     })
 }

@@ -25,7 +25,7 @@ use crate::scene::Scene;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
 pub use sparse::Stage;
-use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions};
+use sparse::{GatherForm, GlossyGather, KernelGroups, SparseGpu, SparseOptions};
 
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,7 +56,7 @@ impl Default for SparseSettings {
             options: SparseOptions {
                 tile: 128,
                 gather: GatherForm::Compute,
-                glossy: true,
+                glossy: GlossyGather::Auto,
                 occlusion: OcclusionMode::Rays,
                 weights: Weights::Geometric,
                 visibility_history: 50,
@@ -98,7 +98,11 @@ impl SparseSettings {
                     "raster" => GatherForm::Raster,
                     _ => GatherForm::Compute,
                 },
-                glossy: options.choice("glossy", &["on", "off"])? == "on",
+                glossy: match options.choice("glossy", &["auto", "on", "off"])? {
+                    "on" => GlossyGather::On,
+                    "off" => GlossyGather::Off,
+                    _ => GlossyGather::Auto,
+                },
                 occlusion: match options.choice("occlusion", &["rays", "sum", "union", "off"])? {
                     "off" => OcclusionMode::Off,
                     "union" => OcclusionMode::Union,
@@ -309,9 +313,9 @@ pub const OPTIONS: &[OptionSpec] = &[
     },
     OptionSpec {
         name: "glossy",
-        kind: OptionKind::Choice(&["on", "off"]),
-        default: "on",
-        help: "glossy indirect light",
+        kind: OptionKind::Choice(&["auto", "on", "off"]),
+        default: "auto",
+        help: "glossy indirect light (auto: where some material has a specular factor above 0; an all-Lambert scene's glossy term is zero, so only diffuse light is gathered)",
     },
     OptionSpec {
         name: "glossy-eye",
@@ -671,7 +675,7 @@ impl Method for SparseMethod {
         if self.last_stage < Stage::Apply {
             return Ok(ViewResult::Direct);
         }
-        if self.settings.glossy_eye == GlossyEye::PerView && opts.glossy {
+        if self.settings.glossy_eye == GlossyEye::PerView && self.sparse.gathers_glossy(&opts) {
             let sparse = &self.sparse;
             let (params, groups) = self.per_view.get_or_try_insert(view, || {
                 let mut bytes = crate::gpu::GpuBytes::default();
@@ -723,7 +727,8 @@ impl Method for SparseMethod {
                 GatherForm::Compute => self.sparse.gather_slices(&opts),
                 GatherForm::Raster => 1,
             },
-            "glossy": if opts.glossy { "on" } else { "off" },
+            "glossy": format!("{:?}", opts.glossy).to_lowercase(),
+            "glossy_gathered": self.sparse.gathers_glossy(&opts),
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),

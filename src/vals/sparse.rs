@@ -136,7 +136,7 @@ pub struct SparseOptions {
     pub tile: u32,
     /// How the gather runs: a compute pass, or a fragment pass over a point target.
     pub gather: GatherForm,
-    pub glossy: bool,
+    pub glossy: GlossyGather,
     pub occlusion: OcclusionMode,
     pub weights: Weights,
     /// `--occlusion rays`: percent of last frame's visibility blended into this frame's.
@@ -147,6 +147,18 @@ pub struct SparseOptions {
     /// Slices of the VAL list the compute gather is split into (0: automatic, see
     /// [`gather_slices`]).
     pub gather_slices: u32,
+}
+
+/// Whether the sparse method gathers glossy light (`glossy`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GlossyGather {
+    /// Where some material reflects glossily (a specular factor above 0). An all-Lambert
+    /// scene's glossy term is zero at every pixel, so its gather is diffuse only: 35 % less
+    /// gather time on lavapipe, the same image.
+    #[default]
+    Auto,
+    On,
+    Off,
 }
 
 /// The two forms of the gather (`--gather`), which compute the same sums.
@@ -278,6 +290,8 @@ pub struct SparseGpu {
     val_capacity: u64,
     /// A CPU device (the automatic split leaves the gather whole).
     cpu_device: bool,
+    /// Some material of the scene reflects glossily (`glossy auto` gathers glossy light).
+    reflects_glossily: bool,
     /// The gather as a fragment pass (`--gather raster`), sharing `gather`'s bind groups.
     raster_gather: std::cell::OnceCell<RasterGather>,
     renormalize: Kernel,
@@ -345,6 +359,8 @@ const SENSOR_BINDINGS: &[Slot] = &[Slot::Uniform, R, R];
 /// binds its own buffers. On lavapipe compiling them took ~300 ms of every method's set-up.
 struct SparsePipelines {
     gather: (GroupLayout, wgpu::ComputePipeline),
+    /// The gather without glossy code (`GLOSSY_GATHER` false), built when first used.
+    gather_diffuse: std::sync::OnceLock<wgpu::ComputePipeline>,
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
@@ -365,6 +381,29 @@ struct SparsePipelines {
 impl SparsePipelines {
     fn shared(ctx: &GpuContext) -> Result<std::sync::Arc<Self>, GpuError> {
         ctx.shared(|| Self::new(ctx))
+    }
+
+    /// The compute gather specialized to diffuse light only.
+    fn gather_diffuse(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
+        if let Some(pipeline) = self.gather_diffuse.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = ctx.scoped(
+            "the diffuse-only gather pipeline (cs_main)",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                crate::gpu::compute_pipeline_specialized(
+                    &ctx.device,
+                    "gather",
+                    &ctx.shader("vals_gather.wgsl"),
+                    &[&self.gather.0.layout, &self.partials.layout],
+                    "cs_main",
+                    &[("GLOSSY_GATHER", 0.0)],
+                )
+            },
+        )?;
+        Ok(self.gather_diffuse.get_or_init(|| pipeline))
     }
 
     fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
@@ -475,6 +514,7 @@ impl SparsePipelines {
         let occluder_bounds = (occluder_layout, occluder_discs);
         Ok(Self {
             gather: (gather_layout, gather),
+            gather_diffuse: std::sync::OnceLock::new(),
             gather_reduce,
             partials,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
@@ -869,6 +909,7 @@ impl SparseGpu {
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
             cpu_device: ctx.adapter_info.device_type == wgpu::DeviceType::Cpu,
+            reflects_glossily: scene.materials.iter().any(|m| m.specular_factor > 0.0),
             raster_gather: std::cell::OnceCell::new(),
             renormalize,
             occlusion,
@@ -1057,9 +1098,18 @@ impl SparseGpu {
 
     /// The parameter block for `eye` and the options (`glossy_only`: the per-view glossy
     /// re-run).
+    /// Whether `options` gather glossy light in this scene.
+    pub fn gathers_glossy(&self, options: &SparseOptions) -> bool {
+        match options.glossy {
+            GlossyGather::On => true,
+            GlossyGather::Off => false,
+            GlossyGather::Auto => self.reflects_glossily,
+        }
+    }
+
     pub fn params(&self, eye: Vec3, options: &SparseOptions, glossy_only: bool) -> SparseParams {
         let mut flags = 0;
-        if options.glossy {
+        if self.gathers_glossy(options) {
             flags |= FLAG_GLOSSY;
         }
         if options.occlusion == OcclusionMode::Rays {
@@ -1201,8 +1251,13 @@ impl SparseGpu {
                         .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
                     max_groups,
                 );
+                let pipeline = if self.gathers_glossy(options) {
+                    &self.gather.pipeline
+                } else {
+                    self.pipelines.gather_diffuse(passes.ctx())?
+                };
                 passes.compute(self.gather.label, |pass| {
-                    pass.set_pipeline(&self.gather.pipeline);
+                    pass.set_pipeline(pipeline);
                     pass.set_bind_group(0, gather, &[]);
                     pass.set_bind_group(1, &partials, &[]);
                     pass.dispatch_workgroups(x, y, slices);
