@@ -789,6 +789,15 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     let placed = cornell["sparse_points"].as_u64().unwrap() as f64;
     assert!((placed / chosen - 1.0).abs() < 0.02, "{placed} vs {chosen}");
     assert!(budget["predicted_flip"].as_f64().unwrap() <= 0.1);
+    // Its walls are Lambert: the gather is diffuse only and priced so; `glossy on` prices the
+    // lobes.
+    assert_eq!(cornell["glossy_gathered"], false);
+    assert_eq!(
+        budget["gather_cost"],
+        valgi::vals::budget::model::DIFFUSE_GATHER_COST
+    );
+    let glossy = budget_render("cornell", &["--target-flip", "0.1", "--glossy", "on"]);
+    assert_eq!(glossy["budget"]["gather_cost"], 1.0);
     // The survey looks from the camera the image is drawn from: the scene's own by default,
     // the command line's when it gives one.
     let own = budget["surveyed_from"].as_array().expect("surveyed_from");

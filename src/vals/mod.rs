@@ -430,6 +430,13 @@ pub fn apply_budget(
     if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
     }
+    if !settings
+        .options
+        .glossy
+        .gathers(sparse::reflects_glossily(scene))
+    {
+        survey.gather_cost = budget::model::DIFFUSE_GATHER_COST;
+    }
     let given = |key: &str| options.given(key);
     let choice = survey.choose(target);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
@@ -483,6 +490,9 @@ pub fn apply_budget(
         "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
         "surveyed_from": survey.eye.map(|e| [e.x, e.y, e.z]),
         "time_scale": survey.time_scale,
+        // 1: the gather's glossy lobes priced; below: a diffuse-only gather (`glossy auto`
+        // on an all-Lambert scene, or `off`).
+        "gather_cost": survey.gather_cost,
         "device_fma_peak": device_fma_peak,
         "sparse_points": {
             "value": settings.sparse_points,

@@ -161,6 +161,24 @@ pub enum GlossyGather {
     Off,
 }
 
+impl GlossyGather {
+    /// Whether this setting gathers glossy light in a scene where some material reflects
+    /// glossily (`reflects_glossily`, [`reflects_glossily`]) or none does.
+    pub fn gathers(self, reflects_glossily: bool) -> bool {
+        match self {
+            Self::On => true,
+            Self::Off => false,
+            Self::Auto => reflects_glossily,
+        }
+    }
+}
+
+/// Some material of `scene` has a glossy lobe: ρ_s = specular factor · mix(0.04, base,
+/// metallic) is zero for every material whose specular factor is 0.
+pub fn reflects_glossily(scene: &Scene) -> bool {
+    scene.materials.iter().any(|m| m.specular_factor > 0.0)
+}
+
 /// The two forms of the gather (`--gather`), which compute the same sums.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum GatherForm {
@@ -909,7 +927,7 @@ impl SparseGpu {
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
             cpu_device: ctx.adapter_info.device_type == wgpu::DeviceType::Cpu,
-            reflects_glossily: scene.materials.iter().any(|m| m.specular_factor > 0.0),
+            reflects_glossily: reflects_glossily(scene),
             raster_gather: std::cell::OnceCell::new(),
             renormalize,
             occlusion,
@@ -1100,11 +1118,7 @@ impl SparseGpu {
     /// re-run).
     /// Whether `options` gather glossy light in this scene.
     pub fn gathers_glossy(&self, options: &SparseOptions) -> bool {
-        match options.glossy {
-            GlossyGather::On => true,
-            GlossyGather::Off => false,
-            GlossyGather::Auto => self.reflects_glossily,
-        }
+        options.glossy.gathers(self.reflects_glossily)
     }
 
     pub fn params(&self, eye: Vec3, options: &SparseOptions, glossy_only: bool) -> SparseParams {
