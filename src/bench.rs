@@ -8,11 +8,12 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use crate::gpu::GpuContext;
+use crate::light::GlossyGather;
 use crate::method::Method;
 use crate::raster::{RenderError, RenderSettings};
 use crate::scene::Scene;
 use crate::vals::math::OcclusionMode;
-use crate::vals::sparse::{GatherForm, GlossyGather};
+use crate::vals::sparse::GatherForm;
 use crate::vals::{SparseMethod, SparseSettings};
 
 /// Arithmetic per point-VAL pair in the diffuse + glossy gather, in FMA-equivalents (an FMA, a
@@ -335,6 +336,8 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
     if request.brute {
         let mut options = crate::method::MethodOptions::default();
         options.set("rsm", rsm);
+        // As the sparse rows: the glossy lobes summed on Lambert scenes too.
+        options.set("glossy", "on");
         let render_settings = RenderSettings {
             width: request.width,
             height: request.height,

@@ -7,6 +7,7 @@ mod common;
 
 use glam::{Quat, Vec3, Vec4};
 use valgi::gpu::GpuContext;
+use valgi::light::GlossyGather;
 use valgi::method::{Method, MethodOptions};
 use valgi::peers::brute::BruteMethod;
 use valgi::raster::FrameOutput;
@@ -16,9 +17,7 @@ use valgi::scene::{
     Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
 };
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
-use valgi::vals::sparse::{
-    GatherForm, GlossyGather, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH,
-};
+use valgi::vals::sparse::{GatherForm, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
 
 use common::small_render_settings as settings;
@@ -1115,6 +1114,24 @@ fn glossy_auto_gathers_only_where_a_material_reflects_glossily() {
             .lights
             .iter()
             .any(|l| l.glossy.max_element() > 0.0));
+        // Brute force decides the same way, with the same image either way.
+        let brute = |glossy: &str| {
+            let mut options = MethodOptions::default();
+            options.set("rsm", 32);
+            options.set("glossy", glossy);
+            let mut brute = BruteMethod::new(&ctx, &scene, settings(size), &options).unwrap();
+            let world = scene.world_from_node();
+            let frame = brute
+                .render(&ctx, &scene, &world, &camera(&scene, size))
+                .unwrap();
+            (valgi::frame::Method::report(&brute), frame.indirect)
+        };
+        let ((auto_report, auto_image), (_, on_image)) = (brute("auto"), brute("on"));
+        assert_eq!(
+            auto_report["glossy_gathered"], gathers,
+            "specular {specular}"
+        );
+        assert_eq!(auto_image.pixels, on_image.pixels, "specular {specular}");
     }
 }
 

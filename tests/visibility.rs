@@ -21,7 +21,7 @@ fn settings(points: usize) -> SparseSettings {
         options: SparseOptions {
             tile: 64,
             gather: Default::default(),
-            glossy: valgi::vals::sparse::GlossyGather::On,
+            glossy: valgi::light::GlossyGather::On,
             occlusion: OcclusionMode::Rays,
             weights: Weights::Geometric,
             visibility_history: 0,

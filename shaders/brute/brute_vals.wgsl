@@ -29,6 +29,10 @@ struct Pixel {
     k: f32,
 }
 
+// False in the build for a method without glossy light (`light::GlossyGather`): a uniform
+// flag alone leaves the lobe's code in, and llvmpipe runs both sides of a branch.
+override GLOSSY_GATHER: bool = true;
+
 // One VAL's reflected radiance at the pixel.
 fn val_radiance(px: Pixel, val: Val, glossy_on: bool) -> vec3<f32> {
     let gw = disc_geometry(px.p, px.n, val);
@@ -36,7 +40,7 @@ fn val_radiance(px: Pixel, val: Val, glossy_on: bool) -> vec3<f32> {
         return vec3<f32>(0.0);
     }
     var f = px.rho_d / PI;
-    if (glossy_on) {
+    if (glossy_on && GLOSSY_GATHER) {
         f += px.specular_scale * lobe(px.r, gw.yzw, px.k);
     }
     return f * val.flux.rgb * (gw.x / PI);

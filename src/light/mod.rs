@@ -104,6 +104,49 @@ pub fn append_vals(vals: &mut Vec<Val>, candidates: &[Val], capacity: usize) {
 
 /// Glossy lobes on.
 pub const FLAG_GLOSSY: u32 = 1;
+
+/// Whether a VAL method gathers glossy light (its `glossy` option).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum GlossyGather {
+    /// Where some material reflects glossily ([`reflects_glossily`]). An all-Lambert
+    /// scene's glossy term is zero at every pixel, so only diffuse light is gathered, by a
+    /// pipeline built without the glossy code (`GLOSSY_GATHER` false): on a CPU device a
+    /// uniform flag does not skip code, since llvmpipe runs both sides of every branch.
+    #[default]
+    Auto,
+    On,
+    Off,
+}
+
+impl GlossyGather {
+    /// The option's values, as `MethodOptions::choice` takes them.
+    pub const CHOICES: &'static [&'static str] = &["auto", "on", "off"];
+
+    /// One of [`Self::CHOICES`] (anything else is `auto`; `choice` has checked it).
+    pub fn parse(choice: &str) -> Self {
+        match choice {
+            "on" => Self::On,
+            "off" => Self::Off,
+            _ => Self::Auto,
+        }
+    }
+
+    /// Whether this setting gathers glossy light in a scene where some material reflects
+    /// glossily (`reflects_glossily`) or none does.
+    pub fn gathers(self, reflects_glossily: bool) -> bool {
+        match self {
+            Self::On => true,
+            Self::Off => false,
+            Self::Auto => reflects_glossily,
+        }
+    }
+}
+
+/// Some material of `scene` has a glossy lobe: ρ_s = specular factor · mix(0.04, base,
+/// metallic) (`specular_albedo`) is zero for every material whose specular factor is 0.
+pub fn reflects_glossily(scene: &crate::scene::Scene) -> bool {
+    scene.materials.iter().any(|m| m.specular_factor > 0.0)
+}
 /// Light positions averaged with flux weights instead of geometric ones.
 pub const FLAG_FLUX_WEIGHTS: u32 = 2;
 /// Recompute only the glossy half of the solution (per-view glossy eye); the diffuse half

@@ -8,9 +8,9 @@ use crate::frame::{FrameInput, Method, View, ViewResult};
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
-use crate::light::{ValParams, FLAG_GLOSSY};
+use crate::light::{GlossyGather, ValParams, FLAG_GLOSSY};
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
-use crate::raster::{compute_pipeline, Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT};
+use crate::raster::{Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT};
 use crate::scene::Scene;
 
 /// `brute_vals.wgsl`'s group: the view's frame uniform, the VAL parameters, the VALs and their
@@ -46,9 +46,9 @@ pub static ENTRY: Entry = Entry {
         },
         OptionSpec {
             name: "glossy",
-            kind: OptionKind::Choice(&["on", "off"]),
-            default: "on",
-            help: "glossy indirect light",
+            kind: OptionKind::Choice(GlossyGather::CHOICES),
+            default: "auto",
+            help: "glossy indirect light (auto: where some material has a specular factor above 0; an all-Lambert scene's glossy term is zero, so only diffuse light is summed)",
         },
     ],
     create,
@@ -66,6 +66,8 @@ fn create(
 pub struct BruteMethod {
     pub raster: Rasterizer,
     pub rsm: Rsm,
+    /// The `glossy` option, and whether it sums glossy light in this scene.
+    glossy_option: GlossyGather,
     glossy: bool,
     tile: u32,
     params_buffer: wgpu::Buffer,
@@ -82,7 +84,8 @@ impl BruteMethod {
         options: &MethodOptions,
     ) -> Result<Self, RenderError> {
         let rsm_resolution: u32 = options.get("rsm", 128)?;
-        let glossy = options.choice("glossy", &["on", "off"])? == "on";
+        let glossy_option = GlossyGather::parse(options.choice("glossy", GlossyGather::CHOICES)?);
+        let glossy = glossy_option.gathers(crate::light::reflects_glossily(scene));
         let tile: u32 = options.get("tile", 128)?;
         if !(1..=256).contains(&tile) {
             return Err(RenderError::Settings(format!(
@@ -104,15 +107,19 @@ impl BruteMethod {
         });
         let cs = wgpu::ShaderStages::COMPUTE;
         let layout = GroupLayout::new(device, "brute", cs, BINDINGS);
-        let pipeline = compute_pipeline(
+        // Without glossy light, the build without its code (see `GlossyGather`).
+        let pipeline = crate::gpu::compute_pipeline_specialized(
             device,
             "brute",
             &ctx.shader("brute_vals.wgsl"),
-            &layout.layout,
+            &[&layout.layout],
+            "cs_main",
+            &[("GLOSSY_GATHER", if glossy { 1.0 } else { 0.0 })],
         );
         Ok(Self {
             raster,
             rsm,
+            glossy_option,
             glossy,
             tile,
             params_buffer,
@@ -202,8 +209,9 @@ impl Method for BruteMethod {
         map.insert("rsm".into(), self.rsm.resolution.into());
         map.insert(
             "glossy".into(),
-            if self.glossy { "on" } else { "off" }.into(),
+            format!("{:?}", self.glossy_option).to_lowercase().into(),
         );
+        map.insert("glossy_gathered".into(), self.glossy.into());
         map
     }
 }

@@ -18,6 +18,7 @@ use std::time::Instant;
 use crate::frame::{FrameInput, IndirectLayer, Method, View, ViewCache, ViewResult};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
+use crate::light::GlossyGather;
 use crate::light::ValSource;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{Rasterizer, RenderError, RenderSettings};
@@ -25,7 +26,7 @@ use crate::scene::Scene;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
 pub use sparse::Stage;
-use sparse::{GatherForm, GlossyGather, KernelGroups, SparseGpu, SparseOptions};
+use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions};
 
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,11 +99,7 @@ impl SparseSettings {
                     "raster" => GatherForm::Raster,
                     _ => GatherForm::Compute,
                 },
-                glossy: match options.choice("glossy", &["auto", "on", "off"])? {
-                    "on" => GlossyGather::On,
-                    "off" => GlossyGather::Off,
-                    _ => GlossyGather::Auto,
-                },
+                glossy: GlossyGather::parse(options.choice("glossy", GlossyGather::CHOICES)?),
                 occlusion: match options.choice("occlusion", &["rays", "sum", "union", "off"])? {
                     "off" => OcclusionMode::Off,
                     "union" => OcclusionMode::Union,
@@ -433,7 +430,7 @@ pub fn apply_budget(
     if !settings
         .options
         .glossy
-        .gathers(sparse::reflects_glossily(scene))
+        .gathers(crate::light::reflects_glossily(scene))
     {
         survey.gather_cost = budget::model::DIFFUSE_GATHER_COST;
     }

@@ -136,7 +136,7 @@ pub struct SparseOptions {
     pub tile: u32,
     /// How the gather runs: a compute pass, or a fragment pass over a point target.
     pub gather: GatherForm,
-    pub glossy: GlossyGather,
+    pub glossy: crate::light::GlossyGather,
     pub occlusion: OcclusionMode,
     pub weights: Weights,
     /// `--occlusion rays`: percent of last frame's visibility blended into this frame's.
@@ -147,36 +147,6 @@ pub struct SparseOptions {
     /// Slices of the VAL list the compute gather is split into (0: automatic, see
     /// [`gather_slices`]).
     pub gather_slices: u32,
-}
-
-/// Whether the sparse method gathers glossy light (`glossy`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum GlossyGather {
-    /// Where some material reflects glossily (a specular factor above 0). An all-Lambert
-    /// scene's glossy term is zero at every pixel, so its gather is diffuse only: 35 % less
-    /// gather time on lavapipe, the same image.
-    #[default]
-    Auto,
-    On,
-    Off,
-}
-
-impl GlossyGather {
-    /// Whether this setting gathers glossy light in a scene where some material reflects
-    /// glossily (`reflects_glossily`, [`reflects_glossily`]) or none does.
-    pub fn gathers(self, reflects_glossily: bool) -> bool {
-        match self {
-            Self::On => true,
-            Self::Off => false,
-            Self::Auto => reflects_glossily,
-        }
-    }
-}
-
-/// Some material of `scene` has a glossy lobe: ρ_s = specular factor · mix(0.04, base,
-/// metallic) is zero for every material whose specular factor is 0.
-pub fn reflects_glossily(scene: &Scene) -> bool {
-    scene.materials.iter().any(|m| m.specular_factor > 0.0)
 }
 
 /// The two forms of the gather (`--gather`), which compute the same sums.
@@ -927,7 +897,7 @@ impl SparseGpu {
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
             cpu_device: ctx.adapter_info.device_type == wgpu::DeviceType::Cpu,
-            reflects_glossily: reflects_glossily(scene),
+            reflects_glossily: crate::light::reflects_glossily(scene),
             raster_gather: std::cell::OnceCell::new(),
             renormalize,
             occlusion,
