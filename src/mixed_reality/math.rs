@@ -242,8 +242,9 @@ pub const CUT_LEVELS: u32 = 5;
 
 /// `--real-cut` merges a block only when the length of its flux-weighted mean normal is
 /// at least this (1: all surfels face one way). It keeps a table's top and its edge, or two
-/// walls of a corner, apart; the sensor's per-pixel normal noise on a flat wall (0.8–0.95
-/// on the Open3D frames' walls over 32×32 pixels) does not split it.
+/// walls of a corner, apart, while the sensor's normal noise does not split flat surfaces: on
+/// the Open3D frame 0 the median over 32×32-pixel blocks is 0.954 (10th percentile 0.733; 16
+/// of 282 blocks fall below 0.7), over 8×8 blocks 0.977 (54 of 4255 below).
 pub const CUT_NORMAL_AGREEMENT: f32 = 0.7;
 
 /// The virtual receivers (the sparse points) as one world-space sphere: `--real-cut` merges
