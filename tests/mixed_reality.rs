@@ -468,7 +468,7 @@ fn the_cut_on_the_device_matches_its_cpu_twin() {
             ..Default::default()
         };
         let mut vals = DepthVals::new(&ctx, k, s).unwrap();
-        *vals.receivers.lock().unwrap() = Some(receivers);
+        vals.receivers = Some(receivers);
         vals.upload(&ctx, &frame, pose()).unwrap();
         let mut passes = Passes::new(&ctx);
         vals.record_passes(&mut passes).unwrap();

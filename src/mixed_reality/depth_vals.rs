@@ -102,10 +102,6 @@ impl From<&KernelParams> for DepthValParams {
 /// `DepthValParams::receivers` when no receivers are known: `--real-cut` merges nothing.
 const NO_RECEIVERS: [f32; 4] = [0.0, 0.0, 0.0, -1.0];
 
-/// The receivers `--real-cut` measures blocks from, set by whoever places the virtual
-/// objects before each frame (`session::MixedReality::render`).
-pub type ReceiverSlot = Arc<Mutex<Option<Receivers>>>;
-
 /// How a depth frame becomes VALs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DepthValSettings {
@@ -279,8 +275,9 @@ pub struct DepthVals {
     pub intrinsics: Intrinsics,
     pub settings: DepthValSettings,
     pub slot: FrameSlot,
-    /// `--real-cut`'s receivers, read when a frame is uploaded.
-    pub receivers: ReceiverSlot,
+    /// The virtual receivers `--real-cut` measures blocks from, set by whoever places the
+    /// virtual objects (`session::MixedReality::new`); `None`: nothing merges.
+    pub receivers: Option<Receivers>,
     external: ExternalVals,
     params_buffer: wgpu::Buffer,
     depth_raw: wgpu::Buffer,
@@ -382,7 +379,7 @@ impl DepthVals {
             intrinsics,
             settings,
             slot: FrameSlot::default(),
-            receivers: ReceiverSlot::default(),
+            receivers: None,
             external: ExternalVals {
                 candidates,
                 rows: p.grid_height,
@@ -448,10 +445,8 @@ impl DepthVals {
             let mut params = DepthValParams::from(&p);
             if let Some(ratio) = self.settings.real_cut {
                 params.cut_ratio = ratio;
-                let receivers = *self.receivers.lock().map_err(|_| {
-                    RenderError::Settings("the receivers' slot was poisoned".into())
-                })?;
-                if let Some(r) = receivers.filter(|r| r.centre.is_finite() && r.radius >= 0.0) {
+                let usable = |r: &Receivers| r.centre.is_finite() && r.radius >= 0.0;
+                if let Some(r) = self.receivers.filter(usable) {
                     params.receivers = [r.centre.x, r.centre.y, r.centre.z, r.radius];
                 }
             }

@@ -17,7 +17,7 @@ use std::time::Instant;
 use glam::{Mat4, Quat, Vec3};
 use rayon::prelude::*;
 
-use super::depth_vals::{DepthValSettings, DepthVals, FrameSlot, ReceiverSlot};
+use super::depth_vals::{DepthValSettings, DepthVals, FrameSlot};
 use super::math;
 use super::rgbd::{Intrinsics, RgbdFrame};
 use crate::frame::{record_frame, View};
@@ -206,7 +206,6 @@ pub struct MixedReality {
     pub intrinsics: Intrinsics,
     pub settings: MrSettings,
     slot: FrameSlot,
-    receivers: ReceiverSlot,
     view: Option<View>,
 }
 
@@ -217,9 +216,15 @@ impl MixedReality {
         intrinsics: Intrinsics,
         settings: MrSettings,
     ) -> Result<Self, RenderError> {
-        let source = DepthVals::new(ctx, intrinsics, settings.depth)?;
+        let mut source = DepthVals::new(ctx, intrinsics, settings.depth)?;
+        // The sparse points lie on the virtual objects, which stand still in the room (every
+        // frame is drawn at rest): `--real-cut` measures from their bounding sphere.
+        let bounds = scene.world_bounds(&scene.world_from_node());
+        source.receivers = (!bounds.is_empty()).then(|| math::Receivers {
+            centre: bounds.center(),
+            radius: 0.5 * bounds.extent().length(),
+        });
         let slot = source.slot.clone();
-        let receivers = source.receivers.clone();
         let render = RenderSettings {
             width: intrinsics.width,
             height: intrinsics.height,
@@ -240,7 +245,6 @@ impl MixedReality {
             intrinsics,
             settings,
             slot,
-            receivers,
             view: None,
         })
     }
@@ -285,17 +289,6 @@ impl MixedReality {
                 frame.width, frame.height, k.width, k.height
             )));
         }
-        let world = self.scene.world_from_node();
-        // The sparse points lie on the virtual objects: `--real-cut` measures from their box.
-        let bounds = self.scene.world_bounds(&world);
-        *self
-            .receivers
-            .lock()
-            .map_err(|_| RenderError::Settings("the receivers' slot was poisoned".into()))? =
-            (!bounds.is_empty()).then(|| math::Receivers {
-                centre: bounds.center(),
-                radius: 0.5 * bounds.extent().length(),
-            });
         *self
             .slot
             .lock()
@@ -309,6 +302,7 @@ impl MixedReality {
             }
             None => View::new(ctx, "sensor", camera, (k.width, k.height), 1)?,
         };
+        let world = self.scene.world_from_node();
         let recorded = record_frame(
             &mut self.method,
             ctx,

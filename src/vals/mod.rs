@@ -310,7 +310,7 @@ pub const OPTIONS: &[OptionSpec] = &[
     },
     OptionSpec {
         name: "glossy",
-        kind: OptionKind::Choice(&["auto", "on", "off"]),
+        kind: OptionKind::Choice(GlossyGather::CHOICES),
         default: "auto",
         help: "glossy indirect light (auto: where some material has a specular factor above 0; an all-Lambert scene's glossy term is zero, so only diffuse light is gathered)",
     },
