@@ -16,17 +16,22 @@ use crate::vals::math::OcclusionMode;
 use crate::vals::sparse::GatherForm;
 use crate::vals::{SparseMethod, SparseSettings};
 
-/// Arithmetic per point-VAL pair in the diffuse + glossy gather, in FMA-equivalents (an FMA, a
-/// multiply or an add counts one; inverseSqrt, division, pow count one each, which flatters
-/// nothing): d = l − x (3), |d|² (3), inverseSqrt (1), ω̂ (3), n·ω̂ and n_j·ω̂ (6), the two
-/// clamps and product (3), r² = A/π and the denominator (2), division (1), E = Φ·g/π (4),
-/// weight A·g (1), Σ E (3), diffuse moments Σw, Σw·l, Σw·l² (7), r·ω̂ (3), pow (1),
-/// Σ lobe·E (3), glossy weight (1), glossy moments (7).
-pub const GATHER_OPS_PER_PAIR: f64 = 55.0;
+/// Arithmetic per point-VAL pair in the diffuse + glossy gather (`accumulate` in
+/// `shaders/vals/vals_gather_common.wgsl`), in FMA-equivalents: an FMA, a multiply, an add or a
+/// compare-and-select counts one; inverseSqrt, division and pow count one each, which flatters
+/// nothing. Per-VAL factors (r² = A/π, Φ/π, l², the weight's factor), computed once per VAL
+/// for an invocation's four points, are left out. Diffuse half (32): d = l − x (3), |d|² (3),
+/// n·d and n_j·d (6), the two clamps and product (3), the denominator |d|²·(|d|² + r²) (2),
+/// division and its guard (2), visibility V·g (1), weight f·g and ε + … (2), Σ Φ/π·g (3),
+/// moments Σw, Σw·l, Σw·l² (7). Glossy half (21): r·d (3), inverseSqrt, its guard and the
+/// product (3), the clamp, pow and the select on g > 0 (3), Σ Φ/π·(g·lobe) (4), weight (1),
+/// moments (7). Before the cosines' 1/|d| was folded into the denominator the same count read
+/// 55 and 40.
+pub const GATHER_OPS_PER_PAIR: f64 = 53.0;
 
 /// The same for a diffuse-only gather (`glossy off`, or `auto` on an all-Lambert scene): the
-/// 55 less the glossy half's r·ω̂, pow, Σ lobe·E, weight and moments (15).
-pub const GATHER_DIFFUSE_OPS_PER_PAIR: f64 = 40.0;
+/// diffuse half of [`GATHER_OPS_PER_PAIR`].
+pub const GATHER_DIFFUSE_OPS_PER_PAIR: f64 = 32.0;
 
 #[derive(Clone, Debug)]
 pub struct BenchRequest {

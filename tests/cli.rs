@@ -792,12 +792,12 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     // Its walls are Lambert: the gather is diffuse only and priced so; `glossy on` prices the
     // lobes.
     assert_eq!(cornell["glossy_gathered"], false);
-    assert_eq!(
-        budget["gather_cost"],
-        valgi::vals::budget::model::DIFFUSE_GATHER_COST
-    );
+    let gather_cost = valgi::vals::budget::model::gather_cost;
+    assert_eq!(budget["gather_cost"], gather_cost(false, true));
     let glossy = budget_render("cornell", &["--target-flip", "0.1", "--glossy", "on"]);
-    assert_eq!(glossy["budget"]["gather_cost"], 1.0);
+    assert_eq!(glossy["budget"]["occlusion"]["value"], "rays");
+    assert_eq!(glossy["budget"]["gather_cost"], gather_cost(true, true));
+    assert!(gather_cost(false, true) < gather_cost(true, true));
     // The survey looks from the camera the image is drawn from: the scene's own by default,
     // the command line's when it gives one.
     let own = budget["surveyed_from"].as_array().expect("surveyed_from");

@@ -35,15 +35,12 @@ override GLOSSY_GATHER: bool = true;
 
 // One VAL's reflected radiance at the pixel.
 fn val_radiance(px: Pixel, val: Val, glossy_on: bool) -> vec3<f32> {
-    let gw = disc_geometry(px.p, px.n, val);
-    if (gw.x <= 0.0) {
-        return vec3<f32>(0.0);
-    }
+    let t = disc_terms(px.p, px.n, val);
     var f = px.rho_d / PI;
     if (glossy_on && GLOSSY_GATHER) {
-        f += px.specular_scale * lobe(px.r, gw.yzw, px.k);
+        f += px.specular_scale * disc_lobe(t, px.r, px.k);
     }
-    return f * val.flux.rgb * (gw.x / PI);
+    return f * val.flux.rgb * (t.g / PI);
 }
 
 @compute @workgroup_size(8, 8, 1)

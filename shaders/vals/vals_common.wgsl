@@ -90,16 +90,33 @@ fn world_point(model: vec4<u32>, point_meta: vec2<u32>, instance: InstanceData) 
     return out;
 }
 
-// g = max(0, n·ω̂)·max(0, −n_j·ω̂)/(|d|² + r_j²); returns (g, ω̂).
-fn disc_geometry(x: vec3<f32>, n: vec3<f32>, val: Val) -> vec4<f32> {
-    let d = val.position_area.xyz - x;
-    let dist2 = dot(d, d);
-    if (dist2 <= 0.0) {
-        return vec4<f32>(0.0);
-    }
-    let w = d * inverseSqrt(dist2);
-    let g = max(dot(n, w), 0.0) * max(-dot(val.normal.xyz, w), 0.0) / (dist2 + val.position_area.w / PI);
-    return vec4<f32>(g, w);
+// One disc VAL seen from the receiver (x, n): d = l − x, |d|², and
+// g = max(0, n·ω̂)·max(0, −n_j·ω̂)/(|d|² + r_j²) (`vals::math::disc_geometry`), written with the
+// cosines' 1/|d| folded into the denominator, g = max(0, n·d)·max(0, −n_j·d)/(|d|²·(|d|² + r_j²)),
+// so that a diffuse sum needs no square root and no ω̂ (on lavapipe the gather measured the
+// same within its noise; the fold is for devices where inverseSqrt is a slower unit's work).
+// g is 0 where d = 0.
+struct DiscTerms {
+    d: vec3<f32>,
+    dist2: f32,
+    g: f32,
+}
+
+fn disc_terms(x: vec3<f32>, n: vec3<f32>, val: Val) -> DiscTerms {
+    var t: DiscTerms;
+    t.d = val.position_area.xyz - x;
+    t.dist2 = dot(t.d, t.d);
+    let cosines = max(dot(n, t.d), 0.0) * max(-dot(val.normal.xyz, t.d), 0.0);
+    let denominator = t.dist2 * (t.dist2 + val.position_area.w * (1.0 / PI));
+    t.g = select(0.0, cosines / denominator, denominator > 0.0);
+    return t;
+}
+
+// The Phong lobe toward the disc, max(0, r·ω̂)^k, where its g is above 0 (0 elsewhere, as the
+// CPU twin's gather has it).
+fn disc_lobe(t: DiscTerms, r: vec3<f32>, k: f32) -> f32 {
+    let cosine = max(dot(r, t.d) * inverseSqrt(max(t.dist2, 1e-30)), 0.0);
+    return select(0.0, pow(cosine, k), t.g > 0.0);
 }
 
 fn lobe(r: vec3<f32>, w: vec3<f32>, k: f32) -> f32 {

@@ -19,9 +19,9 @@ var<workgroup> shared_count: u32;
 // are the shared half's POINT_SLOTS.
 const POINTS_PER_INVOCATION: u32 = POINT_SLOTS;
 
-// The four points' cluster visibility words, one variable per word (lane q: slot q), read
-// through `slot_words`'s switch: the word index comes from the VAL, the same for the whole
-// workgroup, so the variables can stay in registers. On an H200 this gathered `+rays` 10–13 %
+// The four points' cluster visibility words, one variable per word (lane q: slot q), picked
+// by `slot_words`: the word index comes from the VAL, the same for the whole workgroup, so
+// the variables can stay in registers. On an H200 this gathered `+rays` 10–13 %
 // faster than a private array indexed by the cluster (16k VALs × 4k points 0.76 against
 // 0.84 ms, 512k × 4k 28.5–29.0 against 32.3–33.8 ms, same run); on lavapipe it measured the
 // same within the noise.
@@ -54,24 +54,22 @@ fn load_visibility(first: u32, use_visibility: bool) {
     vis7 = words_of(first, 7u, use_visibility);
 }
 
+// A select tree, not a switch: llvmpipe runs every case of a switch under a mask, and with it
+// the gather took 10–15 % longer on lavapipe (16k VALs × 4k points, with or without
+// visibility, since the lookup ran either way before GATHER_VISIBILITY).
 fn slot_words(w: u32) -> vec4<u32> {
-    switch w {
-        case 0u: { return vis0; }
-        case 1u: { return vis1; }
-        case 2u: { return vis2; }
-        case 3u: { return vis3; }
-        case 4u: { return vis4; }
-        case 5u: { return vis5; }
-        case 6u: { return vis6; }
-        default: { return vis7; }
-    }
+    let b0 = (w & 1u) != 0u;
+    let b1 = (w & 2u) != 0u;
+    let low = select(select(vis0, vis1, b0), select(vis2, vis3, b0), b1);
+    let high = select(select(vis4, vis5, b0), select(vis6, vis7, b0), b1);
+    return select(low, high, (w & 4u) != 0u);
 }
 
 // One VAL at each of this invocation's points. Written out, not a loop: llvmpipe counts every
 // loop iteration against its per-invocation limit (see the VAL loop below).
 fn accumulate_all(val: Val, glossy_on: bool, flux_weights: bool, use_visibility: bool) {
     var v = vec4<f32>(1.0);
-    if (use_visibility) {
+    if (use_visibility && GATHER_VISIBILITY) {
         let cluster = val_cluster(val);
         let words = slot_words(min(cluster / 4u, VISIBILITY_WORDS - 1u));
         v = vec4<f32>(

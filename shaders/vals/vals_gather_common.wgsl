@@ -23,6 +23,9 @@ const VISIBILITY_WORDS: u32 = 8u;
 // glossy code at all: the uniform FLAG_GLOSSY alone leaves it in, and a CPU device (llvmpipe
 // runs both sides of every branch under a mask) paid for the lobes with the flag off.
 override GLOSSY_GATHER: bool = true;
+// False in a pipeline for a solution without `--occlusion rays`: the cluster visibility
+// lookup, per VAL, then goes too (a quarter of a diffuse gather's time on lavapipe).
+override GATHER_VISIBILITY: bool = true;
 const POINT_SLOTS: u32 = 4u;
 
 // Weighted moments Σw, Σw·l, Σw·l² of the VAL positions.
@@ -55,10 +58,8 @@ struct Sums {
 // (appended external ones, w = 32) are not scaled. Each form keeps its points' words where
 // it reads them fastest (see each).
 fn cluster_visibility(cluster: u32, word: u32) -> f32 {
-    if (cluster >= VISIBILITY_WORDS * 4u) {
-        return 1.0;
-    }
-    return f32((word >> (8u * (cluster % 4u))) & 255u) / 255.0;
+    let v = f32((word >> (8u * (cluster % 4u))) & 255u) * (1.0 / 255.0);
+    return select(v, 1.0, cluster >= VISIBILITY_WORDS * 4u);
 }
 
 // The cluster of a VAL, as `cluster_visibility` takes it.
@@ -69,29 +70,28 @@ fn val_cluster(val: Val) -> u32 {
 // Adds one VAL's contribution at the point (x, n, k) with mirror direction r, scaled by its
 // cluster's visibility V there (1 without visibility).
 fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: Val, visibility: f32, glossy_on: bool, flux_weights: bool) {
-    let gw = disc_geometry(point.position, point.normal, val);
-    let g = gw.x * visibility;
-    let e = val.flux.rgb * (g / PI);
-    var strength = val.position_area.w * g;
-    if (flux_weights) {
-        strength = (val.flux.r + val.flux.g + val.flux.b) / 3.0 * g;
-    }
+    let t = disc_terms(point.position, point.normal, val);
+    let g = t.g * visibility;
+    // Per-VAL factors (the same at the invocation's four points, so computed once per VAL).
+    // The weight's is picked before the product: llvmpipe runs both sides of a branch, so a
+    // branch on the flag would cost both products at every pair.
+    let weight_factor = select(val.position_area.w, (val.flux.r + val.flux.g + val.flux.b) * (1.0 / 3.0), flux_weights);
+    let flux_over_pi = val.flux.rgb * (1.0 / PI);
     let l = val.position_area.xyz;
+    let l2 = l * l;
+    let strength = weight_factor * g;
     let wd = POSITION_EPSILON + strength;
-    (*sums).diffuse += e;
+    (*sums).diffuse += flux_over_pi * g;
     (*sums).md.weight += wd;
     (*sums).md.sum += wd * l;
-    (*sums).md.sum_squares += wd * l * l;
+    (*sums).md.sum_squares += wd * l2;
     if (glossy_on && GLOSSY_GATHER) {
-        var lobe_j = 0.0;
-        if (g > 0.0) {
-            lobe_j = lobe(r, gw.yzw, point.k);
-        }
+        let lobe_j = disc_lobe(t, r, point.k);
         let ws = POSITION_EPSILON + strength * lobe_j;
-        (*sums).glossy += e * lobe_j;
+        (*sums).glossy += flux_over_pi * (g * lobe_j);
         (*sums).ms.weight += ws;
         (*sums).ms.sum += ws * l;
-        (*sums).ms.sum_squares += ws * l * l;
+        (*sums).ms.sum_squares += ws * l2;
     }
 }
 

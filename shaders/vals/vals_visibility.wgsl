@@ -18,6 +18,10 @@ const RAY_OFFSET: f32 = 2e-3;
 // Most RSM tiles a cluster shoots at (each CLUSTER_SAMPLE_SIDE² rays): with more tiles than
 // MAX_CLUSTERS · this (hundreds of lights), an evenly strided subset stands for the rest.
 const MAX_RAY_TILES: u32 = 4u;
+// False in the pipeline for solutions without a depth sensor: a uniform test alone leaves the
+// sensor's candidates and depth march in every ray's code, and llvmpipe runs both sides of a
+// branch (and a loop's body once) under a mask.
+override SENSOR_RAYS: bool = true;
 
 @group(0) @binding(0) var<storage, read> params: SparseParams;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
@@ -50,7 +54,7 @@ struct StratumSample {
 // Candidate `k` of stratum `s` of tile `tile`: an RSM tile's sample slot, or past the RSM's
 // tiles a sensor tile's surfel (area 0: none).
 fn candidate_val(tile: u32, s: u32, k: u32) -> Val {
-    if (tile >= params.rsm_tiles) {
+    if (SENSOR_RAYS && tile >= params.rsm_tiles) {
         return sensor_stratum_sample(tile - params.rsm_tiles, s, k);
     }
     let per_tile = CLUSTER_SAMPLE_SIDE * CLUSTER_SAMPLE_SIDE;
@@ -72,7 +76,7 @@ fn stratum_sample(point: WorldPoint, tile: u32, s: u32) -> StratumSample {
         if (val.position_area.w <= 0.0) {
             continue;
         }
-        let g = disc_geometry(point.position, point.normal, val).x;
+        let g = disc_terms(point.position, point.normal, val).g;
         let weight = g * (val.flux.r + val.flux.g + val.flux.b);
         if (!(weight > 0.0)) {
             continue;
@@ -88,6 +92,9 @@ fn stratum_sample(point: WorldPoint, tile: u32, s: u32) -> StratumSample {
 
 fn sample_visible(point: WorldPoint, sample: StratumSample) -> bool {
     let start = point.position + point.normal * sample.offset;
+    if (!SENSOR_RAYS) {
+        return !segment_occluded(start, sample.end);
+    }
     return !segment_occluded(start, sample.end) && !sensor_blocks(start, sample.end);
 }
 

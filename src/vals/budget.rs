@@ -127,9 +127,9 @@ pub struct Survey {
     /// Predicted times are the fitted model's times × this: 1 on the fitting device, its FMA
     /// peak over the device's for another ([`model::FIT_FMA_PEAK`]).
     pub time_scale: f64,
-    /// The gather's cost per pair relative to the fitted one: 1 with the glossy lobes,
-    /// [`model::DIFFUSE_GATHER_COST`] for a diffuse-only gather.
-    pub gather_cost: f64,
+    /// Whether the gather will gather glossy light (`glossy auto` leaves the lobes out of an
+    /// all-Lambert scene): it prices the gather ([`model::gather_cost`]).
+    pub gathers_glossy: bool,
 }
 
 /// Light views as the RSM lays them out: (light, forward, up, tan of the half field of view)
@@ -390,7 +390,7 @@ impl Survey {
             lit_samples: lit.len(),
             survey_ms: 0.0,
             time_scale: 1.0,
-            gather_cost: 1.0,
+            gathers_glossy: true,
         };
         // Leaving visibility out shows seen + hidden where seen is right: relative to the
         // brighter of the two, hidden / (seen + hidden), and weighted by that brightness (a
@@ -781,10 +781,22 @@ pub mod model {
     pub const C_OFF: f64 = 1.5;
     /// Gather cost per point–VAL pair, ms (lavapipe, 2 cores: 1.08e8 pairs/s over the sweep).
     pub const GATHER_MS_PER_PAIR: f64 = 9.3e-6;
-    /// A diffuse-only gather's cost per pair relative to that (fitted with the glossy lobes
-    /// gathered; `glossy auto` leaves them out of an all-Lambert scene): lavapipe, 16k VALs ×
-    /// 4k points, 153–159 against 233–249 ms.
-    pub const DIFFUSE_GATHER_COST: f64 = 0.64;
+    /// The gather's cost per pair relative to [`GATHER_MS_PER_PAIR`], which was fitted when
+    /// every gather ran the glossy lobes and the cluster-visibility lookup whatever the
+    /// options. A gather is now compiled without the parts its solution does not use
+    /// (`glossy auto` leaves the lobes out of an all-Lambert scene, occlusion other than
+    /// `rays` the lookup). Lavapipe, 16k VALs × 4k points (`valgi bench`, the old gather
+    /// 216–242 ms in the same session): with lobes and visibility 193–201 ms, lobes only
+    /// 181–185, neither 114–121; visibility without lobes costs 0.66 of both (Cornell, 15k
+    /// VALs × 4k points, 131–155 against 185–216 ms).
+    pub fn gather_cost(glossy: bool, rays: bool) -> f64 {
+        match (glossy, rays) {
+            (true, true) => 0.85,
+            (true, false) => 0.79,
+            (false, true) => 0.56,
+            (false, false) => 0.50,
+        }
+    }
     /// Visibility cost per point and cluster (16 rays), ms, and its fixed part: refitted for
     /// the stackless BVH walk (log-space least squares over six built-in scenes × 1024, 4096
     /// and 16 384 points at 128², rms log error 0.34; the stack walk's 4.4e-3 and 47 now
@@ -851,7 +863,9 @@ impl Survey {
         let pairs = points as f64 * self.val_count(rsm);
         let predicted_ms = self.time_scale
             * (model::FRAME_MS_FIXED
-                + model::GATHER_MS_PER_PAIR * self.gather_cost * pairs
+                + model::GATHER_MS_PER_PAIR
+                    * model::gather_cost(self.gathers_glossy, rays)
+                    * pairs
                 + if rays {
                     model::VISIBILITY_MS_FIXED
                         + model::VISIBILITY_MS_PER_POINT_CLUSTER

@@ -33,15 +33,17 @@ pub struct Receiver {
 
 /// `g = max(0, n·ω̂)·max(0, −n_j·ω̂) / (|d|² + r_j²)`, ω̂ from x toward the disc: the disc's
 /// irradiance per unit flux, times π. Finite at zero distance; the point-light law far away.
+/// Computed as the kernels do, with the cosines' 1/|d| folded into the denominator,
+/// `max(0, n·d)·max(0, −n_j·d) / (|d|²·(|d|² + r_j²))`: a diffuse sum then needs no square root.
 pub fn disc_geometry(x: Vec3, n: Vec3, val: &Val) -> (f32, Vec3) {
     let d = val.position - x;
     let dist2 = d.length_squared();
-    if dist2 <= 0.0 {
+    let denominator = dist2 * (dist2 + val.radius_squared());
+    if denominator <= 0.0 {
         return (0.0, Vec3::ZERO);
     }
-    let w = d / dist2.sqrt();
-    let g = n.dot(w).max(0.0) * (-val.normal.dot(w)).max(0.0) / (dist2 + val.radius_squared());
-    (g, w)
+    let cosines = n.dot(d).max(0.0) * (-val.normal.dot(d)).max(0.0);
+    (cosines / denominator, d / dist2.sqrt())
 }
 
 /// `E_j(x) = Φ_j·g_j/π`: irradiance at x (normal n) from one disc VAL.

@@ -432,7 +432,7 @@ pub fn apply_budget(
         .glossy
         .gathers(crate::light::reflects_glossily(scene))
     {
-        survey.gather_cost = budget::model::DIFFUSE_GATHER_COST;
+        survey.gathers_glossy = false;
     }
     let given = |key: &str| options.given(key);
     let choice = survey.choose(target);
@@ -487,9 +487,10 @@ pub fn apply_budget(
         "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
         "surveyed_from": survey.eye.map(|e| [e.x, e.y, e.z]),
         "time_scale": survey.time_scale,
-        // 1: the gather's glossy lobes priced; below: a diffuse-only gather (`glossy auto`
-        // on an all-Lambert scene, or `off`).
-        "gather_cost": survey.gather_cost,
+        // The chosen gather's cost per pair relative to the fitted one: with or without the
+        // glossy lobes (`glossy auto` on an all-Lambert scene, or `off`), with or without the
+        // cluster visibility.
+        "gather_cost": budget::model::gather_cost(survey.gathers_glossy, used.rays),
         "device_fma_peak": device_fma_peak,
         "sparse_points": {
             "value": settings.sparse_points,

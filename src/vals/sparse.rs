@@ -302,6 +302,8 @@ pub struct SparseGpu {
     rsm_tiles: u32,
     /// A depth sensor's tiles, clusters after the RSM's (0 without a sensor).
     sensor_tiles: u32,
+    /// Whether a depth sensor's image takes part in the visibility (its VALs, its depth).
+    has_sensor: bool,
 }
 
 /// Bytes of cluster visibility per sparse point: one per cluster.
@@ -342,13 +344,38 @@ const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
 /// filtered depth and ray samples ([`crate::light::sensor::SensorBuffers`]).
 const SENSOR_BINDINGS: &[Slot] = &[Slot::Uniform, R, R];
 
+/// What the compute gather's code does besides diffuse light. A pipeline compiled without a
+/// part has none of its code: a uniform flag alone leaves the code in, and a CPU device
+/// (llvmpipe runs both sides of every branch under a mask) pays for it with the flag off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct GatherCode {
+    /// The glossy lobes and their sums.
+    glossy: bool,
+    /// The cluster visibility of `--occlusion rays`.
+    visibility: bool,
+}
+
+impl GatherCode {
+    /// The slot in `SparsePipelines::gather_variants`; `None` for the full gather.
+    fn variant(self) -> Option<usize> {
+        match (self.glossy, self.visibility) {
+            (true, true) => None,
+            (false, true) => Some(0),
+            (true, false) => Some(1),
+            (false, false) => Some(2),
+        }
+    }
+}
+
 /// The sparse passes' layouts and pipelines, compiled once per device and shared by every
 /// solution on it (a preview's balls, a viewer's rebuilds, an eval sweep's settings): each
 /// binds its own buffers. On lavapipe compiling them took ~300 ms of every method's set-up.
 struct SparsePipelines {
     gather: (GroupLayout, wgpu::ComputePipeline),
-    /// The gather without glossy code (`GLOSSY_GATHER` false), built when first used.
-    gather_diffuse: std::sync::OnceLock<wgpu::ComputePipeline>,
+    /// The gather without the code a solution does not run, built when first used and indexed
+    /// by [`GatherCode::variant`]: the glossy lobes (`GLOSSY_GATHER` false) and the cluster
+    /// visibility (`GATHER_VISIBILITY` false). `gather` is the variant with both.
+    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 3],
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
@@ -360,6 +387,9 @@ struct SparsePipelines {
     interpolate: (GroupLayout, wgpu::ComputePipeline),
     /// Group 1 is the scene BVH's ([`SceneBvh::layout`]), group 2 a depth sensor's.
     visibility: (GroupLayout, wgpu::ComputePipeline),
+    /// The visibility pass without the depth sensor's code (`SENSOR_RAYS` false), for the
+    /// solutions without a sensor, built when first used.
+    visibility_no_sensor: std::sync::OnceLock<wgpu::ComputePipeline>,
     sensor: GroupLayout,
     /// Group 2 for solutions without a sensor: no tiles, no frame.
     no_sensor: wgpu::BindGroup,
@@ -371,13 +401,22 @@ impl SparsePipelines {
         ctx.shared(|| Self::new(ctx))
     }
 
-    /// The compute gather specialized to diffuse light only.
-    fn gather_diffuse(&self, ctx: &GpuContext) -> Result<&wgpu::ComputePipeline, GpuError> {
-        if let Some(pipeline) = self.gather_diffuse.get() {
+    /// The compute gather compiled with the code `code` runs and no more.
+    fn gather_pipeline(
+        &self,
+        ctx: &GpuContext,
+        code: GatherCode,
+    ) -> Result<&wgpu::ComputePipeline, GpuError> {
+        let Some(variant) = code.variant() else {
+            return Ok(&self.gather.1);
+        };
+        let slot = &self.gather_variants[variant];
+        if let Some(pipeline) = slot.get() {
             return Ok(pipeline);
         }
+        let flag = |on: bool| if on { 1.0 } else { 0.0 };
         let pipeline = ctx.scoped(
-            "the diffuse-only gather pipeline (cs_main)",
+            "a specialized gather pipeline (cs_main)",
             None,
             crate::raster::PIPELINE_REMEDY,
             || {
@@ -387,11 +426,43 @@ impl SparsePipelines {
                     &ctx.shader("vals_gather.wgsl"),
                     &[&self.gather.0.layout, &self.partials.layout],
                     "cs_main",
-                    &[("GLOSSY_GATHER", 0.0)],
+                    &[
+                        ("GLOSSY_GATHER", flag(code.glossy)),
+                        ("GATHER_VISIBILITY", flag(code.visibility)),
+                    ],
                 )
             },
         )?;
-        Ok(self.gather_diffuse.get_or_init(|| pipeline))
+        Ok(slot.get_or_init(|| pipeline))
+    }
+
+    fn visibility_without_sensor(
+        &self,
+        ctx: &GpuContext,
+    ) -> Result<&wgpu::ComputePipeline, GpuError> {
+        if let Some(pipeline) = self.visibility_no_sensor.get() {
+            return Ok(pipeline);
+        }
+        let pipeline = ctx.scoped(
+            "the visibility pipeline without a sensor (cs_main)",
+            None,
+            crate::raster::PIPELINE_REMEDY,
+            || {
+                crate::gpu::compute_pipeline_specialized(
+                    &ctx.device,
+                    "visibility",
+                    &ctx.shader("vals_visibility.wgsl"),
+                    &[
+                        &self.visibility.0.layout,
+                        &SceneBvh::layout(ctx).layout,
+                        &self.sensor.layout,
+                    ],
+                    "cs_main",
+                    &[("SENSOR_RAYS", 0.0)],
+                )
+            },
+        )?;
+        Ok(self.visibility_no_sensor.get_or_init(|| pipeline))
     }
 
     fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
@@ -502,7 +573,7 @@ impl SparsePipelines {
         let occluder_bounds = (occluder_layout, occluder_discs);
         Ok(Self {
             gather: (gather_layout, gather),
-            gather_diffuse: std::sync::OnceLock::new(),
+            gather_variants: Default::default(),
             gather_reduce,
             partials,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
@@ -517,6 +588,7 @@ impl SparsePipelines {
             visibility: (visibility_layout, visibility),
             sensor,
             no_sensor,
+            visibility_no_sensor: Default::default(),
             apply: (apply_layout, apply),
         })
     }
@@ -913,6 +985,7 @@ impl SparseGpu {
             sensor_group,
             rsm_tiles: rsm.tile_count(),
             sensor_tiles: sensor.map_or(0, |s| s.tiles * s.tiles),
+            has_sensor: sensor.is_some(),
         })
     }
 
@@ -1173,8 +1246,13 @@ impl SparseGpu {
                 self.point_count.div_ceil(POINT_GROUP),
                 self.max_groups_per_dimension,
             );
+            let pipeline = if self.has_sensor {
+                &self.pipelines.visibility.1
+            } else {
+                self.pipelines.visibility_without_sensor(passes.ctx())?
+            };
             passes.compute("visibility", |pass| {
-                pass.set_pipeline(&self.pipelines.visibility.1);
+                pass.set_pipeline(pipeline);
                 pass.set_bind_group(0, &self.visibility_group, &[]);
                 pass.set_bind_group(1, &self.bvh.group, &[]);
                 pass.set_bind_group(2, &self.sensor_group, &[]);
@@ -1235,10 +1313,13 @@ impl SparseGpu {
                         .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
                     max_groups,
                 );
-                let pipeline = if self.gathers_glossy(options) {
-                    &self.gather.pipeline
-                } else {
-                    self.pipelines.gather_diffuse(passes.ctx())?
+                let code = GatherCode {
+                    glossy: self.gathers_glossy(options),
+                    visibility: options.occlusion == OcclusionMode::Rays,
+                };
+                let pipeline = match code.variant() {
+                    None => &self.gather.pipeline,
+                    Some(_) => self.pipelines.gather_pipeline(passes.ctx(), code)?,
                 };
                 passes.compute(self.gather.label, |pass| {
                     pass.set_pipeline(pipeline);
