@@ -780,7 +780,7 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     let budget = &cornell["budget"];
     assert_eq!(budget["occlusion"]["value"], "rays", "{budget}");
     assert_eq!(cornell["occlusion"], "rays");
-    for knob in ["sparse_points", "rsm", "occlusion"] {
+    for knob in ["sparse_points", "rsm", "occlusion", "visibility_rays"] {
         let why = budget[knob]["why"].as_str().unwrap_or_default();
         assert!(why.len() > 20, "{knob}: {budget}");
     }

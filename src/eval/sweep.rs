@@ -308,12 +308,18 @@ pub fn check_auto(
     AutoCheck {
         scene: row.scene.clone(),
         settings: row.settings.clone(),
-        chosen: format!(
-            "points={} rsm={} occlusion={}",
-            value("sparse_points"),
-            value("rsm"),
-            value("occlusion")
-        ),
+        chosen: {
+            let occlusion = value("occlusion");
+            let mut chosen = format!(
+                "points={} rsm={} occlusion={occlusion}",
+                value("sparse_points"),
+                value("rsm")
+            );
+            if occlusion == "rays" {
+                chosen += &format!(" visibility-rays={}", value("visibility_rays"));
+            }
+            chosen
+        },
         target_flip,
         total_ms: row.total_ms,
         flip_indirect: row.flip_indirect,

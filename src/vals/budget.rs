@@ -779,6 +779,14 @@ pub mod model {
     pub const C_VALS: f64 = 8.0;
     /// Weight of the occluded share o when visibility is off.
     pub const C_OFF: f64 = 1.5;
+    /// Weight of the partial share p with adaptive rays (`--visibility-rays adaptive`: a
+    /// cluster tile whose 2×2 coarse strata agree is taken whole). Fitted as an upper
+    /// envelope to the sweep's adaptive-minus-all convergence FLIP per scene (median over
+    /// the grid; `valgi eval --sweep --frames 3`, 9 built-in scenes): ΔFLIP / (a·p) was 0.97
+    /// on Cornell (p = 0.137, ΔFLIP 0.040), 0.99 on the bunny in it, 0.50 coarse-wall, 0.52
+    /// glossy-row, 0.32 door room, 0.14 aligned occluders, 0.09 bunny box; the corridor and
+    /// the thin wall (p ≤ 0.001) lost nothing.
+    pub const C_PARTIAL: f64 = 1.0;
     /// Gather cost per point–VAL pair, ms (lavapipe, 2 cores: 1.08e8 pairs/s over the sweep).
     pub const GATHER_MS_PER_PAIR: f64 = 9.3e-6;
     /// The gather's cost per pair relative to [`GATHER_MS_PER_PAIR`], which was fitted when
@@ -803,6 +811,12 @@ pub mod model {
     /// over-predict 2.6×).
     pub const VISIBILITY_MS_PER_POINT_CLUSTER: f64 = 1.88e-3;
     pub const VISIBILITY_MS_FIXED: f64 = 11.5;
+    /// The share of that per-point cost adaptive rays keep: the same sweep's visibility time
+    /// (frame with rays less the frame without) with adaptive rays over all strata, median
+    /// over the grid per scene, was 0.61–0.62 on five scenes, 0.67 bunny box, 0.74 door room,
+    /// 0.89–0.92 on the aligned occluders and the coarse wall (whose tiles are more often
+    /// split).
+    pub const ADAPTIVE_RAY_COST: f64 = 0.7;
     /// The rest of a frame (shadow maps, RSM, G-buffer, direct, interpolation, apply) at
     /// 128², ms: the same for every choice, so it only shifts the budget.
     pub const FRAME_MS_FIXED: f64 = 60.0;
@@ -819,6 +833,26 @@ pub mod model {
 pub const CANDIDATE_POINTS: [usize; 9] = [1024, 1448, 2048, 2896, 4096, 5793, 8192, 11585, 16384];
 pub const CANDIDATE_RSM: [u32; 5] = [32, 48, 64, 96, 128];
 
+/// The indirect occlusion a candidate runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Visibility {
+    /// No indirect occlusion (`--occlusion off`).
+    Off,
+    /// Shadow rays to every sample stratum of each cluster (`--occlusion rays`).
+    Rays,
+    /// The 2×2 coarse strata first, the rest where they disagree (`--occlusion rays
+    /// --visibility-rays adaptive`).
+    AdaptiveRays,
+}
+
+impl Visibility {
+    pub const ALL: [Visibility; 3] = [Visibility::Off, Visibility::Rays, Visibility::AdaptiveRays];
+
+    pub fn rays(self) -> bool {
+        self != Visibility::Off
+    }
+}
+
 /// What budget mode aims at.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum BudgetTarget {
@@ -834,8 +868,7 @@ pub enum BudgetTarget {
 pub struct BudgetChoice {
     pub points: usize,
     pub rsm: u32,
-    /// Shadow rays to the VAL clusters (`--occlusion rays`), or no indirect occlusion.
-    pub rays: bool,
+    pub visibility: Visibility,
     pub predicted_flip: f64,
     pub predicted_ms: f64,
     /// The error terms behind the prediction: ε(h) + δ(h) of the points, ε(s) of the VALs,
@@ -849,16 +882,20 @@ pub struct BudgetChoice {
 
 impl Survey {
     /// Predicts a candidate's convergence FLIP and frame time.
-    pub fn predict(&self, points: usize, rsm: u32, rays: bool) -> BudgetChoice {
+    pub fn predict(&self, points: usize, rsm: u32, visibility: Visibility) -> BudgetChoice {
         let h = self.point_spacing(points);
         let variation = self.interpolation_error(h) + self.variation_error(h);
         let val_error = self.interpolation_error(self.val_spacing(rsm));
-        let visibility = if rays {
-            0.0
-        } else {
-            model::C_OFF * self.occluded_share
+        let (visibility_error, ray_cost) = match visibility {
+            Visibility::Off => (model::C_OFF * self.occluded_share, 0.0),
+            Visibility::Rays => (0.0, 1.0),
+            Visibility::AdaptiveRays => (
+                model::C_PARTIAL * self.partial_share,
+                model::ADAPTIVE_RAY_COST,
+            ),
         };
-        let error = variation + model::C_VALS * val_error + visibility;
+        let rays = visibility.rays();
+        let error = variation + model::C_VALS * val_error + visibility_error;
         let predicted_flip = model::A * error.max(0.0).powf(model::B);
         let pairs = points as f64 * self.val_count(rsm);
         let predicted_ms = self.time_scale
@@ -869,6 +906,7 @@ impl Survey {
                 + if rays {
                     model::VISIBILITY_MS_FIXED
                         + model::VISIBILITY_MS_PER_POINT_CLUSTER
+                            * ray_cost
                             * points as f64
                             * self.clusters as f64
                 } else {
@@ -877,7 +915,7 @@ impl Survey {
         BudgetChoice {
             points,
             rsm,
-            rays,
+            visibility,
             predicted_flip,
             predicted_ms,
             variation,
@@ -892,8 +930,8 @@ impl Survey {
         let mut all = vec![];
         for &points in &CANDIDATE_POINTS {
             for &rsm in &CANDIDATE_RSM {
-                for rays in [false, true] {
-                    all.push(self.predict(points, rsm, rays));
+                for visibility in Visibility::ALL {
+                    all.push(self.predict(points, rsm, visibility));
                 }
             }
         }
@@ -967,13 +1005,37 @@ mod tests {
         let empty = survey_of("bunny-box-empty");
         assert!(empty.occluded_share < 1e-3, "{}", empty.occluded_share);
         assert!(empty.partial_share < 1e-3, "{}", empty.partial_share);
-        assert!(!empty.choose(BudgetTarget::Flip(0.05)).rays);
+        assert_eq!(
+            empty.choose(BudgetTarget::Flip(0.05)).visibility,
+            Visibility::Off
+        );
         // The door room's light arrives through a doorway: much of it is blocked.
         let door = survey_of("door-room");
         assert!(door.occluded_share > 0.05, "{}", door.occluded_share);
         let choice = door.choose(BudgetTarget::Flip(0.05));
-        assert!(choice.rays && choice.met, "{choice:?}");
+        assert!(choice.visibility.rays() && choice.met, "{choice:?}");
         assert!(choice.predicted_flip <= 0.05);
+    }
+
+    #[test]
+    fn adaptive_rays_are_taken_where_cluster_tiles_are_seen_whole() {
+        // The thin wall's light is either all behind the wall or all in front of it: a tile's
+        // coarse strata settle it, and adaptive rays cost less for the same error.
+        let thin = survey_of("thin-wall");
+        assert!(thin.partial_share < 1e-3, "{}", thin.partial_share);
+        let choice = thin.choose(BudgetTarget::Flip(0.05));
+        assert_eq!(choice.visibility, Visibility::AdaptiveRays, "{choice:?}");
+        let all = thin.predict(choice.points, choice.rsm, Visibility::Rays);
+        assert!(all.predicted_ms > choice.predicted_ms);
+        assert!((all.predicted_flip - choice.predicted_flip).abs() < 1e-3);
+        // In the Cornell box the tall block splits many tiles seen from the floor: there,
+        // settling tiles whole costs more error than the rays it saves.
+        let cornell = survey_of("cornell");
+        assert!(cornell.partial_share > 0.05, "{}", cornell.partial_share);
+        let choice = cornell.choose(BudgetTarget::Flip(0.05));
+        assert_eq!(choice.visibility, Visibility::Rays, "{choice:?}");
+        let adaptive = cornell.predict(choice.points, choice.rsm, Visibility::AdaptiveRays);
+        assert!(adaptive.predicted_flip > 0.05, "{adaptive:?}");
     }
 
     #[test]
@@ -1024,8 +1086,8 @@ mod tests {
         // Every prediction is a hundredth: 3 ms now buys what 300 ms bought.
         let fast = survey.choose(BudgetTarget::Ms(3.0));
         assert_eq!(
-            (fast.points, fast.rsm, fast.rays),
-            (slow.points, slow.rsm, slow.rays)
+            (fast.points, fast.rsm, fast.visibility),
+            (slow.points, slow.rsm, slow.visibility)
         );
         assert!((fast.predicted_ms - slow.predicted_ms * 0.01).abs() < 1e-9 * slow.predicted_ms);
         // And 300 ms buys at least as accurate a setting as before.
@@ -1036,8 +1098,8 @@ mod tests {
         survey.time_scale = 1.0;
         let at_one = survey.choose(BudgetTarget::Flip(0.05));
         assert_eq!(
-            (at_scale.points, at_scale.rsm, at_scale.rays),
-            (at_one.points, at_one.rsm, at_one.rays)
+            (at_scale.points, at_scale.rsm, at_scale.visibility),
+            (at_one.points, at_one.rsm, at_one.visibility)
         );
     }
 

@@ -446,22 +446,29 @@ pub fn apply_budget(
         settings.rsm_texels = None;
     }
     if !given("occlusion") {
-        settings.options.occlusion = if choice.rays {
+        settings.options.occlusion = if choice.visibility.rays() {
             OcclusionMode::Rays
         } else {
             OcclusionMode::Off
         };
     }
-    let used = survey.predict(
-        settings.sparse_points,
-        settings.rsm,
+    if !given("visibility-rays") {
+        settings.options.adaptive_rays = choice.visibility == budget::Visibility::AdaptiveRays;
+    }
+    let used_visibility = match (
         settings.options.occlusion == OcclusionMode::Rays,
-    );
+        settings.options.adaptive_rays,
+    ) {
+        (false, _) => budget::Visibility::Off,
+        (true, false) => budget::Visibility::Rays,
+        (true, true) => budget::Visibility::AdaptiveRays,
+    };
+    let used = survey.predict(settings.sparse_points, settings.rsm, used_visibility);
     let met = match target {
         budget::BudgetTarget::Flip(f) => used.predicted_flip <= f,
         budget::BudgetTarget::Ms(ms) => used.predicted_ms <= ms,
     };
-    let overridden = ["sparse-points", "rsm", "occlusion"]
+    let overridden = ["sparse-points", "rsm", "occlusion", "visibility-rays"]
         .iter()
         .any(|k| given(k));
     let target_text = match target {
@@ -490,7 +497,7 @@ pub fn apply_budget(
         // The chosen gather's cost per pair relative to the fitted one: with or without the
         // glossy lobes (`glossy auto` on an all-Lambert scene, or `off`), with or without the
         // cluster visibility.
-        "gather_cost": budget::model::gather_cost(survey.gathers_glossy, used.rays),
+        "gather_cost": budget::model::gather_cost(survey.gathers_glossy, used.visibility.rays()),
         "device_fma_peak": device_fma_peak,
         "sparse_points": {
             "value": settings.sparse_points,
@@ -513,6 +520,18 @@ pub fn apply_budget(
             } else {
                 format!("geometry blocks only {:.3} of the one-bounce light the camera sees: no occlusion",
                     survey.occluded_share)
+            }),
+        },
+        "visibility_rays": {
+            "value": if settings.options.adaptive_rays { "adaptive" } else { "all" },
+            "why": why("visibility-rays", match used.visibility {
+                budget::Visibility::Off => "no rays".to_string(),
+                budget::Visibility::Rays => format!(
+                    "every stratum: settling a cluster tile by its coarse strata would get {:.3} of the light wrong",
+                    survey.partial_share),
+                budget::Visibility::AdaptiveRays => format!(
+                    "coarse strata first: settling a cluster tile by them gets only {:.3} of the light wrong, for about {:.0} % of the rays",
+                    survey.partial_share, 100.0 * budget::model::ADAPTIVE_RAY_COST),
             }),
         },
         "choice": match (overridden, choice.met) {
