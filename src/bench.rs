@@ -19,8 +19,9 @@ use crate::vals::{SparseMethod, SparseSettings};
 /// Arithmetic per point-VAL pair in the diffuse + glossy gather (`accumulate` in
 /// `shaders/vals/vals_gather_common.wgsl`), in FMA-equivalents: an FMA, a multiply, an add or a
 /// compare-and-select counts one; inverseSqrt, division and pow count one each, which flatters
-/// nothing. Per-VAL factors (r² = A/π, Φ/π, l², the weight's factor), computed once per VAL
-/// for an invocation's four points, are left out. Diffuse half (32): d = l − x (3), |d|² (3),
+/// nothing. Per-VAL work (r² = A/π, Φ/π, l², the weight's factor, and with `--occlusion rays`
+/// the lookup of the VAL's cluster in the points' visibility words), done once per VAL for an
+/// invocation's four points, is left out. Diffuse half (32): d = l − x (3), |d|² (3),
 /// n·d and n_j·d (6), the two clamps and product (3), the denominator |d|²·(|d|² + r²) (2),
 /// division and its guard (2), visibility V·g (1), weight f·g and ε + … (2), Σ Φ/π·g (3),
 /// moments Σw, Σw·l, Σw·l² (7). Glossy half (21): r·d (3), inverseSqrt, its guard and the

@@ -367,6 +367,33 @@ impl GatherCode {
     }
 }
 
+/// `cs_main` of `shader` with its pipeline constants set, compiled into `slot` the first time
+/// it is asked for.
+fn specialized_once<'a>(
+    slot: &'a std::sync::OnceLock<wgpu::ComputePipeline>,
+    ctx: &GpuContext,
+    label: &str,
+    shader: &str,
+    layouts: &[&wgpu::BindGroupLayout],
+    constants: &[(&str, f64)],
+) -> Result<&'a wgpu::ComputePipeline, GpuError> {
+    if let Some(pipeline) = slot.get() {
+        return Ok(pipeline);
+    }
+    let what = format!("a specialized {label} pipeline (cs_main)");
+    let pipeline = ctx.scoped(&what, None, crate::raster::PIPELINE_REMEDY, || {
+        crate::gpu::compute_pipeline_specialized(
+            &ctx.device,
+            label,
+            &ctx.shader(shader),
+            layouts,
+            "cs_main",
+            constants,
+        )
+    })?;
+    Ok(slot.get_or_init(|| pipeline))
+}
+
 /// The sparse passes' layouts and pipelines, compiled once per device and shared by every
 /// solution on it (a preview's balls, a viewer's rebuilds, an eval sweep's settings): each
 /// binds its own buffers. On lavapipe compiling them took ~300 ms of every method's set-up.
@@ -410,59 +437,36 @@ impl SparsePipelines {
         let Some(variant) = code.variant() else {
             return Ok(&self.gather.1);
         };
-        let slot = &self.gather_variants[variant];
-        if let Some(pipeline) = slot.get() {
-            return Ok(pipeline);
-        }
         let flag = |on: bool| if on { 1.0 } else { 0.0 };
-        let pipeline = ctx.scoped(
-            "a specialized gather pipeline (cs_main)",
-            None,
-            crate::raster::PIPELINE_REMEDY,
-            || {
-                crate::gpu::compute_pipeline_specialized(
-                    &ctx.device,
-                    "gather",
-                    &ctx.shader("vals_gather.wgsl"),
-                    &[&self.gather.0.layout, &self.partials.layout],
-                    "cs_main",
-                    &[
-                        ("GLOSSY_GATHER", flag(code.glossy)),
-                        ("GATHER_VISIBILITY", flag(code.visibility)),
-                    ],
-                )
-            },
-        )?;
-        Ok(slot.get_or_init(|| pipeline))
+        specialized_once(
+            &self.gather_variants[variant],
+            ctx,
+            "gather",
+            "vals_gather.wgsl",
+            &[&self.gather.0.layout, &self.partials.layout],
+            &[
+                ("GLOSSY_GATHER", flag(code.glossy)),
+                ("GATHER_VISIBILITY", flag(code.visibility)),
+            ],
+        )
     }
 
     fn visibility_without_sensor(
         &self,
         ctx: &GpuContext,
     ) -> Result<&wgpu::ComputePipeline, GpuError> {
-        if let Some(pipeline) = self.visibility_no_sensor.get() {
-            return Ok(pipeline);
-        }
-        let pipeline = ctx.scoped(
-            "the visibility pipeline without a sensor (cs_main)",
-            None,
-            crate::raster::PIPELINE_REMEDY,
-            || {
-                crate::gpu::compute_pipeline_specialized(
-                    &ctx.device,
-                    "visibility",
-                    &ctx.shader("vals_visibility.wgsl"),
-                    &[
-                        &self.visibility.0.layout,
-                        &SceneBvh::layout(ctx).layout,
-                        &self.sensor.layout,
-                    ],
-                    "cs_main",
-                    &[("SENSOR_RAYS", 0.0)],
-                )
-            },
-        )?;
-        Ok(self.visibility_no_sensor.get_or_init(|| pipeline))
+        specialized_once(
+            &self.visibility_no_sensor,
+            ctx,
+            "visibility",
+            "vals_visibility.wgsl",
+            &[
+                &self.visibility.0.layout,
+                &SceneBvh::layout(ctx).layout,
+                &self.sensor.layout,
+            ],
+            &[("SENSOR_RAYS", 0.0)],
+        )
     }
 
     fn new(ctx: &GpuContext) -> Result<Self, GpuError> {
