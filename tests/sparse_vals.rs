@@ -17,7 +17,9 @@ use valgi::scene::{
     Camera, CameraView, FovAxis, Instance, Light, LightKind, Material, Node, Scene, Trs,
 };
 use valgi::vals::math::{self, OcclusionMode, Receiver, Weights};
-use valgi::vals::sparse::{GatherForm, PointsReadback, SparseOptions, RASTER_GATHER_WIDTH};
+use valgi::vals::sparse::{
+    GatherForm, PointsReadback, SparseOptions, VisibilityLookup, RASTER_GATHER_WIDTH,
+};
 use valgi::vals::{SparseMethod, SparseSettings, Stage};
 
 use common::small_render_settings as settings;
@@ -46,6 +48,7 @@ fn sparse_settings(
             visibility_history: 0,
             adaptive_rays: false,
             gather_slices: 0,
+            visibility_lookup: Default::default(),
         },
         ..Default::default()
     }
@@ -733,6 +736,39 @@ fn raster_gather_writes_what_the_compute_gather_writes() {
             "point {i}: glossy sphere"
         );
     }
+}
+
+#[test]
+fn both_visibility_lookups_gather_the_same_sums() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let run = |occlusion: OcclusionMode, lookup: VisibilityLookup| {
+        let mut s = sparse_settings(32, 700, occlusion, true);
+        s.options.visibility_lookup = lookup;
+        run_sparse(&ctx, &scene, 16, s, Stage::Gather).2
+    };
+    let tree = run(OcclusionMode::Rays, VisibilityLookup::Tree);
+    let switch = run(OcclusionMode::Rays, VisibilityLookup::Switch);
+    // The same word, hence the same f32 sums in the same order: equal to the bit.
+    assert_eq!(tree.lights.len(), switch.lights.len());
+    for (i, (t, w)) in tree.lights.iter().zip(&switch.lights).enumerate() {
+        assert_eq!(t.diffuse, w.diffuse, "point {i}");
+        assert_eq!(t.glossy, w.glossy, "point {i}");
+        assert_eq!(t.diffuse_position, w.diffuse_position, "point {i}");
+    }
+    // And the lookup matters: the tall block hides some clusters from some points, so the
+    // sums differ from those gathered without visibility.
+    let off = run(OcclusionMode::Off, VisibilityLookup::Tree);
+    let darker = tree
+        .lights
+        .iter()
+        .zip(&off.lights)
+        .filter(|(t, o)| t.diffuse.max_element() < 0.9 * o.diffuse.max_element())
+        .count();
+    assert!(
+        darker > 10,
+        "{darker} points lost a tenth of their light to visibility"
+    );
 }
 
 #[test]

@@ -54,15 +54,30 @@ fn load_visibility(first: u32, use_visibility: bool) {
     vis7 = words_of(first, 7u, use_visibility);
 }
 
-// A select tree, not a switch: llvmpipe runs every case of a switch under a mask, and with it
-// the gather took 10–15 % longer on lavapipe (16k VALs × 4k points, with or without
-// visibility, since the lookup ran either way before GATHER_VISIBILITY).
+// True on a CPU device (`vals::sparse::select_tree`): llvmpipe runs every case of a switch under
+// a mask, and with the switch the gather took 10–15 % longer on lavapipe (16k VALs × 4k points,
+// with or without visibility, since the lookup ran either way before GATHER_VISIBILITY). A
+// GPU branches on the uniform word index, and keeps the switch it was measured with.
+override VISIBILITY_SELECT_TREE: bool = true;
+
 fn slot_words(w: u32) -> vec4<u32> {
-    let b0 = (w & 1u) != 0u;
-    let b1 = (w & 2u) != 0u;
-    let low = select(select(vis0, vis1, b0), select(vis2, vis3, b0), b1);
-    let high = select(select(vis4, vis5, b0), select(vis6, vis7, b0), b1);
-    return select(low, high, (w & 4u) != 0u);
+    if (VISIBILITY_SELECT_TREE) {
+        let b0 = (w & 1u) != 0u;
+        let b1 = (w & 2u) != 0u;
+        let low = select(select(vis0, vis1, b0), select(vis2, vis3, b0), b1);
+        let high = select(select(vis4, vis5, b0), select(vis6, vis7, b0), b1);
+        return select(low, high, (w & 4u) != 0u);
+    }
+    switch w {
+        case 0u: { return vis0; }
+        case 1u: { return vis1; }
+        case 2u: { return vis2; }
+        case 3u: { return vis3; }
+        case 4u: { return vis4; }
+        case 5u: { return vis5; }
+        case 6u: { return vis6; }
+        default: { return vis7; }
+    }
 }
 
 // One VAL at each of this invocation's points. Written out, not a loop: llvmpipe counts every

@@ -26,7 +26,7 @@ use crate::scene::Scene;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
 pub use sparse::Stage;
-use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions};
+use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions, VisibilityLookup};
 
 /// Everything `--method sparse` can be told.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -63,6 +63,7 @@ impl Default for SparseSettings {
                 visibility_history: 50,
                 adaptive_rays: false,
                 gather_slices: 0,
+                visibility_lookup: VisibilityLookup::Auto,
             },
             glossy_eye: GlossyEye::Mid,
             link_test: true,
@@ -115,6 +116,10 @@ impl SparseSettings {
                 adaptive_rays: options.choice("visibility-rays", &["all", "adaptive"])?
                     == "adaptive",
                 gather_slices: gather_slices_option(options)?,
+                visibility_lookup: VisibilityLookup::parse(
+                    options.choice("visibility-lookup", VisibilityLookup::NAMES)?,
+                )
+                .unwrap_or_default(),
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -343,6 +348,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Choice(&["all", "adaptive"]),
         default: "all",
         help: "--occlusion rays: shoot at all 16 sample strata of each RSM tile, or at its 2×2 coarse strata first and at the other 12 only where those disagree (adaptive: fewer rays, partly hidden tiles come out all seen or all hidden)",
+    },
+    OptionSpec {
+        name: "visibility-lookup",
+        kind: OptionKind::Choice(VisibilityLookup::NAMES),
+        default: "auto",
+        help: "--occlusion rays: how the compute gather picks a VAL's cluster visibility: a select tree (faster on a CPU device, which runs every case of a switch) or a switch (measured on a GPU); auto: the tree on a CPU device, the switch on a GPU",
     },
     OptionSpec {
         name: "weights",
