@@ -16,6 +16,10 @@
 #            per-stage split (Table 2 rows), pairs/s and % of the FMA peak, brute force, and
 #            the gather's VAL slices and tile size swept at 16k VALs
 #   scenes   the gather's pair rate on the door room and on Sponza (sun, 256²), no brute force
+#   lookup-switch, lookup-tree
+#            the default frame (16k VALs, 4k points, W×H) with the gather's cluster-visibility
+#            lookup as a switch and as a select tree (`--visibility-lookup`): `auto` takes the
+#            switch on a GPU and the tree on a CPU device; these two say whether a GPU agrees
 #   views    one lighting solution shared by 1–8 views against one view per solution
 #   mr       one full 640×480 RGB-D frame (every pixel a VAL) lighting the bunny, per pass
 #   negative seed 002's Table 1 (frame time per N+M on bunny-box)
@@ -82,6 +86,10 @@ if [ -f "$SPONZA" ]; then
 else
     echo "== sponza: skipped ($SPONZA not found)"
 fi
+for lookup in switch tree; do
+    part "lookup-$lookup" render --scene cornell --method sparse --sparse-points 4096 --rsm 160 \
+        --width "$W" --height "$H" --frames 5 --no-write --visibility-lookup "$lookup"
+done
 part views bench --views "$VIEWS" --large "$LARGE" --width "$EVAL_W" --height "$EVAL_H" \
     --out "$OUT/views"
 if [ -d "$RGBD" ]; then

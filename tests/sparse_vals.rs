@@ -742,13 +742,15 @@ fn raster_gather_writes_what_the_compute_gather_writes() {
 fn both_visibility_lookups_gather_the_same_sums() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell_coarse();
-    let run = |occlusion: OcclusionMode, lookup: VisibilityLookup| {
+    let run = |occlusion: OcclusionMode, lookup: VisibilityLookup, name: &str| {
         let mut s = sparse_settings(32, 700, occlusion, true);
         s.options.visibility_lookup = lookup;
-        run_sparse(&ctx, &scene, 16, s, Stage::Gather).2
+        let (method, _, points) = run_sparse(&ctx, &scene, 16, s, Stage::Gather);
+        assert_eq!(Method::report(&method)["visibility_lookup"], name);
+        points
     };
-    let tree = run(OcclusionMode::Rays, VisibilityLookup::Tree);
-    let switch = run(OcclusionMode::Rays, VisibilityLookup::Switch);
+    let tree = run(OcclusionMode::Rays, VisibilityLookup::Tree, "tree");
+    let switch = run(OcclusionMode::Rays, VisibilityLookup::Switch, "switch");
     // The same word, hence the same f32 sums in the same order: equal to the bit.
     assert_eq!(tree.lights.len(), switch.lights.len());
     for (i, (t, w)) in tree.lights.iter().zip(&switch.lights).enumerate() {
@@ -758,7 +760,7 @@ fn both_visibility_lookups_gather_the_same_sums() {
     }
     // And the lookup matters: the tall block hides some clusters from some points, so the
     // sums differ from those gathered without visibility.
-    let off = run(OcclusionMode::Off, VisibilityLookup::Tree);
+    let off = run(OcclusionMode::Off, VisibilityLookup::Tree, "tree");
     let darker = tree
         .lights
         .iter()

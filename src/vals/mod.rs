@@ -771,6 +771,7 @@ impl Method for SparseMethod {
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),
             "visibility_rays": if opts.adaptive_rays { "adaptive" } else { "all" },
+            "visibility_lookup": if self.sparse.visibility_select_tree(&opts) { "tree" } else { "switch" },
             "preprocess_ms": crate::gpu::timing::round3(self.preprocess_ms),
             "preprocess_meshes_computed": self.meshes_computed,
             "link_test": if self.settings.link_test { "on" } else { "off" },

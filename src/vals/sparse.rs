@@ -178,10 +178,10 @@ impl VisibilityLookup {
         }
     }
 
-    /// Whether the gather is built with the select tree on `ctx`'s device.
-    pub fn select_tree(self, ctx: &GpuContext) -> bool {
+    /// Whether the gather is built with the select tree, on a CPU device or a GPU.
+    pub fn select_tree(self, cpu_device: bool) -> bool {
         match self {
-            Self::Auto => ctx.is_software(),
+            Self::Auto => cpu_device,
             Self::Tree => true,
             Self::Switch => false,
         }
@@ -402,7 +402,7 @@ impl GatherCode {
         Self {
             glossy: true,
             visibility: true,
-            select_tree: VisibilityLookup::Auto.select_tree(ctx),
+            select_tree: VisibilityLookup::Auto.select_tree(ctx.is_software()),
         }
     }
 
@@ -1106,6 +1106,11 @@ impl SparseGpu {
     }
 
     /// The VAL slices the compute gather runs as under `options` on this device.
+    /// Whether the compute gather looks visibility up through the select tree (else a switch).
+    pub fn visibility_select_tree(&self, options: &SparseOptions) -> bool {
+        options.visibility_lookup.select_tree(self.cpu_device)
+    }
+
     pub fn gather_slices(&self, options: &SparseOptions) -> u32 {
         gather_slices(
             options.gather_slices,
@@ -1382,7 +1387,7 @@ impl SparseGpu {
                 let code = GatherCode {
                     glossy: self.gathers_glossy(options),
                     visibility: options.occlusion == OcclusionMode::Rays,
-                    select_tree: options.visibility_lookup.select_tree(passes.ctx()),
+                    select_tree: self.visibility_select_tree(options),
                 };
                 let pipeline = if code == GatherCode::full(passes.ctx()) {
                     &self.gather.pipeline
