@@ -54,7 +54,7 @@ fn load_visibility(first: u32, use_visibility: bool) {
     vis7 = words_of(first, 7u, use_visibility);
 }
 
-// True on a CPU device (`vals::sparse::select_tree`): llvmpipe runs every case of a switch under
+// True on a CPU device (`vals::sparse::VisibilityLookup`): llvmpipe runs every case of a switch under
 // a mask, and with the switch the gather took 10–15 % longer on lavapipe (16k VALs × 4k points,
 // with or without visibility, since the lookup ran either way before GATHER_VISIBILITY). A
 // GPU branches on the uniform word index, and keeps the switch it was measured with.
