@@ -32,6 +32,7 @@ impl AtlasOnVals {
             &ctx.shader("atlas_apply.wgsl"),
             &[&add_bgl.layout],
             "cs_add",
+            &[],
         );
         Self {
             layer,

@@ -68,21 +68,11 @@ pub fn linear_groups(groups: u32, max_per_dimension: u32) -> (u32, u32) {
     }
 }
 
-/// A compute pipeline whose bind groups 0, 1, … have `layouts`.
+/// A compute pipeline whose bind groups 0, 1, … have `layouts`, with the module's
+/// pipeline-overridable constants (`override` in WGSL) set to `constants`: code behind a
+/// constant-false condition is compiled out, which a uniform flag does not achieve on a CPU
+/// device (llvmpipe runs both sides of every branch under a mask).
 pub fn compute_pipeline_groups(
-    device: &wgpu::Device,
-    label: &str,
-    module: &wgpu::ShaderModule,
-    layouts: &[&wgpu::BindGroupLayout],
-    entry: &str,
-) -> wgpu::ComputePipeline {
-    compute_pipeline_specialized(device, label, module, layouts, entry, &[])
-}
-
-/// The same with the module's pipeline-overridable constants (`override` in WGSL) set:
-/// code behind a constant-false condition is compiled out, which a uniform flag does not
-/// achieve on a CPU device (llvmpipe runs both sides of every branch under a mask).
-pub fn compute_pipeline_specialized(
     device: &wgpu::Device,
     label: &str,
     module: &wgpu::ShaderModule,

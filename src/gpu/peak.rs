@@ -59,6 +59,7 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
         &ctx.shader("bench_fma.wgsl"),
         &[&layout.layout],
         "cs_main",
+        &[],
     );
     let run = |iterations: u32| -> Result<f64, GpuError> {
         ctx.queue.write_buffer(

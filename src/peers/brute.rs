@@ -108,7 +108,7 @@ impl BruteMethod {
         let cs = wgpu::ShaderStages::COMPUTE;
         let layout = GroupLayout::new(device, "brute", cs, BINDINGS);
         // Without glossy light, the build without its code (see `GlossyGather`).
-        let pipeline = crate::gpu::compute_pipeline_specialized(
+        let pipeline = crate::gpu::compute_pipeline_groups(
             device,
             "brute",
             &ctx.shader("brute_vals.wgsl"),

@@ -902,5 +902,5 @@ pub fn compute_pipeline_at(
     layout: &wgpu::BindGroupLayout,
     entry: &str,
 ) -> wgpu::ComputePipeline {
-    crate::gpu::compute_pipeline_groups(device, label, module, &[layout], entry)
+    crate::gpu::compute_pipeline_groups(device, label, module, &[layout], entry, &[])
 }

@@ -117,9 +117,8 @@ impl SparseSettings {
                     == "adaptive",
                 gather_slices: gather_slices_option(options)?,
                 visibility_lookup: VisibilityLookup::parse(
-                    options.choice("visibility-lookup", VisibilityLookup::NAMES)?,
-                )
-                .unwrap_or_default(),
+                    options.choice("visibility-lookup", VisibilityLookup::CHOICES)?,
+                ),
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -351,7 +350,7 @@ pub const OPTIONS: &[OptionSpec] = &[
     },
     OptionSpec {
         name: "visibility-lookup",
-        kind: OptionKind::Choice(VisibilityLookup::NAMES),
+        kind: OptionKind::Choice(VisibilityLookup::CHOICES),
         default: "auto",
         help: "--occlusion rays: how the compute gather picks a VAL's cluster visibility: a select tree (faster on a CPU device, which runs every case of a switch) or a switch (measured on a GPU); auto: the tree on a CPU device, the switch on a GPU",
     },

@@ -167,14 +167,16 @@ pub enum VisibilityLookup {
 }
 
 impl VisibilityLookup {
-    pub const NAMES: &'static [&'static str] = &["auto", "tree", "switch"];
+    /// The option's values, as `MethodOptions::choice` takes them.
+    pub const CHOICES: &'static [&'static str] = &["auto", "tree", "switch"];
 
-    pub fn parse(name: &str) -> Option<Self> {
-        match name {
-            "auto" => Some(Self::Auto),
-            "tree" => Some(Self::Tree),
-            "switch" => Some(Self::Switch),
-            _ => None,
+    /// One of [`Self::CHOICES`] (anything else is `auto`; `choice` has checked it), as
+    /// [`crate::light::GlossyGather::parse`].
+    pub fn parse(choice: &str) -> Self {
+        match choice {
+            "tree" => Self::Tree,
+            "switch" => Self::Switch,
+            _ => Self::Auto,
         }
     }
 
@@ -437,7 +439,7 @@ fn specialized_once<'a>(
     }
     let what = format!("a specialized {label} pipeline (cs_main)");
     let pipeline = ctx.scoped(&what, None, crate::raster::PIPELINE_REMEDY, || {
-        crate::gpu::compute_pipeline_specialized(
+        crate::gpu::compute_pipeline_groups(
             &ctx.device,
             label,
             &ctx.shader(shader),
@@ -533,7 +535,7 @@ impl SparsePipelines {
                 &format!("the {name} pipeline ({entry})"),
                 None,
                 crate::raster::PIPELINE_REMEDY,
-                || compute_pipeline_groups(device, name, module, groups, entry),
+                || compute_pipeline_groups(device, name, module, groups, entry, &[]),
             )
         };
         let compute = |name: &'static str,
@@ -563,7 +565,7 @@ impl SparsePipelines {
             || {
                 let shader = ctx.shader("vals_gather.wgsl");
                 let constants = GatherCode::full(ctx).constants();
-                let pipeline = crate::gpu::compute_pipeline_specialized;
+                let pipeline = crate::gpu::compute_pipeline_groups;
                 pipeline(device, "gather", &shader, &groups, "cs_main", &constants)
             },
         )?;
