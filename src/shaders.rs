@@ -175,11 +175,39 @@ pub const INCLUDES: &[&str] = &[
 ];
 
 fn raw(name: &str) -> &'static str {
-    FILES
+    let embedded = FILES
         .iter()
         .find(|(n, _)| *n == name)
         .map(|(_, s)| *s)
-        .unwrap_or_else(|| panic!("shader '{name}' is not listed in shaders::FILES"))
+        .unwrap_or_else(|| panic!("shader '{name}' is not listed in shaders::FILES"));
+    match std::env::var_os(SHADER_DIR_VAR) {
+        Some(dir) => from_dir(std::path::Path::new(&dir), name).unwrap_or(embedded),
+        None => embedded,
+    }
+}
+
+/// Names a `shaders/` folder whose files replace the embedded ones at run time, so that a
+/// shader can be edited and timed without rebuilding the binary (a release build of the
+/// crate takes minutes). A development aid: the embedded text is what ships and what the
+/// tests validate.
+pub const SHADER_DIR_VAR: &str = "VALGI_SHADER_DIR";
+
+/// `dir/<part>/name`, read once per process (the text must live as long as the embedded one).
+fn from_dir(dir: &std::path::Path, name: &str) -> Option<&'static str> {
+    use std::collections::HashMap;
+    use std::sync::{Mutex, OnceLock};
+    static CACHE: OnceLock<Mutex<HashMap<String, &'static str>>> = OnceLock::new();
+    let mut cache = CACHE.get_or_init(Default::default).lock().ok()?;
+    if let Some(text) = cache.get(name) {
+        return Some(text);
+    }
+    let text = std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .find_map(|part| std::fs::read_to_string(part.path().join(name)).ok())?;
+    let text: &'static str = Box::leak(text.into_boxed_str());
+    cache.insert(name.to_string(), text);
+    Some(text)
 }
 
 /// The shader's source with its includes resolved.

@@ -19,6 +19,10 @@ pub struct FmaParams {
 /// Threads per workgroup of the FMA-peak kernel (`bench_fma.wgsl`).
 pub const FMA_GROUP: u32 = 256;
 
+/// Scalar fused multiply-adds per loop iteration of `bench_fma.wgsl`: four vec4 chains,
+/// written out eight times.
+pub const FMAS_PER_ITERATION: u32 = 4 * 4 * 8;
+
 /// [`fma_peak`] measured once per device (budget mode asks for it at every method build: a
 /// viewer's rebuild or a sweep's settings would measure it again, ~0.3 s on lavapipe).
 pub fn device_fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
@@ -79,12 +83,14 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
             pass.dispatch_workgroups(threads / FMA_GROUP, 1, 1);
         })?;
         let ms = passes.finish()?.get("fma").unwrap_or(0.0).max(1e-6);
-        Ok(threads as f64 * iterations as f64 * 16.0 / (ms * 1e-3))
+        Ok(threads as f64 * iterations as f64 * FMAS_PER_ITERATION as f64 / (ms * 1e-3))
     };
     // Grow the work until one run takes long enough to time well.
     let mut iterations = 64u32;
     let mut rate = run(iterations)?;
-    while threads as f64 * iterations as f64 * 16.0 / rate < 0.2 && iterations < 1 << 20 {
+    while threads as f64 * iterations as f64 * FMAS_PER_ITERATION as f64 / rate < 0.2
+        && iterations < 1 << 20
+    {
         iterations *= 4;
         rate = run(iterations)?;
     }
@@ -92,4 +98,18 @@ pub fn fma_peak(ctx: &GpuContext) -> Result<f64, GpuError> {
         .map(|_| run(iterations))
         .collect::<Result<Vec<f64>, _>>()?;
     Ok(best.into_iter().fold(rate, f64::max))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FMAS_PER_ITERATION;
+
+    #[test]
+    fn the_peak_counts_the_fmas_its_kernel_runs() {
+        let source = crate::shaders::source("bench_fma.wgsl");
+        // Each `fma` statement of the loop is on vec4 chains: four scalar FMAs.
+        let statements = source.matches("= fma(").count() as u32;
+        assert!(statements >= 4, "{statements} fma statements");
+        assert_eq!(4 * statements, FMAS_PER_ITERATION);
+    }
 }

@@ -821,9 +821,12 @@ pub mod model {
     /// 128², ms: the same for every choice, so it only shifts the budget.
     pub const FRAME_MS_FIXED: f64 = 60.0;
     /// The FMA peak (`gpu::peak::fma_peak`) of the device the times above were fitted on,
-    /// FMA/s: lavapipe on 2 cores measures 21–38 GFMA/s from run to run. On another device
-    /// the times are scaled by this over that device's peak ([`Survey::time_scale`]).
-    pub const FIT_FMA_PEAK: f64 = 30e9;
+    /// FMA/s: lavapipe on 2 cores. The kernel with its body written out eight times measures
+    /// 61 GFMA/s there (the hardware's 2 cores × 2 FMA units × 8 lanes at about 2 GHz); the
+    /// kernel of the fit's time, loop-bound, read 21–38 (26.7 in the same session as the 61),
+    /// so the fit's 30 becomes 30 × 61/26.7 ≈ 68. On another device the times are scaled by
+    /// this over that device's peak ([`Survey::time_scale`]).
+    pub const FIT_FMA_PEAK: f64 = 68e9;
 }
 
 /// The point counts and RSM sides budget mode chooses among: the range the model was fitted
