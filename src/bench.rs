@@ -27,8 +27,13 @@ use crate::vals::{SparseMethod, SparseSettings};
 /// moments Σw, Σw·l, Σw·l² (7). Glossy half (21): r·d (3), inverseSqrt, its guard and the
 /// product (3), the clamp, pow and the select on g > 0 (3), Σ Φ/π·(g·lobe) (4), weight (1),
 /// moments (7). Before the cosines' 1/|d| was folded into the denominator the same count read
-/// 55 and 40.
+/// 55 and 40. A gather without the light spheres (every solution but `sum` and `union`)
+/// leaves out Σw·l² in each half: [`GATHER_SPHERE_OPS_PER_HALF`] less per half.
 pub const GATHER_OPS_PER_PAIR: f64 = 53.0;
+
+/// The second position moments Σw·l² of one half of the gather (3 FMAs a pair), which only
+/// the disc occlusion's spheres need.
+pub const GATHER_SPHERE_OPS_PER_HALF: f64 = 3.0;
 
 /// The same for a diffuse-only gather (`glossy off`, or `auto` on an all-Lambert scene): the
 /// diffuse half of [`GATHER_OPS_PER_PAIR`].
@@ -111,7 +116,7 @@ struct Row {
     sparse_ms: f64,
     pairs_per_s: f64,
     /// [`GATHER_OPS_PER_PAIR`], or [`GATHER_DIFFUSE_OPS_PER_PAIR`] where no glossy light
-    /// was gathered.
+    /// was gathered, less the sphere moments where the gather left them out.
     ops_per_pair: f64,
     bytes_per_point: f64,
 }
@@ -127,12 +132,19 @@ impl Row {
         let number = |key: &str| report.get(key).and_then(|v| v.as_f64()).unwrap_or(0.0);
         let (vals, points) = (number("vals") as u32, number("sparse_points") as u32);
         let gather_ms = crate::vals::gather_ms(timings).max(1e-6);
-        let glossy = report.get("glossy_gathered").and_then(|v| v.as_bool());
+        let flag = |key: &str| report.get(key).and_then(|v| v.as_bool());
+        let glossy = flag("glossy_gathered") != Some(false);
+        let spheres = flag("spheres_gathered") != Some(false);
+        let (ops, halves) = if glossy {
+            (GATHER_OPS_PER_PAIR, 2.0)
+        } else {
+            (GATHER_DIFFUSE_OPS_PER_PAIR, 1.0)
+        };
         Self {
-            ops_per_pair: if glossy == Some(false) {
-                GATHER_DIFFUSE_OPS_PER_PAIR
+            ops_per_pair: if spheres {
+                ops
             } else {
-                GATHER_OPS_PER_PAIR
+                ops - halves * GATHER_SPHERE_OPS_PER_HALF
             },
             config: config.into(),
             vals,

@@ -26,6 +26,12 @@ override GLOSSY_GATHER: bool = true;
 // False in a pipeline for a solution without `--occlusion rays`: the cluster visibility
 // lookup, per VAL, then goes too (a quarter of a diffuse gather's time on lavapipe).
 override GATHER_VISIBILITY: bool = true;
+// False in a pipeline for a solution without the disc occlusion (`sum`, `union`): the second
+// position moments, which only size its light spheres, then go (3 of a diffuse pair's 32
+// operations, and state that no longer spills: `+rays` 196–203 → 174–176 ms on lavapipe,
+// 16k VALs × 4k points). Whatever the build, the spheres are written only for those modes
+// (`params.occlusion_mode`), so every form of the gather writes the same slots.
+override GATHER_SPHERES: bool = true;
 const POINT_SLOTS: u32 = 4u;
 
 // Weighted moments Σw, Σw·l, Σw·l² of the VAL positions.
@@ -84,14 +90,18 @@ fn accumulate(sums: ptr<function, Sums>, point: WorldPoint, r: vec3<f32>, val: V
     (*sums).diffuse += flux_over_pi * g;
     (*sums).md.weight += wd;
     (*sums).md.sum += wd * l;
-    (*sums).md.sum_squares += wd * l2;
+    if (GATHER_SPHERES) {
+        (*sums).md.sum_squares += wd * l2;
+    }
     if (glossy_on && GLOSSY_GATHER) {
         let lobe_j = disc_lobe(t, r, point.k);
         let ws = POSITION_EPSILON + strength * lobe_j;
         (*sums).glossy += flux_over_pi * (g * lobe_j);
         (*sums).ms.weight += ws;
         (*sums).ms.sum += ws * l;
-        (*sums).ms.sum_squares += ws * l2;
+        if (GATHER_SPHERES) {
+            (*sums).ms.sum_squares += ws * l2;
+        }
     }
 }
 
@@ -132,10 +142,14 @@ var<private> all_sums: array<Sums, POINT_SLOTS>;
 // The point's gathered sums into its slots: irradiance sums, mean positions as f16 offsets
 // from the point, occlusion spheres.
 fn write_point(index: u32, point: WorldPoint, sums: Sums, count: u32, glossy_on: bool) {
-    let d = moments_mean_sphere(sums.md);
+    var d = moments_mean_sphere(sums.md);
     var s = vec4<f32>(point.position, 0.0);
     if (glossy_on) {
         s = moments_mean_sphere(sums.ms);
+    }
+    if (params.occlusion_mode == 0u) {
+        d.w = 0.0;
+        s.w = 0.0;
     }
     // With no VAL at all the means are undefined: keep the lights on the point, dark.
     var off_d = d.xyz - point.position;

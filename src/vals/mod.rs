@@ -766,6 +766,7 @@ impl Method for SparseMethod {
             },
             "glossy": format!("{:?}", opts.glossy).to_lowercase(),
             "glossy_gathered": self.sparse.gathers_glossy(&opts),
+            "spheres_gathered": self.sparse.gathers_spheres(&opts),
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
             "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),

@@ -396,6 +396,8 @@ struct GatherCode {
     visibility: bool,
     /// The visibility lookup as a select tree, else as a switch ([`VisibilityLookup`]).
     select_tree: bool,
+    /// The second position moments that size the disc occlusion's light spheres.
+    spheres: bool,
 }
 
 impl GatherCode {
@@ -405,22 +407,27 @@ impl GatherCode {
             glossy: true,
             visibility: true,
             select_tree: VisibilityLookup::Auto.select_tree(ctx.is_software()),
+            spheres: true,
         }
     }
 
     /// The pipeline constants that build it (`vals_gather.wgsl`).
-    fn constants(self) -> [(&'static str, f64); 3] {
+    fn constants(self) -> [(&'static str, f64); 4] {
         let flag = |on: bool| if on { 1.0 } else { 0.0 };
         [
             ("GLOSSY_GATHER", flag(self.glossy)),
             ("GATHER_VISIBILITY", flag(self.visibility)),
             ("VISIBILITY_SELECT_TREE", flag(self.select_tree)),
+            ("GATHER_SPHERES", flag(self.spheres)),
         ]
     }
 
     /// The slot in `SparsePipelines::gather_variants`.
     fn variant(self) -> usize {
-        self.glossy as usize | (self.visibility as usize) << 1 | (self.select_tree as usize) << 2
+        self.glossy as usize
+            | (self.visibility as usize) << 1
+            | (self.select_tree as usize) << 2
+            | (self.spheres as usize) << 3
     }
 }
 
@@ -458,9 +465,9 @@ struct SparsePipelines {
     gather: (GroupLayout, wgpu::ComputePipeline),
     /// The gather without the code a solution does not run, built when first used and indexed
     /// by [`GatherCode::variant`]: the glossy lobes (`GLOSSY_GATHER` false), the cluster
-    /// visibility (`GATHER_VISIBILITY` false), the other visibility lookup.
-    /// `gather` is [`GatherCode::full`].
-    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 8],
+    /// visibility (`GATHER_VISIBILITY` false), the other visibility lookup, the light spheres'
+    /// moments (`GATHER_SPHERES` false). `gather` is [`GatherCode::full`].
+    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 16],
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
@@ -1237,6 +1244,15 @@ impl SparseGpu {
         options.glossy.gathers(self.reflects_glossily)
     }
 
+    /// Whether the gather sums the second position moments, which size the light spheres of
+    /// the disc occlusion (`sum`, `union`): the compute gather leaves them out for other
+    /// solutions; the raster form keeps one build. Either way the spheres are written only
+    /// for those modes.
+    pub fn gathers_spheres(&self, options: &SparseOptions) -> bool {
+        options.gather == GatherForm::Raster
+            || matches!(options.occlusion, OcclusionMode::Sum | OcclusionMode::Union)
+    }
+
     pub fn params(&self, eye: Vec3, options: &SparseOptions, glossy_only: bool) -> SparseParams {
         let mut flags = 0;
         if self.gathers_glossy(options) {
@@ -1390,6 +1406,7 @@ impl SparseGpu {
                     glossy: self.gathers_glossy(options),
                     visibility: options.occlusion == OcclusionMode::Rays,
                     select_tree: self.visibility_select_tree(options),
+                    spheres: self.gathers_spheres(options),
                 };
                 let pipeline = if code == GatherCode::full(passes.ctx()) {
                     &self.gather.pipeline
