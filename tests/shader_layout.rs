@@ -216,8 +216,8 @@ fn shared_constants_match() {
         (
             "vals_gather.wgsl",
             &[(
-                "POINTS_PER_INVOCATION",
-                valgi::vals::sparse::GATHER_POINTS_PER_INVOCATION,
+                "POINT_SLOTS",
+                valgi::vals::sparse::GATHER_POINTS_PER_INVOCATION_MAX,
             )],
         ),
         (

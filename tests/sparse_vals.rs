@@ -48,6 +48,7 @@ fn sparse_settings(
             visibility_history: 0,
             adaptive_rays: false,
             gather_slices: 0,
+            gather_points: 0,
             visibility_lookup: Default::default(),
         },
         ..Default::default()
@@ -771,6 +772,63 @@ fn both_visibility_lookups_gather_the_same_sums() {
         darker > 10,
         "{darker} points lost a tenth of their light to visibility"
     );
+}
+
+/// 4, 8 and 16 points per compute-gather invocation (`gather-points`; a CPU device picks 16
+/// at 4096 points) gather the same f32 sums in the same order, so the same bits, with the
+/// cluster visibility (each slot group's own words) and with the disc occlusion's spheres;
+/// 1500 points fill one 16-slot workgroup and part of a second.
+#[test]
+fn every_points_per_invocation_gathers_the_same_sums() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let run = |occlusion: OcclusionMode, per_invocation: u32| {
+        let mut s = sparse_settings(32, 1500, occlusion, true);
+        s.options.gather_points = per_invocation;
+        let (method, _, points) = run_sparse(&ctx, &scene, 16, s, Stage::Gather);
+        assert_eq!(
+            Method::report(&method)["gather_points_per_invocation"],
+            per_invocation
+        );
+        points
+    };
+    for occlusion in [OcclusionMode::Rays, OcclusionMode::Sum] {
+        let four = run(occlusion, 4);
+        assert!(four.lights.len() > 1024, "{} points", four.lights.len());
+        for per_invocation in [8, 16] {
+            let other = run(occlusion, per_invocation);
+            assert_eq!(other.lights.len(), four.lights.len());
+            for (i, (a, b)) in four.lights.iter().zip(&other.lights).enumerate() {
+                let what = format!("{occlusion:?}, {per_invocation} per invocation, point {i}");
+                assert_eq!(a.diffuse, b.diffuse, "{what}: diffuse");
+                assert_eq!(a.glossy, b.glossy, "{what}: glossy");
+                assert_eq!(a.diffuse_position, b.diffuse_position, "{what}: position");
+                assert_eq!(
+                    a.glossy_position, b.glossy_position,
+                    "{what}: glossy position"
+                );
+                assert_eq!(four.spheres[i], other.spheres[i], "{what}: spheres");
+            }
+        }
+        if occlusion == OcclusionMode::Sum {
+            // The spheres are gathered for the disc occlusion.
+            let sized = four.spheres.iter().filter(|(d, _)| *d > 0.0).count();
+            assert!(sized > four.lights.len() / 2, "{sized} spheres");
+        } else {
+            // Visibility differs from point to point, so a slot reading another's words
+            // would change its sums: the tall block hides clusters from some points.
+            let off = run(OcclusionMode::Off, 16);
+            let darker = four
+                .lights
+                .iter()
+                .zip(&off.lights)
+                .filter(|(t, o)| t.diffuse.max_element() < 0.9 * o.diffuse.max_element())
+                .count();
+            assert!(darker > 10, "{darker} points lost a tenth of their light");
+            // Without the disc occlusion no sphere is written.
+            assert!(four.spheres.iter().all(|&(d, s)| d == 0.0 && s == 0.0));
+        }
+    }
 }
 
 #[test]

@@ -27,6 +27,7 @@ fn settings(points: usize) -> SparseSettings {
             visibility_history: 0,
             adaptive_rays: false,
             gather_slices: 0,
+            gather_points: 0,
             visibility_lookup: Default::default(),
         },
         ..Default::default()

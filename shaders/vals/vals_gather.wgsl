@@ -1,7 +1,7 @@
-// Step 1 — gather: every VAL at every sparse point. Each workgroup takes 64 invocations × 4
-// points; the VAL list streams through workgroup memory `tile` records at a time, so every VAL
-// is fetched from the buffer once per workgroup and read from workgroup memory once per
-// invocation, not once per point. Writes the irradiance sums (in the slots the
+// Step 1 — gather: every VAL at every sparse point. Each workgroup takes 64 invocations ×
+// GATHER_SLOTS points; the VAL list streams through workgroup memory `tile` records at a
+// time, so every VAL is fetched from the buffer once per workgroup and read from workgroup
+// memory once per invocation, not once per point. Writes the irradiance sums (in the slots the
 // renormalized intensities later take), the averaged positions as f16 offsets from the point,
 // and the occlusion spheres. Split over VAL slices (dispatch z > 1), each workgroup gathers
 // one slice and stores partial sums for `vals_gather_reduce.wgsl` instead.
@@ -13,26 +13,21 @@ const TILE_MAX: u32 = 256u;
 var<workgroup> tile_vals: array<Val, TILE_MAX>;
 var<workgroup> shared_count: u32;
 
-// Points per invocation: every VAL read from workgroup memory is used for this many points
-// (register blocking), which on a CPU device halves the loads per pair at 2 and quarters them
-// at 4. `GATHER_POINTS_PER_INVOCATION` in `src/vals/sparse.rs` sizes the dispatch; the slots
-// are the shared half's POINT_SLOTS.
-const POINTS_PER_INVOCATION: u32 = POINT_SLOTS;
+// Points per invocation, 4, 8 or 16 (`vals::sparse::gather_points_per_invocation` picks it
+// and sizes the dispatch): every VAL read from workgroup memory, and its per-VAL factors, serve
+// this many points (register blocking). On llvmpipe, where every invocation reads each VAL
+// itself, 16 points ran the gather 1.4–2.1× faster than 4 (16k VALs × 4k points: diffuse 90 →
+// 44 ms, +rays 174 → 123); a GPU keeps the 4 it was measured with. The code for slots past
+// GATHER_SLOTS is compiled out, so the arrays below stay in registers either way.
+override GATHER_SLOTS: u32 = 4u;
 
-// The four points' cluster visibility words, one variable per word (lane q: slot q), picked
-// by `slot_words`: the word index comes from the VAL, the same for the whole workgroup, so
-// the variables can stay in registers. On an H200 this gathered `+rays` 10–13 %
-// faster than a private array indexed by the cluster (16k VALs × 4k points 0.76 against
-// 0.84 ms, 512k × 4k 28.5–29.0 against 32.3–33.8 ms, same run); on lavapipe it measured the
-// same within the noise.
-var<private> vis0: vec4<u32>;
-var<private> vis1: vec4<u32>;
-var<private> vis2: vec4<u32>;
-var<private> vis3: vec4<u32>;
-var<private> vis4: vec4<u32>;
-var<private> vis5: vec4<u32>;
-var<private> vis6: vec4<u32>;
-var<private> vis7: vec4<u32>;
+// Each group of four slots' cluster visibility words, word w of slot 4g + i in lane i of
+// visibility_words[g][w], picked by `slot_words`: the word index comes from the VAL, the same
+// for the whole workgroup, and every index here is a constant once the slot code is written
+// out, so the words stay in registers. On an H200 this gathered `+rays` 10–13 % faster than a
+// private array indexed by the cluster (16k VALs × 4k points 0.76 against 0.84 ms, 512k × 4k
+// 28.5–29.0 against 32.3–33.8 ms, same run); on lavapipe it measured the same within the noise.
+var<private> visibility_words: array<array<vec4<u32>, 8>, 4>;
 
 fn words_of(first: u32, w: u32, use_visibility: bool) -> vec4<u32> {
     return vec4<u32>(
@@ -43,15 +38,18 @@ fn words_of(first: u32, w: u32, use_visibility: bool) -> vec4<u32> {
     );
 }
 
-fn load_visibility(first: u32, use_visibility: bool) {
-    vis0 = words_of(first, 0u, use_visibility);
-    vis1 = words_of(first, 1u, use_visibility);
-    vis2 = words_of(first, 2u, use_visibility);
-    vis3 = words_of(first, 3u, use_visibility);
-    vis4 = words_of(first, 4u, use_visibility);
-    vis5 = words_of(first, 5u, use_visibility);
-    vis6 = words_of(first, 6u, use_visibility);
-    vis7 = words_of(first, 7u, use_visibility);
+// The eight words of the four slots from point `first` on.
+fn group_words(first: u32, use_visibility: bool) -> array<vec4<u32>, 8> {
+    return array<vec4<u32>, 8>(
+        words_of(first, 0u, use_visibility),
+        words_of(first, 1u, use_visibility),
+        words_of(first, 2u, use_visibility),
+        words_of(first, 3u, use_visibility),
+        words_of(first, 4u, use_visibility),
+        words_of(first, 5u, use_visibility),
+        words_of(first, 6u, use_visibility),
+        words_of(first, 7u, use_visibility),
+    );
 }
 
 // True on a CPU device (`vals::sparse::VisibilityLookup`): llvmpipe runs every case of a switch under
@@ -60,33 +58,35 @@ fn load_visibility(first: u32, use_visibility: bool) {
 // GPU branches on the uniform word index, and keeps the switch it was measured with.
 override VISIBILITY_SELECT_TREE: bool = true;
 
-fn slot_words(w: u32) -> vec4<u32> {
+// Word w of the four slots of group g.
+fn slot_words(g: u32, w: u32) -> vec4<u32> {
+    let words = visibility_words[g];
     if (VISIBILITY_SELECT_TREE) {
         let b0 = (w & 1u) != 0u;
         let b1 = (w & 2u) != 0u;
-        let low = select(select(vis0, vis1, b0), select(vis2, vis3, b0), b1);
-        let high = select(select(vis4, vis5, b0), select(vis6, vis7, b0), b1);
+        let low = select(select(words[0], words[1], b0), select(words[2], words[3], b0), b1);
+        let high = select(select(words[4], words[5], b0), select(words[6], words[7], b0), b1);
         return select(low, high, (w & 4u) != 0u);
     }
     switch w {
-        case 0u: { return vis0; }
-        case 1u: { return vis1; }
-        case 2u: { return vis2; }
-        case 3u: { return vis3; }
-        case 4u: { return vis4; }
-        case 5u: { return vis5; }
-        case 6u: { return vis6; }
-        default: { return vis7; }
+        case 0u: { return words[0]; }
+        case 1u: { return words[1]; }
+        case 2u: { return words[2]; }
+        case 3u: { return words[3]; }
+        case 4u: { return words[4]; }
+        case 5u: { return words[5]; }
+        case 6u: { return words[6]; }
+        default: { return words[7]; }
     }
 }
 
-// One VAL at each of this invocation's points. Written out, not a loop: llvmpipe counts every
+// One VAL at the four points of slot group g. Written out, not a loop: llvmpipe counts every
 // loop iteration against its per-invocation limit (see the VAL loop below).
-fn accumulate_all(val: Val, glossy_on: bool, flux_weights: bool, use_visibility: bool) {
+fn accumulate_group(g: u32, val: Val, glossy_on: bool, flux_weights: bool, use_visibility: bool) {
     var v = vec4<f32>(1.0);
     if (use_visibility && GATHER_VISIBILITY) {
         let cluster = val_cluster(val);
-        let words = slot_words(min(cluster / 4u, VISIBILITY_WORDS - 1u));
+        let words = slot_words(g, min(cluster / 4u, VISIBILITY_WORDS - 1u));
         v = vec4<f32>(
             cluster_visibility(cluster, words.x),
             cluster_visibility(cluster, words.y),
@@ -94,18 +94,52 @@ fn accumulate_all(val: Val, glossy_on: bool, flux_weights: bool, use_visibility:
             cluster_visibility(cluster, words.w),
         );
     }
-    var s0 = all_sums[0];
-    var s1 = all_sums[1];
-    var s2 = all_sums[2];
-    var s3 = all_sums[3];
-    accumulate(&s0, points[0], mirrors[0], val, v.x, glossy_on, flux_weights);
-    accumulate(&s1, points[1], mirrors[1], val, v.y, glossy_on, flux_weights);
-    accumulate(&s2, points[2], mirrors[2], val, v.z, glossy_on, flux_weights);
-    accumulate(&s3, points[3], mirrors[3], val, v.w, glossy_on, flux_weights);
-    all_sums[0] = s0;
-    all_sums[1] = s1;
-    all_sums[2] = s2;
-    all_sums[3] = s3;
+    let q = 4u * g;
+    var s0 = all_sums[q];
+    var s1 = all_sums[q + 1u];
+    var s2 = all_sums[q + 2u];
+    var s3 = all_sums[q + 3u];
+    accumulate(&s0, points[q], mirrors[q], val, v.x, glossy_on, flux_weights);
+    accumulate(&s1, points[q + 1u], mirrors[q + 1u], val, v.y, glossy_on, flux_weights);
+    accumulate(&s2, points[q + 2u], mirrors[q + 2u], val, v.z, glossy_on, flux_weights);
+    accumulate(&s3, points[q + 3u], mirrors[q + 3u], val, v.w, glossy_on, flux_weights);
+    all_sums[q] = s0;
+    all_sums[q + 1u] = s1;
+    all_sums[q + 2u] = s2;
+    all_sums[q + 3u] = s3;
+}
+
+// One VAL at each of this invocation's points.
+fn accumulate_all(val: Val, glossy_on: bool, flux_weights: bool, use_visibility: bool) {
+    accumulate_group(0u, val, glossy_on, flux_weights, use_visibility);
+    if (GATHER_SLOTS > 4u) {
+        accumulate_group(1u, val, glossy_on, flux_weights, use_visibility);
+    }
+    if (GATHER_SLOTS > 8u) {
+        accumulate_group(2u, val, glossy_on, flux_weights, use_visibility);
+        accumulate_group(3u, val, glossy_on, flux_weights, use_visibility);
+    }
+}
+
+// Slot group g's points (from `first`, strided by GROUP), their words, cleared sums; true
+// when one of them is a point.
+fn load_group(g: u32, first: u32, use_visibility: bool) -> bool {
+    let q = 4u * g;
+    let base = first + q * GROUP;
+    var any_active = load_slot(q, base);
+    any_active = load_slot(q + 1u, base + GROUP) || any_active;
+    any_active = load_slot(q + 2u, base + 2u * GROUP) || any_active;
+    any_active = load_slot(q + 3u, base + 3u * GROUP) || any_active;
+    visibility_words[g] = group_words(base, use_visibility);
+    return any_active;
+}
+
+fn write_group(g: u32, first: u32, count: u32, glossy_on: bool, slice: u32, slices: u32) {
+    let q = 4u * g;
+    write_slot(q, first, count, glossy_on, slice, slices);
+    write_slot(q + 1u, first, count, glossy_on, slice, slices);
+    write_slot(q + 2u, first, count, glossy_on, slice, slices);
+    write_slot(q + 3u, first, count, glossy_on, slice, slices);
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -120,19 +154,22 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let chunk = (count + slices - 1u) / slices;
     let begin = min(gid.z * chunk, count);
     let end = min(begin + chunk, count);
-    // The workgroup's GROUP · POINTS_PER_INVOCATION points, strided by GROUP so that the
-    // invocations of a SIMD row read neighbouring points.
-    let first = (linear_index(gid, groups) / GROUP) * GROUP * POINTS_PER_INVOCATION + lid;
+    // The workgroup's GROUP · GATHER_SLOTS points, strided by GROUP so that the invocations
+    // of a SIMD row read neighbouring points.
+    let first = (linear_index(gid, groups) / GROUP) * GROUP * GATHER_SLOTS + lid;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
     let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
     let use_visibility = (params.flags & FLAG_VISIBILITY) != 0u;
 
     // Written out, not a loop, so that the per-slot arrays are indexed by constants only.
-    var any_active = load_slot(0u, first + 0u * GROUP);
-    any_active = load_slot(1u, first + 1u * GROUP) || any_active;
-    any_active = load_slot(2u, first + 2u * GROUP) || any_active;
-    any_active = load_slot(3u, first + 3u * GROUP) || any_active;
-    load_visibility(first, use_visibility);
+    var any_active = load_group(0u, first, use_visibility);
+    if (GATHER_SLOTS > 4u) {
+        any_active = load_group(1u, first, use_visibility) || any_active;
+    }
+    if (GATHER_SLOTS > 8u) {
+        any_active = load_group(2u, first, use_visibility) || any_active;
+        any_active = load_group(3u, first, use_visibility) || any_active;
+    }
 
     for (var base = begin; base < end; base += tile) {
         let m = min(tile, end - base);
@@ -173,10 +210,14 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         }
         workgroupBarrier();
     }
-    write_slot(0u, first, count, glossy_on, gid.z, slices);
-    write_slot(1u, first, count, glossy_on, gid.z, slices);
-    write_slot(2u, first, count, glossy_on, gid.z, slices);
-    write_slot(3u, first, count, glossy_on, gid.z, slices);
+    write_group(0u, first, count, glossy_on, gid.z, slices);
+    if (GATHER_SLOTS > 4u) {
+        write_group(1u, first, count, glossy_on, gid.z, slices);
+    }
+    if (GATHER_SLOTS > 8u) {
+        write_group(2u, first, count, glossy_on, gid.z, slices);
+        write_group(3u, first, count, glossy_on, gid.z, slices);
+    }
 }
 
 fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, slice: u32, slices: u32) {

@@ -32,7 +32,8 @@ override GATHER_VISIBILITY: bool = true;
 // 16k VALs × 4k points). Whatever the build, the spheres are written only for those modes
 // (`params.occlusion_mode`), so every form of the gather writes the same slots.
 override GATHER_SPHERES: bool = true;
-const POINT_SLOTS: u32 = 4u;
+// Room for the compute form's GATHER_SLOTS (at most 16; `vals_gather.wgsl`).
+const POINT_SLOTS: u32 = 16u;
 
 // Weighted moments Σw, Σw·l, Σw·l² of the VAL positions.
 struct Moments {

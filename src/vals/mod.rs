@@ -63,6 +63,7 @@ impl Default for SparseSettings {
                 visibility_history: 50,
                 adaptive_rays: false,
                 gather_slices: 0,
+                gather_points: 0,
                 visibility_lookup: VisibilityLookup::Auto,
             },
             glossy_eye: GlossyEye::Mid,
@@ -116,6 +117,10 @@ impl SparseSettings {
                 adaptive_rays: options.choice("visibility-rays", &["all", "adaptive"])?
                     == "adaptive",
                 gather_slices: gather_slices_option(options)?,
+                gather_points: match options.choice("gather-points", &["auto", "4", "8", "16"])? {
+                    "auto" => 0,
+                    n => n.parse().unwrap_or(0),
+                },
                 visibility_lookup: VisibilityLookup::parse(
                     options.choice("visibility-lookup", VisibilityLookup::CHOICES)?,
                 ),
@@ -304,7 +309,13 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "gather",
         kind: OptionKind::Choice(&["compute", "raster"]),
         default: "compute",
-        help: "the gather as a compute pass (VALs through workgroup memory, 4 points per invocation) or as a fragment pass over a point target (the paper's form); same sums",
+        help: "the gather as a compute pass (VALs through workgroup memory, several points per invocation) or as a fragment pass over a point target (the paper's form); same sums",
+    },
+    OptionSpec {
+        name: "gather-points",
+        kind: OptionKind::Choice(&["auto", "4", "8", "16"]),
+        default: "auto",
+        help: "sparse points per compute-gather invocation, each VAL read serving them all (auto: 4 on a GPU; on a CPU device 16 or 8 where every CPU thread still gets a workgroup, else 4); same sums",
     },
     OptionSpec {
         name: "gather-slices",
@@ -762,6 +773,10 @@ impl Method for SparseMethod {
             "gather": format!("{:?}", opts.gather).to_lowercase(),
             "gather_slices": match opts.gather {
                 GatherForm::Compute => self.sparse.gather_slices(&opts),
+                GatherForm::Raster => 1,
+            },
+            "gather_points_per_invocation": match opts.gather {
+                GatherForm::Compute => self.sparse.gather_points_per_invocation(&opts),
                 GatherForm::Raster => 1,
             },
             "glossy": format!("{:?}", opts.glossy).to_lowercase(),

@@ -62,9 +62,47 @@ pub fn occlusion_levels(point_count: u32, tile: u32) -> Vec<u32> {
 /// `tests/shader_layout.rs`).
 pub const POINT_GROUP: u32 = 64;
 
-/// Sparse points each gather invocation takes (`POINTS_PER_INVOCATION` in
-/// `shaders/vals/vals_gather.wgsl`): a gather workgroup covers `POINT_GROUP` times this many.
-pub const GATHER_POINTS_PER_INVOCATION: u32 = 4;
+/// Sparse points a gather invocation takes on a GPU (`GATHER_SLOTS` in
+/// `shaders/vals/vals_gather.wgsl`), the count the H200's figures were measured with: a gather
+/// workgroup covers `POINT_GROUP` times this many.
+pub const GATHER_POINTS_PER_INVOCATION_GPU: u32 = 4;
+
+/// The most points a gather invocation takes (`POINT_SLOTS` in `vals_gather_common.wgsl`).
+pub const GATHER_POINTS_PER_INVOCATION_MAX: u32 = 16;
+
+/// Sparse points each gather invocation takes (`GATHER_SLOTS`): `requested` where it is 4, 8
+/// or 16 (`gather-points`); else on a GPU
+/// [`GATHER_POINTS_PER_INVOCATION_GPU`]; on a CPU device the most of 16, 8 and 4 that still
+/// gives every one of `threads` CPU threads a workgroup, since there each invocation reads
+/// every VAL from workgroup memory itself and more points per read ran the gather 1.4–2.1×
+/// faster (lavapipe, 16k VALs × 4k points, 16 points against 4).
+pub fn gather_points_per_invocation(
+    requested: u32,
+    cpu_device: bool,
+    point_count: u32,
+    threads: u32,
+) -> u32 {
+    if matches!(requested, 4 | 8 | 16) {
+        return requested;
+    }
+    if !cpu_device {
+        return GATHER_POINTS_PER_INVOCATION_GPU;
+    }
+    [16, 8]
+        .into_iter()
+        .find(|&slots| point_count.div_ceil(POINT_GROUP * slots) >= threads.max(1))
+        .unwrap_or(4)
+}
+
+/// The CPU threads a software device runs workgroups on: Mesa's `LP_NUM_THREADS` where set,
+/// else the machine's.
+pub fn cpu_device_threads() -> u32 {
+    std::env::var("LP_NUM_THREADS")
+        .ok()
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u32))
+}
 
 /// vec4 words per (slice, point) of the split gather's partial sums (`PARTIAL_VEC4S` in
 /// `shaders/vals/vals_gather_partials.wgsl`): the 20 floats of one point's sums.
@@ -104,7 +142,7 @@ pub fn gather_slices(
         0 if cpu_device => 1,
         0 => {
             let groups = point_count
-                .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION)
+                .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION_GPU)
                 .max(1);
             let by_vals = val_capacity.div_ceil(u64::from(tile.max(1))).max(1);
             GATHER_TARGET_WORKGROUPS
@@ -147,6 +185,9 @@ pub struct SparseOptions {
     /// Slices of the VAL list the compute gather is split into (0: automatic, see
     /// [`gather_slices`]).
     pub gather_slices: u32,
+    /// Points per compute-gather invocation, 4, 8 or 16 (0: automatic, see
+    /// [`gather_points_per_invocation`]).
+    pub gather_points: u32,
     /// How the compute gather picks a VAL's cluster visibility (`visibility-lookup`).
     pub visibility_lookup: VisibilityLookup,
 }
@@ -193,7 +234,7 @@ impl VisibilityLookup {
 /// The two forms of the gather (`--gather`), which compute the same sums.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum GatherForm {
-    /// `vals_gather.wgsl`: workgroups of 64 invocations × [`GATHER_POINTS_PER_INVOCATION`]
+    /// `vals_gather.wgsl`: workgroups of 64 invocations × [`gather_points_per_invocation`]
     /// points, the VALs streamed through workgroup memory.
     #[default]
     Compute,
@@ -398,6 +439,8 @@ struct GatherCode {
     select_tree: bool,
     /// The second position moments that size the disc occlusion's light spheres.
     spheres: bool,
+    /// Points per invocation: 4, 8 or 16 ([`gather_points_per_invocation`]).
+    slots: u32,
 }
 
 impl GatherCode {
@@ -408,26 +451,38 @@ impl GatherCode {
             visibility: true,
             select_tree: VisibilityLookup::Auto.select_tree(ctx.is_software()),
             spheres: true,
+            slots: if ctx.is_software() {
+                GATHER_POINTS_PER_INVOCATION_MAX
+            } else {
+                GATHER_POINTS_PER_INVOCATION_GPU
+            },
         }
     }
 
     /// The pipeline constants that build it (`vals_gather.wgsl`).
-    fn constants(self) -> [(&'static str, f64); 4] {
+    fn constants(self) -> [(&'static str, f64); 5] {
         let flag = |on: bool| if on { 1.0 } else { 0.0 };
         [
             ("GLOSSY_GATHER", flag(self.glossy)),
             ("GATHER_VISIBILITY", flag(self.visibility)),
             ("VISIBILITY_SELECT_TREE", flag(self.select_tree)),
             ("GATHER_SPHERES", flag(self.spheres)),
+            ("GATHER_SLOTS", f64::from(self.slots)),
         ]
     }
 
     /// The slot in `SparsePipelines::gather_variants`.
     fn variant(self) -> usize {
+        let slots = match self.slots {
+            16 => 2,
+            8 => 1,
+            _ => 0,
+        };
         self.glossy as usize
             | (self.visibility as usize) << 1
             | (self.select_tree as usize) << 2
             | (self.spheres as usize) << 3
+            | slots << 4
     }
 }
 
@@ -467,7 +522,7 @@ struct SparsePipelines {
     /// by [`GatherCode::variant`]: the glossy lobes (`GLOSSY_GATHER` false), the cluster
     /// visibility (`GATHER_VISIBILITY` false), the other visibility lookup, the light spheres'
     /// moments (`GATHER_SPHERES` false). `gather` is [`GatherCode::full`].
-    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 16],
+    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 48],
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
@@ -648,7 +703,7 @@ impl SparsePipelines {
         let occluder_bounds = (occluder_layout, occluder_discs);
         Ok(Self {
             gather: (gather_layout, gather),
-            gather_variants: Default::default(),
+            gather_variants: std::array::from_fn(|_| std::sync::OnceLock::new()),
             gather_reduce,
             partials,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
@@ -1115,6 +1170,17 @@ impl SparseGpu {
     }
 
     /// The VAL slices the compute gather runs as under `options` on this device.
+    /// Points per compute-gather invocation under `options` on this device for this point
+    /// count.
+    pub fn gather_points_per_invocation(&self, options: &SparseOptions) -> u32 {
+        gather_points_per_invocation(
+            options.gather_points,
+            self.cpu_device,
+            self.point_count,
+            cpu_device_threads(),
+        )
+    }
+
     /// Whether the compute gather looks visibility up through the select tree (else a switch).
     pub fn visibility_select_tree(&self, options: &SparseOptions) -> bool {
         options.visibility_lookup.select_tree(self.cpu_device)
@@ -1397,17 +1463,17 @@ impl SparseGpu {
             GatherForm::Compute if self.point_count > 0 => {
                 let slices = self.gather_slices(options);
                 let partials = self.partials_for(passes.ctx(), slices)?;
-                let (x, y) = linear_groups(
-                    self.point_count
-                        .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION),
-                    max_groups,
-                );
                 let code = GatherCode {
                     glossy: self.gathers_glossy(options),
                     visibility: options.occlusion == OcclusionMode::Rays,
                     select_tree: self.visibility_select_tree(options),
                     spheres: self.gathers_spheres(options),
+                    slots: self.gather_points_per_invocation(options),
                 };
+                let (x, y) = linear_groups(
+                    self.point_count.div_ceil(POINT_GROUP * code.slots),
+                    max_groups,
+                );
                 let pipeline = if code == GatherCode::full(passes.ctx()) {
                     &self.gather.pipeline
                 } else {
@@ -1630,6 +1696,25 @@ mod tests {
     use super::*;
 
     const MIB64: u64 = 64 << 20;
+
+    #[test]
+    fn a_cpu_device_takes_the_most_points_per_invocation_that_keep_every_thread_busy() {
+        // A GPU keeps the four it was measured with, whatever the count.
+        assert_eq!(gather_points_per_invocation(0, false, 1 << 16, 2), 4);
+        // Two threads: 16 points an invocation while there are two workgroups of 1024.
+        assert_eq!(gather_points_per_invocation(0, true, 4096, 2), 16);
+        assert_eq!(gather_points_per_invocation(0, true, 2048, 2), 16);
+        assert_eq!(gather_points_per_invocation(0, true, 1025, 2), 16);
+        assert_eq!(gather_points_per_invocation(0, true, 1024, 2), 8);
+        assert_eq!(gather_points_per_invocation(0, true, 513, 2), 8);
+        assert_eq!(gather_points_per_invocation(0, true, 512, 2), 4);
+        // More threads want more workgroups.
+        assert_eq!(gather_points_per_invocation(0, true, 4096, 16), 4);
+        // An explicit choice stands; anything else is automatic.
+        assert_eq!(gather_points_per_invocation(16, false, 64, 2), 16);
+        assert_eq!(gather_points_per_invocation(8, true, 1 << 16, 2), 8);
+        assert_eq!(gather_points_per_invocation(5, true, 4096, 2), 16);
+    }
 
     #[test]
     fn the_automatic_split_fills_a_gpu_and_leaves_a_cpu_device_whole() {
