@@ -796,13 +796,19 @@ pub mod model {
     /// `rays` the lookup). Lavapipe, 16k VALs × 4k points (`valgi bench`, the old gather
     /// 216–242 ms in the same session): with lobes and visibility 193–201 ms, lobes only
     /// 181–185, neither 114–121; visibility without lobes costs 0.66 of both (Cornell, 15k
-    /// VALs × 4k points, 131–155 against 185–216 ms).
+    /// VALs × 4k points, 131–155 against 185–216 ms). Since then the compute gather sums the
+    /// spheres' moments only for the disc occlusion and takes 16 points per invocation on a
+    /// CPU device: the same bench gave 134 ms with lobes and visibility (196–203 before, in
+    /// that session: 0.85 × 134/200), 117 lobes only (176 before), 45 neither (97 before), and
+    /// visibility without lobes 1.3× neither (Cornell, 9.8k VALs × 4k points, 41 against
+    /// 28–35 ms). A CPU device's 1024-point solutions take 8 points per invocation and gain
+    /// less; the factors are for the 16.
     pub fn gather_cost(glossy: bool, rays: bool) -> f64 {
         match (glossy, rays) {
-            (true, true) => 0.85,
-            (true, false) => 0.79,
-            (false, true) => 0.56,
-            (false, false) => 0.50,
+            (true, true) => 0.57,
+            (true, false) => 0.53,
+            (false, true) => 0.30,
+            (false, false) => 0.23,
         }
     }
     /// Visibility cost per point and cluster (16 rays), ms, and its fixed part: refitted for
