@@ -199,7 +199,10 @@ pub fn default_max_edge(
             let (surveyed, camera, aspect) = edited.unwrap_or((scene, None, 1.0));
             let world = surveyed.world_from_node_at(0.0);
             let camera = surveyed.camera_view(camera, aspect, &world).ok();
-            let survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1);
+            let mut survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1);
+            // Priced as `apply_budget` prices it, so both pick the same count.
+            let glossy = GlossyGather::parse(options.choice("glossy", GlossyGather::CHOICES)?);
+            survey.gathers_glossy = glossy.gathers(crate::light::reflects_glossily(surveyed));
             points = survey.choose(budget::BudgetTarget::Flip(flip)).points;
         }
         (Some(budget::BudgetTarget::Ms(_)), false) => {
