@@ -502,6 +502,14 @@ impl Survey {
     }
 
     /// Spacing of `points` sparse points over the scene's area, m.
+    /// Prices the gather the method will compile for `glossy` on `scene`: the lobes only
+    /// where some material reflects glossily ([`model::gather_cost`]). Both surveys, the
+    /// tessellation's and the method's, price it so, and so pick the same point count.
+    pub fn pricing_glossy(mut self, glossy: crate::light::GlossyGather, scene: &Scene) -> Self {
+        self.gathers_glossy = glossy.gathers(crate::light::reflects_glossily(scene));
+        self
+    }
+
     pub fn point_spacing(&self, points: usize) -> f64 {
         (self.area / points.max(1) as f64).sqrt()
     }

@@ -199,10 +199,9 @@ pub fn default_max_edge(
             let (surveyed, camera, aspect) = edited.unwrap_or((scene, None, 1.0));
             let world = surveyed.world_from_node_at(0.0);
             let camera = surveyed.camera_view(camera, aspect, &world).ok();
-            let mut survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1);
-            // Priced as `apply_budget` prices it, so both pick the same count.
             let glossy = GlossyGather::parse(options.choice("glossy", GlossyGather::CHOICES)?);
-            survey.gathers_glossy = glossy.gathers(crate::light::reflects_glossily(surveyed));
+            let survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1)
+                .pricing_glossy(glossy, surveyed);
             points = survey.choose(budget::BudgetTarget::Flip(flip)).points;
         }
         (Some(budget::BudgetTarget::Ms(_)), false) => {
@@ -447,16 +446,10 @@ pub fn apply_budget(
     let camera = scene
         .camera_view(selector.as_deref(), aspect, &world)
         .map_err(|e| RenderError::Settings(e.to_string()))?;
-    let mut survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed);
+    let mut survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed)
+        .pricing_glossy(settings.options.glossy, scene);
     if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
-    }
-    if !settings
-        .options
-        .glossy
-        .gathers(crate::light::reflects_glossily(scene))
-    {
-        survey.gathers_glossy = false;
     }
     let given = |key: &str| options.given(key);
     let choice = survey.choose(target);

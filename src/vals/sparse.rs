@@ -95,13 +95,16 @@ pub fn gather_points_per_invocation(
 }
 
 /// The CPU threads a software device runs workgroups on: Mesa's `LP_NUM_THREADS` where set,
-/// else the machine's.
+/// else the machine's (asked once per process: every frame's gather dispatch needs it).
 pub fn cpu_device_threads() -> u32 {
-    std::env::var("LP_NUM_THREADS")
-        .ok()
-        .and_then(|v| v.trim().parse::<u32>().ok())
-        .filter(|&n| n > 0)
-        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u32))
+    static THREADS: std::sync::OnceLock<u32> = std::sync::OnceLock::new();
+    *THREADS.get_or_init(|| {
+        std::env::var("LP_NUM_THREADS")
+            .ok()
+            .and_then(|v| v.trim().parse::<u32>().ok())
+            .filter(|&n| n > 0)
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get() as u32))
+    })
 }
 
 /// vec4 words per (slice, point) of the split gather's partial sums (`PARTIAL_VEC4S` in
@@ -123,13 +126,14 @@ pub const GATHER_PARTIAL_BYTES_MAX: u64 = 64 << 20;
 ///
 /// `requested` 0 is automatic: unsplit on a CPU device, whose few threads the points already
 /// fill (splitting there only adds the reduction); on a GPU enough slices that the
-/// workgroups reach [`GATHER_TARGET_WORKGROUPS`], each slice at least one `tile` of
+/// workgroups (of 64 invocations × `points_per_invocation` points) reach [`GATHER_TARGET_WORKGROUPS`], each slice at least one `tile` of
 /// `val_capacity` VALs. Any request is capped by [`GATHER_SLICES_MAX`] and by the partial
 /// sums' size (`max_bytes`, also the device's largest binding).
 pub fn gather_slices(
     requested: u32,
     cpu_device: bool,
     point_count: u32,
+    points_per_invocation: u32,
     val_capacity: u64,
     tile: u32,
     max_bytes: u64,
@@ -142,7 +146,7 @@ pub fn gather_slices(
         0 if cpu_device => 1,
         0 => {
             let groups = point_count
-                .div_ceil(POINT_GROUP * GATHER_POINTS_PER_INVOCATION_GPU)
+                .div_ceil(POINT_GROUP * points_per_invocation.max(1))
                 .max(1);
             let by_vals = val_capacity.div_ceil(u64::from(tile.max(1))).max(1);
             GATHER_TARGET_WORKGROUPS
@@ -1169,7 +1173,6 @@ impl SparseGpu {
         Ok(self.raster_gather.get_or_init(|| raster))
     }
 
-    /// The VAL slices the compute gather runs as under `options` on this device.
     /// Points per compute-gather invocation under `options` on this device for this point
     /// count.
     pub fn gather_points_per_invocation(&self, options: &SparseOptions) -> u32 {
@@ -1186,11 +1189,13 @@ impl SparseGpu {
         options.visibility_lookup.select_tree(self.cpu_device)
     }
 
+    /// The VAL slices the compute gather runs as under `options` on this device.
     pub fn gather_slices(&self, options: &SparseOptions) -> u32 {
         gather_slices(
             options.gather_slices,
             self.cpu_device,
             self.point_count,
+            self.gather_points_per_invocation(options),
             self.val_capacity,
             options.tile,
             self.max_binding,
@@ -1719,31 +1724,34 @@ mod tests {
     #[test]
     fn the_automatic_split_fills_a_gpu_and_leaves_a_cpu_device_whole() {
         // A CPU device: whole, whatever the sizes.
-        assert_eq!(gather_slices(0, true, 4096, 16384, 128, MIB64), 1);
+        assert_eq!(gather_slices(0, true, 4096, 4, 16384, 128, MIB64), 1);
         // 4096 points are 16 workgroups: 64 slices reach the 1024-workgroup target.
-        assert_eq!(gather_slices(0, false, 4096, 16384, 128, MIB64), 64);
+        assert_eq!(gather_slices(0, false, 4096, 4, 16384, 128, MIB64), 64);
         // Each slice keeps at least one tile: 1000 VALs at 128 a tile give 8.
-        assert_eq!(gather_slices(0, false, 4096, 1000, 128, MIB64), 8);
+        assert_eq!(gather_slices(0, false, 4096, 4, 1000, 128, MIB64), 8);
         // Enough points alone: whole.
-        assert_eq!(gather_slices(0, false, 1 << 20, 1 << 20, 128, MIB64), 1);
+        assert_eq!(gather_slices(0, false, 1 << 20, 4, 1 << 20, 128, MIB64), 1);
         // 1024 points of a sensor frame: the slice cap.
         assert_eq!(
-            gather_slices(0, false, 1024, 300_000, 128, MIB64),
+            gather_slices(0, false, 1024, 4, 300_000, 128, MIB64),
             GATHER_SLICES_MAX
         );
     }
 
     #[test]
     fn requests_are_capped_by_the_partial_sums_bytes() {
-        assert_eq!(gather_slices(7, true, 4096, 16384, 128, MIB64), 7);
+        assert_eq!(gather_slices(7, true, 4096, 4, 16384, 128, MIB64), 7);
         assert_eq!(
-            gather_slices(1000, false, 16, 16384, 128, MIB64),
+            gather_slices(1000, false, 16, 4, 16384, 128, MIB64),
             GATHER_SLICES_MAX
         );
         // 65536 points × 80 B = 5 MiB a slice: 12 fit in 64 MiB, 3 in a 16 MiB binding.
-        assert_eq!(gather_slices(100, false, 65536, 1 << 20, 128, MIB64), 12);
-        assert_eq!(gather_slices(100, false, 65536, 1 << 20, 128, 16 << 20), 3);
+        assert_eq!(gather_slices(100, false, 65536, 4, 1 << 20, 128, MIB64), 12);
+        assert_eq!(
+            gather_slices(100, false, 65536, 4, 1 << 20, 128, 16 << 20),
+            3
+        );
         // Not even one slice fits: whole, which needs no partial sums.
-        assert_eq!(gather_slices(0, false, 1 << 20, 16384, 128, 1 << 20), 1);
+        assert_eq!(gather_slices(0, false, 1 << 20, 4, 16384, 128, 1 << 20), 1);
     }
 }
