@@ -1104,6 +1104,15 @@ impl Rsm {
     /// appends the external VALs' valid candidates (pass "vals append"); their producer must
     /// have recorded its passes before this.
     pub fn record(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
+        self.record_maps(passes, scene_gpu)?;
+        self.record_compaction(passes)
+    }
+
+    /// Renders every RSM layer (pass "rsm") and nothing else: for a consumer that reads
+    /// the maps' texels itself and never the VAL list (seed 002's positive lights read N
+    /// texels; the compaction walks every texel of every row, and on bunny-box at 256² it
+    /// was most of the pass).
+    pub fn record_maps(&self, passes: &mut Passes, scene_gpu: &SceneGpu) -> Result<(), GpuError> {
         for (views, in_layer) in self.layer_views.iter().zip(&self.views_by_layer) {
             passes.render(
                 "rsm",
@@ -1129,6 +1138,12 @@ impl Rsm {
                 },
             )?;
         }
+        Ok(())
+    }
+
+    /// The lit texels of the maps [`Rsm::record_maps`] rendered into the VAL list (passes
+    /// "rsm"), then the external VALs' candidates appended (pass "vals append").
+    fn record_compaction(&self, passes: &mut Passes) -> Result<(), GpuError> {
         if self.layer_count > 0 {
             // One thread per row; rows past 65535 workgroups wrap into a second dimension.
             let rows: u32 = self.view_tiles.iter().map(|t| t.side).sum();

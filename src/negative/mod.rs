@@ -717,7 +717,9 @@ impl Method for NegativeMethod {
         self.raster
             .update_and_record(ctx, frame.scene, frame.world_from_node, passes)?;
         self.rsm.prepare(ctx, frame.scene, frame.world_from_node);
-        self.rsm.record(passes, &self.raster.scene_gpu)?;
+        // The positive lights read their N texels straight from the maps (§A.1's S_light):
+        // no VAL list is compacted.
+        self.rsm.record_maps(passes, &self.raster.scene_gpu)?;
         let setup = self.rsm.light_setup(frame.scene, frame.world_from_node);
         let lights = WorldLight::from_scene(frame.scene, frame.world_from_node);
         let samples = cpu::positive_samples(
