@@ -73,25 +73,34 @@ fn agreeing(pairs: &[(&IndirectLight, &IndirectLight)]) -> usize {
 #[test]
 fn gpu_kernels_match_the_cpu_twin() {
     let Some(ctx) = common::gpu() else { return };
-    gpu_matches_cpu(&ctx, "point", "literal");
+    gpu_matches_cpu(&ctx, "point", "literal", 64);
 }
 
 #[test]
 fn gpu_kernels_match_the_cpu_twin_with_disc_falloff_and_propagation_weights() {
     let Some(ctx) = common::gpu() else { return };
-    gpu_matches_cpu(&ctx, "disc", "propagation");
-    gpu_matches_cpu(&ctx, "point", "arriving");
+    gpu_matches_cpu(&ctx, "disc", "propagation", 64);
+    gpu_matches_cpu(&ctx, "point", "arriving", 64);
 }
 
-fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
+/// More positive lights than one uniform block holds: the view passes read them from the
+/// storage buffer instead, with the same results.
+#[test]
+fn gpu_kernels_match_the_cpu_twin_with_more_positive_lights_than_a_uniform_block() {
+    let Some(ctx) = common::gpu() else { return };
+    gpu_matches_cpu(&ctx, "point", "literal", 1100);
+}
+
+fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str, positive: u32) {
     let scene = scene("cornell-bunny");
     let size = 64;
+    let positive_count = positive.to_string();
     let (method, frame, rb) = run(
         ctx,
         &scene,
         size,
         &[
-            ("positive", "64"),
+            ("positive", &positive_count),
             ("negative", "24"),
             ("rsm", "128"),
             ("falloff", falloff_name),
@@ -106,6 +115,8 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str) {
         assert_eq!(falloff, Falloff::Disc);
     }
     let mode = WeightMode::parse(weight);
+    // The view passes read the positives from a uniform block when one holds them all.
+    assert_eq!(method.positives_in_block(), positive <= 1024);
 
     // Positive lights: the raster RSM texel against a ray through the texel centre.
     let tracer = Tracer::new(&scene, &world);

@@ -15,7 +15,7 @@ use std::cell::Cell;
 
 use crate::frame::{FrameInput, Method, View, ViewCache, ViewResult, PIXEL_TILE};
 use crate::gpu::bindings::{GroupLayout, Slot};
-use crate::gpu::{FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
+use crate::gpu::{compute_pipeline_groups, FrameTimings, GpuBytes, GpuContext, GpuError, Passes};
 use crate::light::rsm::Rsm;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{
@@ -57,7 +57,12 @@ const VIEW_BINDINGS: &[Slot] = &[
     Slot::StorageRw,
     Slot::StorageRw,
     Slot::StorageRw,
+    Slot::Uniform,
+    Slot::Uniform,
 ];
+/// Lights in each of `negative_view.wgsl`'s uniform blocks (`LIGHT_BLOCK` there): 48 KiB,
+/// under the 64 KiB every device binds.
+const LIGHT_BLOCK: u64 = 1024;
 use crate::scene::{Aabb, CameraView, Scene};
 use crate::shading::WorldLight;
 use bytemuck::{Pod, Zeroable};
@@ -321,6 +326,8 @@ struct ViewState {
     tiles: wgpu::Buffer,
     candidates: wgpu::Buffer,
     negatives: wgpu::Buffer,
+    /// The negatives as the uniform block the E_n passes read, copied after the selection.
+    negatives_block: wgpu::Buffer,
     negative_state: wgpu::Buffer,
     low_en: wgpu::Buffer,
     full_en: wgpu::Buffer,
@@ -383,6 +390,10 @@ pub struct NegativeMethod {
     samples_buffer: wgpu::Buffer,
     sample_count_buffer: wgpu::Buffer,
     positives_buffer: wgpu::Buffer,
+    /// The positives as the uniform block the view passes read, when they fit one
+    /// (`positives_in_block`; else the passes read `positives_buffer`).
+    positives_block: wgpu::Buffer,
+    positives_in_block: bool,
     positives_group: wgpu::BindGroup,
     positives_pipeline: wgpu::ComputePipeline,
     view_layout: GroupLayout,
@@ -415,6 +426,8 @@ fn buffer(
 const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
+/// A uniform block filled by copies.
+const BLOCK: wgpu::BufferUsages = wgpu::BufferUsages::UNIFORM.union(wgpu::BufferUsages::COPY_DST);
 
 impl NegativeMethod {
     pub fn new(
@@ -439,6 +452,14 @@ impl NegativeMethod {
         let total = (settings.positive as u64 * scene.lights.len() as u64).max(1);
         let samples_buffer = buffer(&mut bytes, device, "negative samples", total * 32, STORAGE);
         let positives_buffer = buffer(&mut bytes, device, "positive lights", total * 48, STORAGE);
+        let positives_in_block = total <= LIGHT_BLOCK;
+        let positives_block = buffer(
+            &mut bytes,
+            device,
+            "positive lights block",
+            LIGHT_BLOCK * 48,
+            BLOCK,
+        );
         let sample_count_buffer = bytes.uniform::<SampleCount>(device, "negative sample count");
         let cs = wgpu::ShaderStages::COMPUTE;
         let positives_layout =
@@ -463,13 +484,16 @@ impl NegativeMethod {
         );
         let view_layout = GroupLayout::new(device, "negative view", cs, VIEW_BINDINGS);
         let module = ctx.shader("negative_view.wgsl");
+        let in_block = [(
+            "POSITIVES_IN_BLOCK",
+            f64::from(u8::from(positives_in_block)),
+        )];
         let view_pipelines = VIEW_ENTRIES
             .iter()
             .map(|e| {
-                (
-                    *e,
-                    compute_pipeline_at(device, e, &module, &view_layout.layout, e),
-                )
+                let layouts = [&view_layout.layout];
+                let pipeline = compute_pipeline_groups(device, e, &module, &layouts, e, &in_block);
+                (*e, pipeline)
             })
             .collect();
         let select_pipeline = compute_pipeline_at(
@@ -488,6 +512,8 @@ impl NegativeMethod {
             samples_buffer,
             sample_count_buffer,
             positives_buffer,
+            positives_block,
+            positives_in_block,
             positives_group,
             positives_pipeline,
             view_layout,
@@ -524,6 +550,12 @@ impl NegativeMethod {
     pub fn read_positives(&self, ctx: &GpuContext) -> Result<Vec<IndirectLight>, GpuError> {
         let all: Vec<IndirectLight> = crate::gpu::read_buffer(ctx, &self.positives_buffer)?;
         Ok(all[..self.samples.len().min(all.len())].to_vec())
+    }
+
+    /// Whether the view passes read the positive lights from their uniform block (all of
+    /// them fit one), not from the storage buffer.
+    pub fn positives_in_block(&self) -> bool {
+        self.positives_in_block
     }
 
     fn pipeline(&self, entry: &str) -> &wgpu::ComputePipeline {
@@ -576,6 +608,13 @@ impl NegativeMethod {
             self.settings.negative.max(1) as u64 * 48,
             STORAGE,
         );
+        let negatives_block = buffer(
+            &mut bytes,
+            device,
+            "negative lights block",
+            LIGHT_BLOCK * 48,
+            BLOCK,
+        );
         let negative_state = buffer(&mut bytes, device, "negative state", 16, STORAGE);
         let low_en = buffer(&mut bytes, device, "negative low E_n", low * 16, STORAGE);
         let full_en = buffer(&mut bytes, device, "negative full E_n", full * 16, STORAGE);
@@ -610,6 +649,8 @@ impl NegativeMethod {
                 &low_en,
                 &full_en,
                 &stats,
+                &self.positives_block,
+                &negatives_block,
             ],
         );
         ViewState {
@@ -621,6 +662,7 @@ impl NegativeMethod {
             tiles: tiles_buffer,
             candidates,
             negatives,
+            negatives_block,
             negative_state,
             low_en,
             full_en,
@@ -767,6 +809,15 @@ impl Method for NegativeMethod {
                 pass.set_bind_group(0, &self.positives_group, &[]);
                 pass.dispatch_workgroups(x, y, 1);
             })?;
+            if self.positives_in_block {
+                passes.encoder().copy_buffer_to_buffer(
+                    &self.positives_buffer,
+                    0,
+                    &self.positives_block,
+                    0,
+                    self.positives_buffer.size(),
+                );
+            }
         }
         Ok(())
     }
@@ -870,6 +921,13 @@ impl Method for NegativeMethod {
                 pass.set_bind_group(0, group, &[]);
                 pass.dispatch_workgroups(1, 1, 1);
             })?;
+            passes.encoder().copy_buffer_to_buffer(
+                &state.negatives,
+                0,
+                &state.negatives_block,
+                0,
+                state.negatives.size(),
+            );
             if s.lowres {
                 run(passes, "negative negative low", "negative_low", low)?;
                 patch(passes, "negative negative tiles", "negative_tiles")?;
