@@ -23,6 +23,13 @@ fn render(ctx: &GpuContext, scene: &Scene, settings: RenderSettings) -> (FrameOu
         .camera_view(None, settings.width as f32 / settings.height as f32, &world)
         .expect("camera");
     let raster = Rasterizer::new(ctx, scene, settings).expect("rasterizer");
+    // The direct pass reads lights and shadow views from uniform blocks when they fit, else
+    // from the storage buffers; each path is checked by the tests that reach it.
+    let views: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
+    assert_eq!(
+        raster.lights_in_block(),
+        scene.lights.len() <= 256 && views <= 256
+    );
     let frame = raster
         .render_direct(ctx, scene, &world, &camera)
         .expect("render");

@@ -13,6 +13,29 @@
 @group(0) @binding(8) var gbuffer_specular: texture_2d<f32>;
 @group(0) @binding(9) var gbuffer_emissive: texture_2d<f32>;
 @group(0) @binding(10) var radiance_direct: texture_storage_2d<rgba32float, write>;
+// The lights and shadow views again as uniform blocks, which every pixel reads alike: a CPU
+// device (Mesa's llvmpipe) reads a uniform block with one scalar load per value where it
+// reads a storage buffer lane by lane under a per-lane test. A scene with more lights or views
+// than a block holds reads the storage buffers (LIGHTS_IN_BLOCK false; `Rasterizer::new`).
+const LIGHT_BLOCK: u32 = 256u;
+const VIEW_BLOCK: u32 = 256u;
+override LIGHTS_IN_BLOCK: bool = true;
+@group(0) @binding(11) var<uniform> lights_block: array<Light, LIGHT_BLOCK>;
+@group(0) @binding(12) var<uniform> shadow_views_block: array<ShadowView, VIEW_BLOCK>;
+
+fn light_at(i: u32) -> Light {
+    if (LIGHTS_IN_BLOCK) {
+        return lights_block[i];
+    }
+    return lights[i];
+}
+
+fn shadow_view_at(i: u32) -> ShadowView {
+    if (LIGHTS_IN_BLOCK) {
+        return shadow_views_block[i];
+    }
+    return shadow_views[i];
+}
 
 // World position of a pixel centre from the depth buffer.
 fn world_position(pixel: vec2<u32>, depth: f32) -> vec3<f32> {
@@ -38,7 +61,7 @@ fn cube_face(d: vec3<f32>) -> u32 {
 // comparison taps over a (2r+1)² texel grid of the view's tile. The receiver is pushed along
 // its normal by a texel's world size so that flat surfaces do not shadow themselves.
 fn visibility(view_index: u32, p: vec3<f32>, n: vec3<f32>) -> f32 {
-    let view = shadow_views[view_index];
+    let view = shadow_view_at(view_index);
     var texel_world = view.texel.x;
     if (view.origin.w > 0.5) {
         texel_world = view.texel.x * length(p - view.origin.xyz);
@@ -97,7 +120,7 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
 
     var radiance = textureLoad(gbuffer_emissive, pixel, 0).rgb;
     for (var i = 0u; i < frame.light_count; i++) {
-        let light = lights[i];
+        let light = light_at(i);
         var wi: vec3<f32>;
         var irradiance_normal: vec3<f32>;
         var view_index = light.first_shadow_view;

@@ -152,7 +152,13 @@ const DIRECT_BINDINGS: &[Slot] = &[
     Slot::Texture,
     Slot::Texture,
     Slot::StorageTexture(RADIANCE_FORMAT),
+    Slot::Uniform,
+    Slot::Uniform,
 ];
+/// Lights and shadow views in `direct_light.wgsl`'s uniform blocks (`LIGHT_BLOCK`,
+/// `VIEW_BLOCK` there): 16 and 32 KiB.
+const LIGHT_BLOCK: usize = 256;
+const VIEW_BLOCK: usize = 256;
 
 /// Shadow maps, G-buffer and direct light for one scene: the view-free part (scene upload,
 /// lights, shadow maps) is updated once per frame; the G-buffer and direct light are recorded
@@ -162,6 +168,11 @@ pub struct Rasterizer {
     pub scene_gpu: SceneGpu,
     lights_buffer: wgpu::Buffer,
     shadow_views_buffer: wgpu::Buffer,
+    /// The lights and views again as the uniform blocks the direct pass reads when they fit
+    /// (`lights_in_block`).
+    lights_block: wgpu::Buffer,
+    shadow_views_block: wgpu::Buffer,
+    lights_in_block: bool,
     /// Where each light's views live in the shadow-map array.
     atlas: shadow_atlas::ShadowAtlas,
     /// One uniform buffer and bind group per shadowed view, in view order (`None`: the
@@ -233,6 +244,27 @@ impl Rasterizer {
                 usage: storage,
                 mapped_at_creation: false,
             },
+        );
+        let lights_in_block =
+            scene.lights.len() <= LIGHT_BLOCK && view_count as usize <= VIEW_BLOCK;
+        let mut block = |label: &str, size: usize| {
+            shadow_bytes.buffer(
+                device,
+                &wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: size as u64,
+                    usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                },
+            )
+        };
+        let lights_block = block(
+            "lights block",
+            LIGHT_BLOCK * std::mem::size_of::<types::GpuLight>(),
+        );
+        let shadow_views_block = block(
+            "shadow views block",
+            VIEW_BLOCK * std::mem::size_of::<ShadowView>(),
         );
         let shadow_desc = wgpu::TextureDescriptor {
             label: Some("shadow maps"),
@@ -376,7 +408,15 @@ impl Rasterizer {
         });
         let direct_pipeline =
             ctx.scoped("the direct-light pipeline", None, PIPELINE_REMEDY, || {
-                compute_pipeline(device, "direct light", &direct_module, &direct_bgl.layout)
+                let in_block = [("LIGHTS_IN_BLOCK", f64::from(u8::from(lights_in_block)))];
+                crate::gpu::compute_pipeline_groups(
+                    device,
+                    "direct light",
+                    &direct_module,
+                    &[&direct_bgl.layout],
+                    "cs_main",
+                    &in_block,
+                )
             })?;
 
         report_shadow_atlas(scene, &atlas);
@@ -397,6 +437,9 @@ impl Rasterizer {
             scene_gpu,
             lights_buffer,
             shadow_views_buffer,
+            lights_block,
+            shadow_views_block,
+            lights_in_block,
             atlas,
             shadow_view_groups,
             shadow_layers,
@@ -457,6 +500,14 @@ impl Rasterizer {
                 0,
                 bytemuck::cast_slice(&setup.views),
             );
+            if self.lights_in_block {
+                queue.write_buffer(&self.lights_block, 0, bytemuck::cast_slice(&setup.lights));
+                queue.write_buffer(
+                    &self.shadow_views_block,
+                    0,
+                    bytemuck::cast_slice(&setup.views),
+                );
+            }
         }
         for (group, view) in self.shadow_view_groups.iter().zip(&setup.views) {
             if let Some((buffer, _)) = group {
@@ -559,6 +610,12 @@ impl Rasterizer {
         )
     }
 
+    /// Whether the direct pass reads the lights and shadow views from their uniform blocks
+    /// (both fit one), not from the storage buffers.
+    pub fn lights_in_block(&self) -> bool {
+        self.lights_in_block
+    }
+
     /// Direct light and emission per pixel (pass "direct").
     pub fn record_direct(
         &self,
@@ -581,6 +638,8 @@ impl Rasterizer {
                 &t.specular,
                 &t.emissive,
                 &t.radiance_direct,
+                &self.lights_block,
+                &self.shadow_views_block,
             ],
         );
         view.record_per_pixel(passes, "direct", &self.direct_pipeline, &group)
