@@ -40,9 +40,11 @@ const GEOMETRY_BINDINGS: &[Slot] = &[
 
 /// `lpv_propagate.wgsl`: parameters, the face table, the source volume, the destination and
 /// accumulated volumes, and the geometry volume.
+/// Faces in `lpv_propagate.wgsl`'s uniform face table (`FACE_BLOCK` there): HO-LPV has 54.
+const FACE_BLOCK: usize = 64;
 const PROPAGATE_BINDINGS: &[Slot] = &[
     Slot::Uniform,
-    Slot::Storage,
+    Slot::Uniform,
     Slot::Storage,
     Slot::StorageRw,
     Slot::StorageRw,
@@ -328,12 +330,19 @@ impl LpvMethod {
         // The shader reads each source once per group of faces with the same offset.
         let mut by_offset = faces.clone();
         by_offset.sort_by_key(|f| f.offset.to_array());
-        let gpu_faces: Vec<LpvFace> = by_offset.iter().map(LpvFace::from_face).collect();
+        let mut gpu_faces: Vec<LpvFace> = by_offset.iter().map(LpvFace::from_face).collect();
+        // The table is a uniform block of FACE_BLOCK faces (`lpv_propagate.wgsl`); the
+        // shader reads the first `face_count`.
+        assert!(
+            gpu_faces.len() <= FACE_BLOCK,
+            "face table larger than its block"
+        );
+        gpu_faces.resize(FACE_BLOCK, LpvFace::zeroed());
         let faces_buffer = bytes.buffer_init(
             device,
             "lpv faces",
             bytemuck::cast_slice(&gpu_faces),
-            wgpu::BufferUsages::STORAGE,
+            wgpu::BufferUsages::UNIFORM,
         );
 
         let cs = wgpu::ShaderStages::COMPUTE;
