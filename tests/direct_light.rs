@@ -28,7 +28,8 @@ fn render(ctx: &GpuContext, scene: &Scene, settings: RenderSettings) -> (FrameOu
     let views: u32 = scene.lights.iter().map(|l| l.kind.shadow_layers()).sum();
     assert_eq!(
         raster.lights_in_block(),
-        scene.lights.len() <= 256 && views <= 256
+        scene.lights.len() <= valgi::raster::LIGHT_BLOCK as usize
+            && views <= valgi::raster::VIEW_BLOCK
     );
     let frame = raster
         .render_direct(ctx, scene, &world, &camera)

@@ -245,7 +245,17 @@ fn shared_constants_match() {
                 ("LIGHT_SPOT", base::LIGHT_SPOT),
                 ("LIGHT_DIRECTIONAL", base::LIGHT_DIRECTIONAL),
                 ("LIGHT_EMITTER", base::LIGHT_EMITTER),
+                ("LIGHT_BLOCK", valgi::raster::LIGHT_BLOCK),
+                ("VIEW_BLOCK", valgi::raster::VIEW_BLOCK),
             ],
+        ),
+        (
+            "negative_view.wgsl",
+            &[("LIGHT_BLOCK", valgi::negative::LIGHT_BLOCK)],
+        ),
+        (
+            "lpv_propagate.wgsl",
+            &[("FACE_BLOCK", valgi::peers::lpv::FACE_BLOCK)],
         ),
     ];
     let expected = per_file

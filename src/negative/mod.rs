@@ -62,7 +62,7 @@ const VIEW_BINDINGS: &[Slot] = &[
 ];
 /// Lights in each of `negative_view.wgsl`'s uniform blocks (`LIGHT_BLOCK` there): 48 KiB,
 /// under the 64 KiB every device binds.
-const LIGHT_BLOCK: u64 = 1024;
+pub const LIGHT_BLOCK: u32 = 1024;
 use crate::scene::{Aabb, CameraView, Scene};
 use crate::shading::WorldLight;
 use bytemuck::{Pod, Zeroable};
@@ -452,12 +452,12 @@ impl NegativeMethod {
         let total = (settings.positive as u64 * scene.lights.len() as u64).max(1);
         let samples_buffer = buffer(&mut bytes, device, "negative samples", total * 32, STORAGE);
         let positives_buffer = buffer(&mut bytes, device, "positive lights", total * 48, STORAGE);
-        let positives_in_block = total <= LIGHT_BLOCK;
+        let positives_in_block = total <= u64::from(LIGHT_BLOCK);
         let positives_block = buffer(
             &mut bytes,
             device,
             "positive lights block",
-            LIGHT_BLOCK * 48,
+            u64::from(LIGHT_BLOCK) * 48,
             BLOCK,
         );
         let sample_count_buffer = bytes.uniform::<SampleCount>(device, "negative sample count");
@@ -612,7 +612,7 @@ impl NegativeMethod {
             &mut bytes,
             device,
             "negative lights block",
-            LIGHT_BLOCK * 48,
+            u64::from(LIGHT_BLOCK) * 48,
             BLOCK,
         );
         let negative_state = buffer(&mut bytes, device, "negative state", 16, STORAGE);

@@ -157,8 +157,8 @@ const DIRECT_BINDINGS: &[Slot] = &[
 ];
 /// Lights and shadow views in `direct_light.wgsl`'s uniform blocks (`LIGHT_BLOCK`,
 /// `VIEW_BLOCK` there): 16 and 32 KiB.
-const LIGHT_BLOCK: usize = 256;
-const VIEW_BLOCK: usize = 256;
+pub const LIGHT_BLOCK: u32 = 256;
+pub const VIEW_BLOCK: u32 = 256;
 
 /// Shadow maps, G-buffer and direct light for one scene: the view-free part (scene upload,
 /// lights, shadow maps) is updated once per frame; the G-buffer and direct light are recorded
@@ -246,13 +246,13 @@ impl Rasterizer {
             },
         );
         let lights_in_block =
-            scene.lights.len() <= LIGHT_BLOCK && view_count as usize <= VIEW_BLOCK;
-        let mut block = |label: &str, size: usize| {
+            scene.lights.len() <= LIGHT_BLOCK as usize && view_count <= VIEW_BLOCK;
+        let mut block = |label: &str, count: u32, size: usize| {
             shadow_bytes.buffer(
                 device,
                 &wgpu::BufferDescriptor {
                     label: Some(label),
-                    size: size as u64,
+                    size: u64::from(count) * size as u64,
                     usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
                     mapped_at_creation: false,
                 },
@@ -260,11 +260,13 @@ impl Rasterizer {
         };
         let lights_block = block(
             "lights block",
-            LIGHT_BLOCK * std::mem::size_of::<types::GpuLight>(),
+            LIGHT_BLOCK,
+            std::mem::size_of::<types::GpuLight>(),
         );
         let shadow_views_block = block(
             "shadow views block",
-            VIEW_BLOCK * std::mem::size_of::<ShadowView>(),
+            VIEW_BLOCK,
+            std::mem::size_of::<ShadowView>(),
         );
         let shadow_desc = wgpu::TextureDescriptor {
             label: Some("shadow maps"),
@@ -494,20 +496,14 @@ impl Rasterizer {
             }
         }
         if !setup.lights.is_empty() {
-            queue.write_buffer(&self.lights_buffer, 0, bytemuck::cast_slice(&setup.lights));
-            queue.write_buffer(
-                &self.shadow_views_buffer,
-                0,
-                bytemuck::cast_slice(&setup.views),
-            );
-            if self.lights_in_block {
-                queue.write_buffer(&self.lights_block, 0, bytemuck::cast_slice(&setup.lights));
-                queue.write_buffer(
-                    &self.shadow_views_block,
-                    0,
-                    bytemuck::cast_slice(&setup.views),
-                );
-            }
+            // Only the direct pass reads these, from the blocks or from the storage buffers.
+            let (lights, views) = if self.lights_in_block {
+                (&self.lights_block, &self.shadow_views_block)
+            } else {
+                (&self.lights_buffer, &self.shadow_views_buffer)
+            };
+            queue.write_buffer(lights, 0, bytemuck::cast_slice(&setup.lights));
+            queue.write_buffer(views, 0, bytemuck::cast_slice(&setup.views));
         }
         for (group, view) in self.shadow_view_groups.iter().zip(&setup.views) {
             if let Some((buffer, _)) = group {

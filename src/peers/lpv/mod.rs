@@ -41,7 +41,7 @@ const GEOMETRY_BINDINGS: &[Slot] = &[
 /// `lpv_propagate.wgsl`: parameters, the face table, the source volume, the destination and
 /// accumulated volumes, and the geometry volume.
 /// Faces in `lpv_propagate.wgsl`'s uniform face table (`FACE_BLOCK` there): HO-LPV has 54.
-const FACE_BLOCK: usize = 64;
+pub const FACE_BLOCK: u32 = 64;
 const PROPAGATE_BINDINGS: &[Slot] = &[
     Slot::Uniform,
     Slot::Uniform,
@@ -334,10 +334,10 @@ impl LpvMethod {
         // The table is a uniform block of FACE_BLOCK faces (`lpv_propagate.wgsl`); the
         // shader reads the first `face_count`.
         assert!(
-            gpu_faces.len() <= FACE_BLOCK,
+            gpu_faces.len() <= FACE_BLOCK as usize,
             "face table larger than its block"
         );
-        gpu_faces.resize(FACE_BLOCK, LpvFace::zeroed());
+        gpu_faces.resize(FACE_BLOCK as usize, LpvFace::zeroed());
         let faces_buffer = bytes.buffer_init(
             device,
             "lpv faces",
