@@ -426,8 +426,13 @@ fn buffer(
 const STORAGE: wgpu::BufferUsages = wgpu::BufferUsages::STORAGE
     .union(wgpu::BufferUsages::COPY_SRC)
     .union(wgpu::BufferUsages::COPY_DST);
-/// A uniform block filled by copies.
-const BLOCK: wgpu::BufferUsages = wgpu::BufferUsages::UNIFORM.union(wgpu::BufferUsages::COPY_DST);
+/// A uniform block of LIGHT_BLOCK lights, filled by copies from the storage buffer that a pass
+/// writes.
+fn light_block(bytes: &mut GpuBytes, device: &wgpu::Device, label: &str) -> wgpu::Buffer {
+    let usage = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
+    let size = u64::from(LIGHT_BLOCK) * std::mem::size_of::<IndirectLight>() as u64;
+    buffer(bytes, device, label, size, usage)
+}
 
 impl NegativeMethod {
     pub fn new(
@@ -453,13 +458,7 @@ impl NegativeMethod {
         let samples_buffer = buffer(&mut bytes, device, "negative samples", total * 32, STORAGE);
         let positives_buffer = buffer(&mut bytes, device, "positive lights", total * 48, STORAGE);
         let positives_in_block = total <= u64::from(LIGHT_BLOCK);
-        let positives_block = buffer(
-            &mut bytes,
-            device,
-            "positive lights block",
-            u64::from(LIGHT_BLOCK) * 48,
-            BLOCK,
-        );
+        let positives_block = light_block(&mut bytes, device, "positive lights block");
         let sample_count_buffer = bytes.uniform::<SampleCount>(device, "negative sample count");
         let cs = wgpu::ShaderStages::COMPUTE;
         let positives_layout =
@@ -608,13 +607,7 @@ impl NegativeMethod {
             self.settings.negative.max(1) as u64 * 48,
             STORAGE,
         );
-        let negatives_block = buffer(
-            &mut bytes,
-            device,
-            "negative lights block",
-            u64::from(LIGHT_BLOCK) * 48,
-            BLOCK,
-        );
+        let negatives_block = light_block(&mut bytes, device, "negative lights block");
         let negative_state = buffer(&mut bytes, device, "negative state", 16, STORAGE);
         let low_en = buffer(&mut bytes, device, "negative low E_n", low * 16, STORAGE);
         let full_en = buffer(&mut bytes, device, "negative full E_n", full * 16, STORAGE);
