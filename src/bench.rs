@@ -8,6 +8,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use crate::gpu::GpuContext;
+use crate::light::val_windows::ValReads;
 use crate::light::GlossyGather;
 use crate::method::Method;
 use crate::raster::{RenderError, RenderSettings};
@@ -274,18 +275,39 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
         .collect::<Result<Vec<u32>, _>>()?;
     for &rsm in &rsms {
         for &points in &request.points {
-            // The last row is the default configuration with the gather drawn as the paper
-            // draws it (fragments over a point target), beside the compute form above it.
-            for (config, glossy, occlusion, gather) in [
-                ("diffuse", false, OcclusionMode::Off, GatherForm::Compute),
-                ("+glossy", true, OcclusionMode::Off, GatherForm::Compute),
-                ("+occlusion", true, OcclusionMode::Sum, GatherForm::Compute),
-                ("+rays", true, OcclusionMode::Rays, GatherForm::Compute),
+            // The last rows are the default configuration with the compute gather reading
+            // the VALs the other way (tiles on a CPU device, windows on a GPU), and with the
+            // gather drawn as the paper draws it (fragments over a point target).
+            let (other_reads, other) = if ctx.is_software() {
+                ("+rays tiles", ValReads::Tiles)
+            } else {
+                ("+rays windows", ValReads::Windows)
+            };
+            let compute = GatherForm::Compute;
+            for (config, glossy, occlusion, gather, reads) in [
+                (
+                    "diffuse",
+                    false,
+                    OcclusionMode::Off,
+                    compute,
+                    ValReads::Auto,
+                ),
+                ("+glossy", true, OcclusionMode::Off, compute, ValReads::Auto),
+                (
+                    "+occlusion",
+                    true,
+                    OcclusionMode::Sum,
+                    compute,
+                    ValReads::Auto,
+                ),
+                ("+rays", true, OcclusionMode::Rays, compute, ValReads::Auto),
+                (other_reads, true, OcclusionMode::Rays, compute, other),
                 (
                     "+rays raster",
                     true,
                     OcclusionMode::Rays,
                     GatherForm::Raster,
+                    ValReads::Auto,
                 ),
             ] {
                 let mut settings = full_configuration(rsm, points);
@@ -294,6 +316,7 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                 }
                 settings.options.occlusion = occlusion;
                 settings.options.gather = gather;
+                settings.options.gather_vals = reads;
                 let (report, timings) = render(settings, request.width, request.height)?;
                 let row = Row::new(config, &report, &timings, request.width, request.height);
                 print_row(&row, peak);
@@ -318,7 +341,9 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
                 let mut settings = full_configuration(rsm, points);
                 settings.options.gather_slices = slices;
                 if let Some(tile) = tile {
+                    // The tile size is the tile form's.
                     settings.options.tile = tile;
+                    settings.options.gather_vals = ValReads::Tiles;
                 }
                 let (report, timings) = render(settings, request.width, request.height)?;
                 let row = Row::new(config, &report, &timings, request.width, request.height);
@@ -372,15 +397,16 @@ pub fn run(request: &BenchRequest) -> Result<PathBuf, crate::app::AppError> {
             .map_err(|e| RenderError::Settings(e.to_string()))?;
         let frame = fastest_frame(|| brute.render(&ctx, &scene, &world, &camera))?;
         let total = frame.timings.total_ms();
+        let report = brute.report();
         println!(
-            "brute force {}×{} with {} VALs: {:.1} ms total ({:.1} ms in the per-pixel sum)",
+            "brute force {}×{} with {} VALs ({}): {:.1} ms total ({:.1} ms in the per-pixel sum)",
             request.width,
             request.height,
-            brute
-                .report()
-                .get("vals")
-                .and_then(|v| v.as_u64())
-                .unwrap_or(0),
+            report.get("vals").and_then(|v| v.as_u64()).unwrap_or(0),
+            report
+                .get("vals_read")
+                .and_then(|v| v.as_str())
+                .unwrap_or(""),
             total,
             frame.timings.get("brute").unwrap_or(0.0)
         );

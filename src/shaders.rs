@@ -45,6 +45,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/light/vals_from_rsm.wgsl"),
     ),
     (
+        "val_windows.wgsl",
+        include_str!("../shaders/light/val_windows.wgsl"),
+    ),
+    (
         "vals_append.wgsl",
         include_str!("../shaders/light/vals_append.wgsl"),
     ),

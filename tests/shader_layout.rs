@@ -104,6 +104,8 @@ fn workgroup_sizes_match_the_dispatches() {
         ("atlas_apply.wgsl", "cs_main", [tile, tile, 1]),
         ("atlas_apply.wgsl", "cs_add", [tile, tile, 1]),
         ("vals_gather.wgsl", "cs_main", [group, 1, 1]),
+        ("vals_gather.wgsl", "cs_window", [group, 1, 1]),
+        ("brute_vals.wgsl", "cs_window", [tile, tile, 1]),
         ("vals_gather_reduce.wgsl", "cs_main", [group, 1, 1]),
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),
         ("vals_occlusion.wgsl", "cs_main", [group, 1, 1]),
@@ -219,6 +221,10 @@ fn shared_constants_match() {
                 "POINT_SLOTS",
                 valgi::vals::sparse::GATHER_POINTS_PER_INVOCATION_MAX,
             )],
+        ),
+        (
+            "val_windows.wgsl",
+            &[("WINDOW_VALS", valgi::light::rsm::VAL_WINDOW as u32)],
         ),
         (
             "vals_gather_raster.wgsl",

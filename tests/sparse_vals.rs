@@ -7,6 +7,8 @@ mod common;
 
 use glam::{Quat, Vec3, Vec4};
 use valgi::gpu::GpuContext;
+use valgi::light::rsm::VAL_WINDOW;
+use valgi::light::val_windows::ValReads;
 use valgi::light::GlossyGather;
 use valgi::method::{Method, MethodOptions};
 use valgi::peers::brute::BruteMethod;
@@ -50,6 +52,7 @@ fn sparse_settings(
             gather_slices: 0,
             gather_points: 0,
             visibility_lookup: Default::default(),
+            gather_vals: ValReads::Auto,
         },
         ..Default::default()
     }
@@ -669,6 +672,36 @@ fn brute_force_matches_the_cpu_sum_over_every_val() {
     brute_force_against_cpu(&ctx, 340, 32);
 }
 
+/// Brute force's two ways of reading the VAL list (`vals tiles|windows`) add each pixel's VALs
+/// in the same order: the same image to the bit, glossy lobes included, over three windows and
+/// part of a fourth. A window's sum carried wrongly would move the pixels by a quarter.
+#[test]
+fn brute_force_windows_write_the_tile_forms_image_to_the_bit() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = glossy_scene(0.3, 1.0);
+    let run = |reads: &str| {
+        let mut options = MethodOptions::default();
+        options.set("rsm", 64);
+        options.set("vals", reads);
+        let mut brute = BruteMethod::new(&ctx, &scene, settings(24), &options).unwrap();
+        let world = scene.world_from_node();
+        let frame = brute
+            .render(&ctx, &scene, &world, &camera(&scene, 24))
+            .unwrap();
+        assert_eq!(Method::report(&brute)["vals_read"], reads);
+        let count = brute.rsm.read_count(&ctx).unwrap() as u64;
+        assert!(count > 3 * VAL_WINDOW, "{count} VALs");
+        frame.indirect
+    };
+    let tiles = run("tiles");
+    let windows = run("windows");
+    let lit = tiles.pixels.iter().filter(|p| p[0] > 0.0).count();
+    assert!(lit > tiles.pixels.len() / 4, "{lit} lit pixels");
+    for (i, (t, w)) in tiles.pixels.iter().zip(&windows.pixels).enumerate() {
+        assert_eq!(t, w, "pixel {i}");
+    }
+}
+
 /// The raster gather (fragments over a point target, `--gather raster`) writes what the
 /// compute gather writes: the same sums, positions and spheres at every point, with the
 /// cluster visibility on and the points filling one and a half rows of the target.
@@ -772,6 +805,60 @@ fn both_visibility_lookups_gather_the_same_sums() {
         darker > 10,
         "{darker} points lost a tenth of their light to visibility"
     );
+}
+
+/// The two ways the compute gather reads the VAL list (`gather-vals`: tiles of workgroup
+/// memory, or uniform windows of 1024 VALs with the running sums carried between windows in
+/// the partial-sums buffer) add the same VALs in the same order: the same bits, with the
+/// cluster visibility and with the disc occlusion's spheres. About 2500 VALs fill two windows
+/// and part of a third; with the sums carried wrongly (dropped, added twice, or another
+/// window's) they would lose or gain a sixth of their light or more.
+#[test]
+fn windowed_gather_writes_what_the_tiled_gather_writes_to_the_bit() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    let run = |occlusion: OcclusionMode, vals: ValReads, name: &str| {
+        let mut s = sparse_settings(64, 700, occlusion, true);
+        s.options.gather_vals = vals;
+        let (method, _, points) = run_sparse(&ctx, &scene, 16, s, Stage::Gather);
+        let report = Method::report(&method);
+        assert_eq!(report["gather_vals"], name);
+        let count = method.rsm.read_count(&ctx).unwrap() as u64;
+        assert!(
+            count > 2 * VAL_WINDOW && !count.is_multiple_of(VAL_WINDOW),
+            "{count} VALs"
+        );
+        points
+    };
+    for occlusion in [OcclusionMode::Rays, OcclusionMode::Sum] {
+        let tiles = run(occlusion, ValReads::Tiles, "tiles");
+        let windows = run(occlusion, ValReads::Windows, "windows");
+        let lit = tiles
+            .lights
+            .iter()
+            .filter(|l| l.diffuse.max_element() > 0.0)
+            .count();
+        assert!(lit > tiles.lights.len() / 2, "{lit} points gathered light");
+        assert_eq!(windows.lights.len(), tiles.lights.len());
+        for (i, (a, b)) in tiles.lights.iter().zip(&windows.lights).enumerate() {
+            let what = format!("{occlusion:?}, point {i}");
+            assert_eq!(a.diffuse, b.diffuse, "{what}: diffuse");
+            assert_eq!(a.glossy, b.glossy, "{what}: glossy");
+            assert_eq!(a.diffuse_position, b.diffuse_position, "{what}: position");
+            assert_eq!(
+                a.glossy_position, b.glossy_position,
+                "{what}: glossy position"
+            );
+            assert_eq!(tiles.spheres[i], windows.spheres[i], "{what}: spheres");
+        }
+    }
+    // A CPU device reads windows unless the gather is split; a GPU reads tiles.
+    let mut s = sparse_settings(64, 700, OcclusionMode::Rays, true);
+    let (method, _, _) = run_sparse(&ctx, &scene, 16, s, Stage::Gather);
+    let cpu = ctx.is_software();
+    assert_eq!(method.sparse.gathers_in_windows(&s.options), cpu);
+    s.options.gather_slices = 3;
+    assert!(!method.sparse.gathers_in_windows(&s.options));
 }
 
 /// 4, 8 and 16 points per compute-gather invocation (`gather-points`; a CPU device picks 16
@@ -905,20 +992,26 @@ fn gather_sums_more_than_65535_vals() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell_coarse();
     let eye = camera(&scene, 16).position();
-    for (gather, slices) in [
-        (GatherForm::Compute, 1),
-        (GatherForm::Compute, 5),
-        (GatherForm::Raster, 1),
+    for (gather, slices, vals) in [
+        (GatherForm::Compute, 1, ValReads::Tiles),
+        (GatherForm::Compute, 1, ValReads::Windows),
+        (GatherForm::Compute, 5, ValReads::Tiles),
+        (GatherForm::Raster, 1, ValReads::Auto),
     ] {
         let mut s = sparse_settings(340, 64, OcclusionMode::Off, true);
         s.options.gather = gather;
         s.options.gather_slices = slices;
+        s.options.gather_vals = vals;
         gather_sums_against_cpu(&ctx, &scene, eye, s);
     }
 }
 
 fn gather_sums_against_cpu(ctx: &GpuContext, scene: &Scene, eye: Vec3, s: SparseSettings) {
-    let gather = (s.options.gather, s.options.gather_slices);
+    let gather = (
+        s.options.gather,
+        s.options.gather_slices,
+        s.options.gather_vals,
+    );
     let (method, _, gathered) = run_sparse(ctx, scene, 16, s, Stage::Gather);
     let vals = method.rsm.read_vals(ctx).unwrap();
     assert!(vals.len() > 65535, "{} VALs", vals.len());

@@ -29,6 +29,7 @@ fn settings(points: usize) -> SparseSettings {
             gather_slices: 0,
             gather_points: 0,
             visibility_lookup: Default::default(),
+            gather_vals: Default::default(),
         },
         ..Default::default()
     }

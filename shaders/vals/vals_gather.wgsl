@@ -1,11 +1,17 @@
 // Step 1 — gather: every VAL at every sparse point. Each workgroup takes 64 invocations ×
-// GATHER_SLOTS points; the VAL list streams through workgroup memory `tile` records at a
-// time, so every VAL is fetched from the buffer once per workgroup and read from workgroup
-// memory once per invocation, not once per point. Writes the irradiance sums (in the slots the
-// renormalized intensities later take), the averaged positions as f16 offsets from the point,
-// and the occlusion spheres. Split over VAL slices (dispatch z > 1), each workgroup gathers
-// one slice and stores partial sums for `vals_gather_reduce.wgsl` instead.
+// GATHER_SLOTS points. Two entry points read the VAL list two ways (`GatherVals` in
+// `src/vals/sparse.rs` picks one):
+// - `cs_main` streams it through workgroup memory `tile` records at a time, so every VAL is
+//   fetched from the buffer once per workgroup and read from workgroup memory once per
+//   invocation, not once per point. Split over VAL slices (dispatch z > 1), each workgroup
+//   gathers one slice and stores partial sums for `vals_gather_reduce.wgsl` instead.
+// - `cs_window` reads one uniform window of WINDOW_VALS VALs per dispatch, one dispatch per
+//   window, and carries each point's running sums from window to window in the partial-sums
+//   buffer (see there why).
+// Both write the irradiance sums (in the slots the renormalized intensities later take), the
+// averaged positions as f16 offsets from the point, and the occlusion spheres.
 #include "vals_gather_partials.wgsl"
+#include "val_windows.wgsl"
 
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
@@ -134,12 +140,29 @@ fn load_group(g: u32, first: u32, use_visibility: bool) -> bool {
     return any_active;
 }
 
-fn write_group(g: u32, first: u32, count: u32, glossy_on: bool, slice: u32, slices: u32) {
+// Slot group g's sums: into the points' slots, or with `to_partials` into the partial sums
+// of `slice`.
+fn write_group(g: u32, first: u32, count: u32, glossy_on: bool, to_partials: bool, slice: u32) {
     let q = 4u * g;
-    write_slot(q, first, count, glossy_on, slice, slices);
-    write_slot(q + 1u, first, count, glossy_on, slice, slices);
-    write_slot(q + 2u, first, count, glossy_on, slice, slices);
-    write_slot(q + 3u, first, count, glossy_on, slice, slices);
+    write_slot(q, first, count, glossy_on, to_partials, slice);
+    write_slot(q + 1u, first, count, glossy_on, to_partials, slice);
+    write_slot(q + 2u, first, count, glossy_on, to_partials, slice);
+    write_slot(q + 3u, first, count, glossy_on, to_partials, slice);
+}
+
+// Slot group g's running sums as an earlier window left them.
+fn resume_group(g: u32, first: u32) {
+    let q = 4u * g;
+    resume_slot(q, first + q * GROUP);
+    resume_slot(q + 1u, first + (q + 1u) * GROUP);
+    resume_slot(q + 2u, first + (q + 2u) * GROUP);
+    resume_slot(q + 3u, first + (q + 3u) * GROUP);
+}
+
+fn resume_slot(q: u32, index: u32) {
+    if (index < params.point_count) {
+        all_sums[q] = partial_load(index * PARTIAL_VEC4S);
+    }
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -161,15 +184,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
     let use_visibility = (params.flags & FLAG_VISIBILITY) != 0u;
 
-    // Written out, not a loop, so that the per-slot arrays are indexed by constants only.
-    var any_active = load_group(0u, first, use_visibility);
-    if (GATHER_SLOTS > 4u) {
-        any_active = load_group(1u, first, use_visibility) || any_active;
-    }
-    if (GATHER_SLOTS > 8u) {
-        any_active = load_group(2u, first, use_visibility) || any_active;
-        any_active = load_group(3u, first, use_visibility) || any_active;
-    }
+    let any_active = load_groups(first, use_visibility);
 
     for (var base = begin; base < end; base += tile) {
         let m = min(tile, end - base);
@@ -210,25 +225,105 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
         }
         workgroupBarrier();
     }
-    write_group(0u, first, count, glossy_on, gid.z, slices);
+    write_groups(first, count, glossy_on, slices > 1u, gid.z);
+}
+
+fn write_groups(first: u32, count: u32, glossy_on: bool, to_partials: bool, slice: u32) {
+    write_group(0u, first, count, glossy_on, to_partials, slice);
     if (GATHER_SLOTS > 4u) {
-        write_group(1u, first, count, glossy_on, gid.z, slices);
+        write_group(1u, first, count, glossy_on, to_partials, slice);
     }
     if (GATHER_SLOTS > 8u) {
-        write_group(2u, first, count, glossy_on, gid.z, slices);
-        write_group(3u, first, count, glossy_on, gid.z, slices);
+        write_group(2u, first, count, glossy_on, to_partials, slice);
+        write_group(3u, first, count, glossy_on, to_partials, slice);
     }
 }
 
-fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, slice: u32, slices: u32) {
+// This invocation's points, their words and cleared sums; true when one of them is a point.
+// Written out, not a loop, so that the per-slot arrays are indexed by constants only.
+fn load_groups(first: u32, use_visibility: bool) -> bool {
+    var any_active = load_group(0u, first, use_visibility);
+    if (GATHER_SLOTS > 4u) {
+        any_active = load_group(1u, first, use_visibility) || any_active;
+    }
+    if (GATHER_SLOTS > 8u) {
+        any_active = load_group(2u, first, use_visibility) || any_active;
+        any_active = load_group(3u, first, use_visibility) || any_active;
+    }
+    return any_active;
+}
+
+fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, to_partials: bool, slice: u32) {
     let index = first + q * GROUP;
     if (index >= params.point_count) {
         return;
     }
-    if (slices > 1u) {
+    if (to_partials) {
         partial_store((slice * params.point_count + index) * PARTIAL_VEC4S, all_sums[q]);
     } else {
         write_point(index, points[q], all_sums[q], count, glossy_on);
     }
 }
 
+
+// The window form, for a CPU device (`val_windows.wgsl`): the VAL each step reads is the
+// same for the whole workgroup, so from a uniform window it costs one load where workgroup
+// memory costs one per lane. Each point's sums go to the partial-sums buffer after a window
+// and come back before the next as the same f32 values, so the VALs are added in the order
+// `cs_main` adds them, to the same bits.
+@compute @workgroup_size(64, 1, 1)
+fn cs_window(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+    let count = min(val_count[0], arrayLength(&vals));
+    // Past the last VAL: an earlier window has written the points.
+    if (window_past_count(count)) {
+        return;
+    }
+    let begin = window.first;
+    let end = window_end(count);
+    let first = (linear_index(gid, groups) / GROUP) * GROUP * GATHER_SLOTS + lid;
+    let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
+    let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
+    let use_visibility = (params.flags & FLAG_VISIBILITY) != 0u;
+    let any_active = load_groups(first, use_visibility);
+    if (begin > 0u) {
+        resume_group(0u, first);
+        if (GATHER_SLOTS > 4u) {
+            resume_group(1u, first);
+        }
+        if (GATHER_SLOTS > 8u) {
+            resume_group(2u, first);
+            resume_group(3u, first);
+        }
+    }
+    if (any_active) {
+        // Unrolled by 16 as `cs_main`'s loop (and at most 64 steps per window).
+        let m = end - begin;
+        var j = 0u;
+        let full = m - m % 16u;
+        while (j < full) {
+            accumulate_all(window_vals[j + 0u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 1u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 2u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 3u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 4u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 5u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 6u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 7u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 8u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 9u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 10u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 11u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 12u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 13u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 14u], glossy_on, flux_weights, use_visibility);
+            accumulate_all(window_vals[j + 15u], glossy_on, flux_weights, use_visibility);
+            j += 16u;
+        }
+        while (j < m) {
+            accumulate_all(window_vals[j], glossy_on, flux_weights, use_visibility);
+            j += 1u;
+        }
+    }
+    // The last window writes the points, the others their running sums.
+    write_groups(first, count, glossy_on, end < count, 0u);
+}

@@ -7,6 +7,9 @@
 
 @group(1) @binding(0) var<storage, read_write> partials: array<vec4<f32>>;
 
+// The window form of the gather (`cs_window`) keeps each point's running sums here between
+// its windows, as slice 0.
+//
 // vec4 words per (slice, point): the 20 floats of `Sums`. `GATHER_PARTIAL_VEC4S` in
 // `src/vals/sparse.rs`.
 const PARTIAL_VEC4S: u32 = 5u;
@@ -19,18 +22,33 @@ fn partial_store(at: u32, s: Sums) {
     partials[at + 4u] = vec4<f32>(s.ms.sum_squares, s.glossy.b);
 }
 
-fn partial_add(sums: ptr<function, Sums>, at: u32) {
+// The sums `partial_store` stored at `at`, as they were.
+fn partial_load(at: u32) -> Sums {
     let a = partials[at];
     let b = partials[at + 1u];
     let c = partials[at + 2u];
     let d = partials[at + 3u];
     let e = partials[at + 4u];
-    (*sums).diffuse += a.xyz;
-    (*sums).md.weight += a.w;
-    (*sums).md.sum += b.xyz;
-    (*sums).ms.weight += b.w;
-    (*sums).md.sum_squares += c.xyz;
-    (*sums).ms.sum += d.xyz;
-    (*sums).ms.sum_squares += e.xyz;
-    (*sums).glossy += vec3<f32>(c.w, d.w, e.w);
+    var s: Sums;
+    s.diffuse = a.xyz;
+    s.md.weight = a.w;
+    s.md.sum = b.xyz;
+    s.ms.weight = b.w;
+    s.md.sum_squares = c.xyz;
+    s.ms.sum = d.xyz;
+    s.ms.sum_squares = e.xyz;
+    s.glossy = vec3<f32>(c.w, d.w, e.w);
+    return s;
+}
+
+fn partial_add(sums: ptr<function, Sums>, at: u32) {
+    let p = partial_load(at);
+    (*sums).diffuse += p.diffuse;
+    (*sums).md.weight += p.md.weight;
+    (*sums).md.sum += p.md.sum;
+    (*sums).ms.weight += p.ms.weight;
+    (*sums).md.sum_squares += p.md.sum_squares;
+    (*sums).ms.sum += p.ms.sum;
+    (*sums).ms.sum_squares += p.ms.sum_squares;
+    (*sums).glossy += p.glossy;
 }

@@ -11,6 +11,10 @@
 pub enum Slot {
     /// `var<uniform>`.
     Uniform,
+    /// `var<uniform>` at an offset given when the group is set (`set_bind_group`'s dynamic
+    /// offsets, in slot order), bound to a [`BufferWindow`]: one group serves every window
+    /// of a buffer larger than a uniform binding may be.
+    DynamicUniform,
     /// `var<storage, read>`.
     Storage,
     /// `var<storage, read_write>`.
@@ -40,7 +44,7 @@ impl Slot {
     pub fn entry(self, binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
         let buffer = |ty| wgpu::BindingType::Buffer {
             ty,
-            has_dynamic_offset: false,
+            has_dynamic_offset: self == Slot::DynamicUniform,
             min_binding_size: None,
         };
         let texture = |sample_type, view_dimension| wgpu::BindingType::Texture {
@@ -51,7 +55,7 @@ impl Slot {
         let float = wgpu::TextureSampleType::Float { filterable: false };
         let d2 = wgpu::TextureViewDimension::D2;
         let ty = match self {
-            Slot::Uniform => buffer(wgpu::BufferBindingType::Uniform),
+            Slot::Uniform | Slot::DynamicUniform => buffer(wgpu::BufferBindingType::Uniform),
             Slot::Storage => buffer(wgpu::BufferBindingType::Storage { read_only: true }),
             Slot::StorageRw => buffer(wgpu::BufferBindingType::Storage { read_only: false }),
             Slot::Texture => texture(float, d2),
@@ -88,6 +92,7 @@ impl Slot {
     fn takes(self) -> ResourceKind {
         match self {
             Slot::Uniform | Slot::Storage | Slot::StorageRw => ResourceKind::Buffer,
+            Slot::DynamicUniform => ResourceKind::BufferWindow,
             Slot::ComparisonSampler | Slot::FilteringSampler => ResourceKind::Sampler,
             _ => ResourceKind::TextureView,
         }
@@ -98,6 +103,7 @@ impl Slot {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ResourceKind {
     Buffer,
+    BufferWindow,
     TextureView,
     Sampler,
 }
@@ -115,6 +121,27 @@ impl Bindable for wgpu::Buffer {
 
     fn kind(&self) -> ResourceKind {
         ResourceKind::Buffer
+    }
+}
+
+/// The first `size` bytes of a buffer, for a [`Slot::DynamicUniform`], which moves them along
+/// the buffer by its dynamic offset.
+pub struct BufferWindow<'a> {
+    pub buffer: &'a wgpu::Buffer,
+    pub size: u64,
+}
+
+impl Bindable for BufferWindow<'_> {
+    fn resource(&self) -> wgpu::BindingResource<'_> {
+        wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+            buffer: self.buffer,
+            offset: 0,
+            size: std::num::NonZeroU64::new(self.size),
+        })
+    }
+
+    fn kind(&self) -> ResourceKind {
+        ResourceKind::BufferWindow
     }
 }
 

@@ -5,6 +5,7 @@
 pub mod bvh;
 pub mod rsm;
 pub mod sensor;
+pub mod val_windows;
 
 use std::f32::consts::PI;
 
@@ -181,6 +182,12 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 texel_area,
                 tile_origin
             ]
+        ),
+        shared_layout!(
+            "ValWindow",
+            "val_windows.wgsl",
+            val_windows::ValWindow,
+            [first, pad0, pad1, pad2]
         ),
         shared_layout!(
             "AppendSize",

@@ -141,6 +141,14 @@ pub fn budget_resolution(requested: u32, views: u32, max_vals: u32) -> Option<u3
     (side > 0).then_some(side)
 }
 
+/// VALs per uniform window of the VAL buffer: 48 KiB, a multiple of the 256-byte offset
+/// alignment and under the 64 KiB a uniform binding may hold. The buffer is padded to whole
+/// windows ([`Rsm::val_windows`]) so that a kernel can bind any window at a dynamic offset
+/// and read it as a uniform block (`WINDOW_VALS` in `vals_gather.wgsl`), which a CPU device
+/// reads far faster than the same VALs from storage or workgroup memory when every
+/// invocation reads the same one (`src/vals/README.md`, "How lavapipe loads memory").
+pub const VAL_WINDOW: u64 = 1024;
+
 /// Most RSM VALs the VAL buffer holds beside `external_slots` external VALs when the device
 /// binds at most `max_binding` bytes (the buffer is bound whole); `None` when not even the
 /// external VALs fit.
@@ -457,6 +465,9 @@ pub struct Rsm {
     /// Further slots after the RSM's for [`ExternalVals`] (0 without).
     pub external_capacity: u32,
     pub vals_buffer: wgpu::Buffer,
+    /// Whether `vals_buffer` holds whole [`VAL_WINDOW`]s that a kernel may bind as uniform
+    /// blocks (false only where the device's binding limits leave no room for the padding).
+    pub val_windows: bool,
     /// One u32: how many VALs this frame produced.
     pub val_count_buffer: wgpu::Buffer,
     /// Cluster tiles per layer side ([`cluster_tiles`]); every VAL's `flux.w` holds its
@@ -719,6 +730,15 @@ impl Rsm {
         }
         let val_bytes = slots.max(1) * std::mem::size_of::<GpuVal>() as u64;
         debug_assert!(val_bytes <= max_binding.max(std::mem::size_of::<GpuVal>() as u64));
+        // Whole windows where the binding limit allows: the padding is never a VAL (every
+        // reader stops at the count).
+        let window_bytes = VAL_WINDOW * std::mem::size_of::<GpuVal>() as u64;
+        let padded = val_bytes.next_multiple_of(window_bytes);
+        // Dynamic offsets are u32.
+        let windows = padded <= max_binding.min(u64::from(u32::MAX))
+            && window_bytes <= limits.max_uniform_buffer_binding_size
+            && window_bytes.is_multiple_of(u64::from(limits.min_uniform_buffer_offset_alignment));
+        let val_bytes = if windows { padded } else { val_bytes };
         let mut bytes = GpuBytes::default();
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
         let vals_buffer = ctx.scoped(
@@ -731,7 +751,7 @@ impl Rsm {
                     &wgpu::BufferDescriptor {
                         label: Some("vals"),
                         size: val_bytes,
-                        usage: storage | wgpu::BufferUsages::COPY_SRC,
+                        usage: storage | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::UNIFORM,
                         mapped_at_creation: false,
                     },
                 )
@@ -1021,6 +1041,7 @@ impl Rsm {
             views_by_layer,
             capacity,
             external_capacity: external_slots as u32,
+            val_windows: windows,
             vals_buffer,
             val_count_buffer,
             tiles,

@@ -4,10 +4,11 @@
 //! the sparse method would give with a receiver point at every pixel, so the difference between
 //! the two is the sparse method's interpolation error alone.
 
-use crate::frame::{FrameInput, Method, View, ViewResult};
+use crate::frame::{FrameInput, Method, View, ViewResult, PIXEL_TILE};
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
+use crate::light::val_windows::{self, ValReads, ValWindows};
 use crate::light::{GlossyGather, ValParams, FLAG_GLOSSY};
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{Rasterizer, RenderError, RenderSettings, RADIANCE_FORMAT};
@@ -42,7 +43,13 @@ pub static ENTRY: Entry = Entry {
             name: "tile",
             kind: OptionKind::Int { min: 1, max: 256 },
             default: "128",
-            help: "VALs per workgroup-memory tile",
+            help: "VALs per workgroup-memory tile (--vals tiles)",
+        },
+        OptionSpec {
+            name: "vals",
+            kind: OptionKind::Choice(ValReads::CHOICES),
+            default: "auto",
+            help: "how each pixel reads the VAL list: staged through workgroup memory in tiles, or from uniform windows of 1024 VALs, one dispatch each (a CPU device reads a VAL every invocation shares far faster from a uniform block); auto: windows on a CPU device, tiles on a GPU; both give the same bits",
         },
         OptionSpec {
             name: "glossy",
@@ -73,7 +80,39 @@ pub struct BruteMethod {
     params_buffer: wgpu::Buffer,
     pipeline: wgpu::ComputePipeline,
     layout: GroupLayout,
+    /// The window form (`cs_window`), where it runs: its pipeline, the VAL windows, the
+    /// running sums' layout and the sums of the last view size.
+    windows: Option<BruteWindows>,
     vals: u32,
+}
+
+/// What the window form of brute force needs besides the tile form's group.
+struct BruteWindows {
+    pipeline: wgpu::ComputePipeline,
+    windows: ValWindows,
+    running_layout: GroupLayout,
+    /// One vec4 per pixel, made again when the view's pixel count changes.
+    running: Option<(u64, wgpu::Buffer, wgpu::BindGroup)>,
+}
+
+impl BruteWindows {
+    fn running_group(&mut self, ctx: &GpuContext, pixels: u64) -> wgpu::BindGroup {
+        let bytes = pixels.max(1) * 16;
+        if let Some((held, _, group)) = &self.running {
+            if *held == bytes {
+                return group.clone();
+            }
+        }
+        let buffer = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("brute running sums"),
+            size: bytes,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
+        let group = self.running_layout.bind(&ctx.device, &[&buffer]);
+        self.running = Some((bytes, buffer, group.clone()));
+        group
+    }
 }
 
 impl BruteMethod {
@@ -92,6 +131,7 @@ impl BruteMethod {
                 "--tile {tile}: must be 1..=256"
             )));
         }
+        let reads = ValReads::parse(options.choice("vals", ValReads::CHOICES)?);
         let raster = Rasterizer::new(ctx, scene, render)?;
         // Without --rsm the lights share one point light's texels, as in the sparse method:
         // both gather the same VALs.
@@ -108,14 +148,41 @@ impl BruteMethod {
         let cs = wgpu::ShaderStages::COMPUTE;
         let layout = GroupLayout::new(device, "brute", cs, BINDINGS);
         // Without glossy light, the build without its code (see `GlossyGather`).
+        let module = ctx.shader("brute_vals.wgsl");
+        let constants = [("GLOSSY_GATHER", if glossy { 1.0 } else { 0.0 })];
         let pipeline = crate::gpu::compute_pipeline_groups(
             device,
             "brute",
-            &ctx.shader("brute_vals.wgsl"),
+            &module,
             &[&layout.layout],
             "cs_main",
-            &[("GLOSSY_GATHER", if glossy { 1.0 } else { 0.0 })],
+            &constants,
         );
+        let window_layout = val_windows::layout(device, cs);
+        let windows = ValWindows::new(ctx, &rsm, &window_layout)
+            .filter(|_| reads.windows(ctx.is_software(), true, 0))
+            .map(|windows| {
+                let running_layout =
+                    GroupLayout::new(device, "brute running sums", cs, &[Slot::StorageRw]);
+                let pipeline = crate::gpu::compute_pipeline_groups(
+                    device,
+                    "brute",
+                    &module,
+                    &[
+                        &layout.layout,
+                        &running_layout.layout,
+                        &window_layout.layout,
+                    ],
+                    "cs_window",
+                    &constants,
+                );
+                BruteWindows {
+                    pipeline,
+                    windows,
+                    running_layout,
+                    running: None,
+                }
+            });
         Ok(Self {
             raster,
             rsm,
@@ -125,6 +192,7 @@ impl BruteMethod {
             params_buffer,
             pipeline,
             layout,
+            windows,
             vals: 0,
         })
     }
@@ -186,7 +254,25 @@ impl Method for BruteMethod {
                 &t.radiance_indirect,
             ],
         );
-        view.record_per_pixel(passes, "brute", &self.pipeline, &group)?;
+        match &mut self.windows {
+            Some(w) => {
+                let (width, height) = view.render_size();
+                let running = w.running_group(ctx, u64::from(width) * u64::from(height));
+                passes.compute("brute", |pass| {
+                    pass.set_pipeline(&w.pipeline);
+                    pass.set_bind_group(0, &group, &[]);
+                    pass.set_bind_group(1, &running, &[]);
+                    w.windows.for_each(pass, 2, |pass| {
+                        pass.dispatch_workgroups(
+                            width.div_ceil(PIXEL_TILE),
+                            height.div_ceil(PIXEL_TILE),
+                            1,
+                        );
+                    });
+                })?;
+            }
+            None => view.record_per_pixel(passes, "brute", &self.pipeline, &group)?,
+        }
         Ok(ViewResult::DirectAndIndirect)
     }
 
@@ -200,7 +286,12 @@ impl Method for BruteMethod {
     }
 
     fn gpu_bytes(&self) -> u64 {
-        self.raster.gpu_bytes() + self.rsm.bytes.0
+        let running = self
+            .windows
+            .as_ref()
+            .and_then(|w| w.running.as_ref())
+            .map_or(0, |(bytes, _, _)| *bytes);
+        self.raster.gpu_bytes() + self.rsm.bytes.0 + running
     }
 
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
@@ -212,6 +303,10 @@ impl Method for BruteMethod {
             format!("{:?}", self.glossy_option).to_lowercase().into(),
         );
         map.insert("glossy_gathered".into(), self.glossy.into());
+        map.insert(
+            "vals_read".into(),
+            ValReads::name(self.windows.is_some()).into(),
+        );
         map
     }
 }

@@ -18,6 +18,7 @@ use std::time::Instant;
 use crate::frame::{FrameInput, IndirectLayer, Method, View, ViewCache, ViewResult};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
 use crate::light::rsm::Rsm;
+use crate::light::val_windows::ValReads;
 use crate::light::GlossyGather;
 use crate::light::ValSource;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
@@ -65,6 +66,7 @@ impl Default for SparseSettings {
                 gather_slices: 0,
                 gather_points: 0,
                 visibility_lookup: VisibilityLookup::Auto,
+                gather_vals: ValReads::Auto,
             },
             glossy_eye: GlossyEye::Mid,
             link_test: true,
@@ -124,6 +126,7 @@ impl SparseSettings {
                 visibility_lookup: VisibilityLookup::parse(
                     options.choice("visibility-lookup", VisibilityLookup::CHOICES)?,
                 ),
+                gather_vals: ValReads::parse(options.choice("gather-vals", ValReads::CHOICES)?),
             },
             glossy_eye: match options.choice("glossy-eye", &["mid", "per-view"])? {
                 "per-view" => GlossyEye::PerView,
@@ -366,6 +369,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         kind: OptionKind::Choice(VisibilityLookup::CHOICES),
         default: "auto",
         help: "--occlusion rays: how the compute gather picks a VAL's cluster visibility: a select tree (faster on a CPU device, which runs every case of a switch) or a switch (measured on a GPU); auto: the tree on a CPU device, the switch on a GPU",
+    },
+    OptionSpec {
+        name: "gather-vals",
+        kind: OptionKind::Choice(ValReads::CHOICES),
+        default: "auto",
+        help: "how the compute gather reads the VAL list: staged through workgroup memory in tiles (splits over VAL slices to fill a GPU) or from uniform windows of 1024 VALs, one dispatch each (a CPU device reads a VAL the whole workgroup shares far faster from a uniform block); auto: windows on a CPU device unless --gather-slices splits the gather, tiles on a GPU; both give the same bits",
     },
     OptionSpec {
         name: "weights",
@@ -783,6 +792,10 @@ impl Method for SparseMethod {
             "weights": format!("{:?}", opts.weights).to_lowercase(),
             "visibility_rays": if opts.adaptive_rays { "adaptive" } else { "all" },
             "visibility_lookup": if self.sparse.visibility_select_tree(&opts) { "tree" } else { "switch" },
+            "gather_vals": match opts.gather {
+                GatherForm::Compute => ValReads::name(self.sparse.gathers_in_windows(&opts)),
+                GatherForm::Raster => "buffer",
+            },
             "preprocess_ms": crate::gpu::timing::round3(self.preprocess_ms),
             "preprocess_meshes_computed": self.meshes_computed,
             "link_test": if self.settings.link_test { "on" } else { "off" },

@@ -23,6 +23,7 @@ use crate::gpu::{compute_pipeline_groups, linear_groups, GpuBytes, GpuContext, G
 use crate::light::bvh::SceneBvh;
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::light::sensor::SensorBuffers;
+use crate::light::val_windows::{self, ValReads, ValWindows};
 use crate::raster::scene_gpu::SceneGpu;
 use crate::raster::{
     buffer_binding, cleared, RenderError, ScenePipeline, POSITION_ONLY, RADIANCE_FORMAT,
@@ -194,6 +195,8 @@ pub struct SparseOptions {
     pub gather_points: u32,
     /// How the compute gather picks a VAL's cluster visibility (`visibility-lookup`).
     pub visibility_lookup: VisibilityLookup,
+    /// How the compute gather reads the VAL list (`gather-vals`).
+    pub gather_vals: ValReads,
 }
 
 /// How the compute gather picks a VAL's cluster visibility from its points' words
@@ -357,9 +360,11 @@ pub struct SparseGpu {
     pipelines: std::sync::Arc<SparsePipelines>,
     /// The largest storage binding the device allows (caps the partial sums).
     max_binding: u64,
-    /// The partial sums of the slices last recorded: (slices, buffer, group), made when the
-    /// slice count changes.
-    partials: std::cell::RefCell<Option<(u32, wgpu::Buffer, wgpu::BindGroup)>>,
+    /// The partial sums last recorded: (bytes, buffer, group), made when their size changes
+    /// (slices of a split gather, or the window form's running sums).
+    partials: std::cell::RefCell<Option<(u64, wgpu::Buffer, wgpu::BindGroup)>>,
+    /// The window form's group and window count, where the VAL buffer holds whole windows.
+    val_windows: Option<ValWindows>,
     /// VALs the VAL buffer holds at most (the automatic split sizes its slices by it).
     val_capacity: u64,
     /// A CPU device (the automatic split leaves the gather whole).
@@ -416,7 +421,6 @@ use Slot::{Storage as R, StorageRw as W};
 const GATHER_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, W, W, R];
 /// Instances, points, point diffuse and glossy (renormalized in place), extra, clamp counts.
 const RENORMALIZE_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, W];
-/// Instances, points, the occluder tiles' bounds it writes.
 /// Instances, points, the tree's bounds and the world-space discs it writes, the walk order.
 const OCCLUDER_BOUNDS_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R];
 /// Instances, points, point diffuse and glossy (dimmed in place), extra, occluder bounds,
@@ -445,6 +449,8 @@ struct GatherCode {
     spheres: bool,
     /// Points per invocation: 4, 8 or 16 ([`gather_points_per_invocation`]).
     slots: u32,
+    /// The window form (`cs_window`, [`ValReads::Windows`]), else the tiles (`cs_main`).
+    windows: bool,
 }
 
 impl GatherCode {
@@ -460,6 +466,16 @@ impl GatherCode {
             } else {
                 GATHER_POINTS_PER_INVOCATION_GPU
             },
+            windows: ctx.is_software(),
+        }
+    }
+
+    /// The entry point of `vals_gather.wgsl` that runs it.
+    fn entry(self) -> &'static str {
+        if self.windows {
+            "cs_window"
+        } else {
+            "cs_main"
         }
     }
 
@@ -482,35 +498,36 @@ impl GatherCode {
             8 => 1,
             _ => 0,
         };
-        self.glossy as usize
+        (self.glossy as usize
             | (self.visibility as usize) << 1
             | (self.select_tree as usize) << 2
             | (self.spheres as usize) << 3
-            | slots << 4
+            | slots << 4)
+            + 48 * self.windows as usize
     }
 }
 
-/// `cs_main` of `shader` with its pipeline constants set, compiled into `slot` the first time
+/// `entry` of `shader` with its pipeline constants set, compiled into `slot` the first time
 /// it is asked for.
 fn specialized_once<'a>(
     slot: &'a std::sync::OnceLock<wgpu::ComputePipeline>,
     ctx: &GpuContext,
     label: &str,
-    shader: &str,
+    (shader, entry): (&str, &str),
     layouts: &[&wgpu::BindGroupLayout],
     constants: &[(&str, f64)],
 ) -> Result<&'a wgpu::ComputePipeline, GpuError> {
     if let Some(pipeline) = slot.get() {
         return Ok(pipeline);
     }
-    let what = format!("a specialized {label} pipeline (cs_main)");
+    let what = format!("a specialized {label} pipeline ({entry})");
     let pipeline = ctx.scoped(&what, None, crate::raster::PIPELINE_REMEDY, || {
         crate::gpu::compute_pipeline_groups(
             &ctx.device,
             label,
             &ctx.shader(shader),
             layouts,
-            "cs_main",
+            entry,
             constants,
         )
     })?;
@@ -525,10 +542,13 @@ struct SparsePipelines {
     /// The gather without the code a solution does not run, built when first used and indexed
     /// by [`GatherCode::variant`]: the glossy lobes (`GLOSSY_GATHER` false), the cluster
     /// visibility (`GATHER_VISIBILITY` false), the other visibility lookup, the light spheres'
-    /// moments (`GATHER_SPHERES` false). `gather` is [`GatherCode::full`].
-    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 48],
+    /// moments (`GATHER_SPHERES` false), the other way of reading the VALs. `gather` is
+    /// [`GatherCode::full`].
+    gather_variants: [std::sync::OnceLock<wgpu::ComputePipeline>; 96],
     gather_reduce: wgpu::ComputePipeline,
     partials: GroupLayout,
+    /// The window form's group 2 ([`val_windows::WINDOW_BINDINGS`]).
+    window: GroupLayout,
     renormalize: (GroupLayout, wgpu::ComputePipeline),
     /// The bounds kernel's discs stage (`cs_main`); `occluder_stages` are its tiles and
     /// internal-node stages (`cs_tiles`, `cs_nodes`), on the same layout.
@@ -565,10 +585,22 @@ impl SparsePipelines {
             &self.gather_variants[code.variant()],
             ctx,
             "gather",
-            "vals_gather.wgsl",
-            &[&self.gather.0.layout, &self.partials.layout],
+            ("vals_gather.wgsl", code.entry()),
+            &Self::gather_groups(&self.gather.0, &self.partials, &self.window, code.windows),
             &code.constants(),
         )
+    }
+
+    /// The gather's groups: its bindings, the partial sums, and for the window form the
+    /// window.
+    fn gather_groups<'a>(
+        gather: &'a GroupLayout,
+        partials: &'a GroupLayout,
+        window: &'a GroupLayout,
+        windows: bool,
+    ) -> Vec<&'a wgpu::BindGroupLayout> {
+        let all = [&gather.layout, &partials.layout, &window.layout];
+        all[..if windows { 3 } else { 2 }].to_vec()
     }
 
     fn visibility_without_sensor(
@@ -579,7 +611,7 @@ impl SparsePipelines {
             &self.visibility_no_sensor,
             ctx,
             "visibility",
-            "vals_visibility.wgsl",
+            ("vals_visibility.wgsl", "cs_main"),
             &[
                 &self.visibility.0.layout,
                 &SceneBvh::layout(ctx).layout,
@@ -623,16 +655,26 @@ impl SparsePipelines {
             cs | wgpu::ShaderStages::FRAGMENT,
             GATHER_BINDINGS,
         );
+        let window = val_windows::layout(device, cs);
         let groups = [&gather_layout.layout, &partials.layout];
+        let full = GatherCode::full(ctx);
         let gather = ctx.scoped(
-            "the gather pipeline (cs_main)",
+            &format!("the gather pipeline ({})", full.entry()),
             None,
             crate::raster::PIPELINE_REMEDY,
             || {
                 let shader = ctx.shader("vals_gather.wgsl");
-                let constants = GatherCode::full(ctx).constants();
+                let constants = full.constants();
+                let layouts = Self::gather_groups(&gather_layout, &partials, &window, full.windows);
                 let pipeline = crate::gpu::compute_pipeline_groups;
-                pipeline(device, "gather", &shader, &groups, "cs_main", &constants)
+                pipeline(
+                    device,
+                    "gather",
+                    &shader,
+                    &layouts,
+                    full.entry(),
+                    &constants,
+                )
             },
         )?;
         let gather_reduce = compute("gather reduce", "vals_gather_reduce.wgsl", &groups)?;
@@ -710,6 +752,7 @@ impl SparsePipelines {
             gather_variants: std::array::from_fn(|_| std::sync::OnceLock::new()),
             gather_reduce,
             partials,
+            window,
             renormalize: kernel("renormalize", "vals_renormalize.wgsl", RENORMALIZE_BINDINGS)?,
             occluder_stages,
             occluder_bounds,
@@ -961,6 +1004,7 @@ impl SparseGpu {
         let params_buffer = bytes.params::<SparseParams>(device, "sparse params");
 
         let pipelines = SparsePipelines::shared(ctx)?;
+        let val_windows = ValWindows::new(ctx, rsm, &pipelines.window);
         let instances = &scene_gpu.instance_buffer;
         // One kernel per pass: the device's pipeline and layout for it, and this solution's
         // buffers after the parameter block in the binding order of its slot list: every
@@ -1100,6 +1144,7 @@ impl SparseGpu {
             gather,
             max_binding,
             partials: std::cell::RefCell::new(None),
+            val_windows,
             val_capacity: vals_buffer.size()
                 / std::mem::size_of::<crate::light::rsm::GpuVal>() as u64,
             cpu_device: ctx.adapter_info.device_type == wgpu::DeviceType::Cpu,
@@ -1189,8 +1234,22 @@ impl SparseGpu {
         options.visibility_lookup.select_tree(self.cpu_device)
     }
 
-    /// The VAL slices the compute gather runs as under `options` on this device.
+    /// Whether the compute gather reads the VALs in uniform windows under `options` on this
+    /// device ([`ValReads`]).
+    pub fn gathers_in_windows(&self, options: &SparseOptions) -> bool {
+        options.gather_vals.windows(
+            self.cpu_device,
+            self.val_windows.is_some(),
+            options.gather_slices,
+        )
+    }
+
+    /// The VAL slices the compute gather runs as under `options` on this device (1 when it
+    /// reads windows).
     pub fn gather_slices(&self, options: &SparseOptions) -> u32 {
+        if self.gathers_in_windows(options) {
+            return 1;
+        }
         gather_slices(
             options.gather_slices,
             self.cpu_device,
@@ -1207,27 +1266,33 @@ impl SparseGpu {
         std::sync::Arc::ptr_eq(&self.pipelines, &other.pipelines)
     }
 
-    /// Bytes of the split gather's partial sums as last recorded (0 unsplit).
+    /// Bytes of the gather's partial sums as last recorded (a split gather's slices or the
+    /// window form's running sums; 0 for neither).
     pub fn gather_partial_bytes(&self) -> u64 {
         match &*self.partials.borrow() {
-            Some((slices, buffer, _)) if *slices > 1 => buffer.size(),
+            Some((bytes, buffer, _)) if *bytes > 16 => buffer.size(),
             _ => 0,
         }
     }
 
-    /// The partial sums' group for `slices` slices (a 16-byte placeholder unsplit), made
-    /// again only when the count changes.
-    fn partials_for(&self, ctx: &GpuContext, slices: u32) -> Result<wgpu::BindGroup, GpuError> {
-        if let Some((held, _, group)) = &*self.partials.borrow() {
-            if *held == slices {
-                return Ok(group.clone());
-            }
-        }
-        let size = if slices > 1 {
+    /// The partial sums' group for `slices` slices, or with `windows` one (a 16-byte
+    /// placeholder for an unsplit tile gather), made again only when the size changes.
+    fn partials_for(
+        &self,
+        ctx: &GpuContext,
+        slices: u32,
+        windows: bool,
+    ) -> Result<wgpu::BindGroup, GpuError> {
+        let size = if slices > 1 || windows {
             u64::from(slices) * u64::from(self.point_count) * GATHER_PARTIAL_VEC4S * 16
         } else {
             16
         };
+        if let Some((held, _, group)) = &*self.partials.borrow() {
+            if *held == size {
+                return Ok(group.clone());
+            }
+        }
         let buffer = ctx.scoped(
             &format!("the gather's partial sums ({slices} slices)"),
             Some(size),
@@ -1242,7 +1307,7 @@ impl SparseGpu {
             },
         )?;
         let group = self.pipelines.partials.bind(&ctx.device, &[&buffer]);
-        *self.partials.borrow_mut() = Some((slices, buffer, group.clone()));
+        *self.partials.borrow_mut() = Some((size, buffer, group.clone()));
         Ok(group)
     }
 
@@ -1467,13 +1532,18 @@ impl SparseGpu {
         match options.gather {
             GatherForm::Compute if self.point_count > 0 => {
                 let slices = self.gather_slices(options);
-                let partials = self.partials_for(passes.ctx(), slices)?;
+                let windows = self
+                    .val_windows
+                    .as_ref()
+                    .filter(|_| self.gathers_in_windows(options));
+                let partials = self.partials_for(passes.ctx(), slices, windows.is_some())?;
                 let code = GatherCode {
                     glossy: self.gathers_glossy(options),
                     visibility: options.occlusion == OcclusionMode::Rays,
                     select_tree: self.visibility_select_tree(options),
                     spheres: self.gathers_spheres(options),
                     slots: self.gather_points_per_invocation(options),
+                    windows: windows.is_some(),
                 };
                 let (x, y) = linear_groups(
                     self.point_count.div_ceil(POINT_GROUP * code.slots),
@@ -1488,7 +1558,12 @@ impl SparseGpu {
                     pass.set_pipeline(pipeline);
                     pass.set_bind_group(0, gather, &[]);
                     pass.set_bind_group(1, &partials, &[]);
-                    pass.dispatch_workgroups(x, y, slices);
+                    match windows {
+                        Some(windows) => windows.for_each(pass, 2, |pass| {
+                            pass.dispatch_workgroups(x, y, 1);
+                        }),
+                        None => pass.dispatch_workgroups(x, y, slices),
+                    }
                 })?;
                 if slices > 1 {
                     let (x, y) = linear_groups(points, max_groups);
