@@ -205,6 +205,10 @@ fn shared_constants_match() {
                 clusters[1],
                 clusters[2],
                 ("MAX_RAY_TILES", valgi::vals::visibility::MAX_RAY_TILES),
+                (
+                    "BVH_ROW_SHIFT",
+                    valgi::light::bvh::BVH_ROW_TEXELS.trailing_zeros(),
+                ),
             ],
         ),
         (

@@ -29,11 +29,58 @@ struct BvhInstance {
     world_max: vec4<f32>,
 }
 
-@group(1) @binding(0) var<storage, read> bvh_nodes: array<BvhNode>;
-@group(1) @binding(1) var<storage, read> bvh_triangles: array<BvhTriangle>;
-@group(1) @binding(2) var<storage, read> bvh_instances: array<BvhInstance>;
-// The top level: leaves hold `prim_count` instances from `first` (in `bvh_instances`).
-@group(1) @binding(3) var<storage, read> bvh_top: array<BvhNode>;
+// Every record as rgba32uint texels, 2^BVH_ROW_SHIFT a row (`BVH_ROW_TEXELS` in
+// `src/light/bvh.rs`, which says why textures: on a CPU device a texel fetch at a per-lane
+// address is one gathered load, a storage read a loop over lanes): the mesh nodes (2 texels
+// each), the triangles (3), the instances (6) and the top level's nodes (2), whose leaves
+// hold `prim_count` instances from `first`.
+const BVH_ROW_SHIFT: u32 = 12u;
+@group(1) @binding(0) var bvh_node_texels: texture_2d<u32>;
+@group(1) @binding(1) var bvh_triangle_texels: texture_2d<u32>;
+@group(1) @binding(2) var bvh_instance_texels: texture_2d<u32>;
+@group(1) @binding(3) var bvh_top_texels: texture_2d<u32>;
+
+fn bvh_texel(texels: texture_2d<u32>, t: u32) -> vec4<u32> {
+    let row_mask = (1u << BVH_ROW_SHIFT) - 1u;
+    return textureLoad(texels, vec2<u32>(t & row_mask, t >> BVH_ROW_SHIFT), 0);
+}
+
+fn bvh_node_of(texels: texture_2d<u32>, i: u32) -> BvhNode {
+    let a = bvh_texel(texels, 2u * i);
+    let b = bvh_texel(texels, 2u * i + 1u);
+    return BvhNode(bitcast<vec3<f32>>(a.xyz), a.w, bitcast<vec3<f32>>(b.xyz), b.w);
+}
+
+fn bvh_node(i: u32) -> BvhNode {
+    return bvh_node_of(bvh_node_texels, i);
+}
+
+fn bvh_top_node(i: u32) -> BvhNode {
+    return bvh_node_of(bvh_top_texels, i);
+}
+
+fn bvh_instance(i: u32) -> BvhInstance {
+    let t = 6u * i;
+    let m = mat4x4<f32>(
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t + 1u)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t + 2u)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t + 3u)),
+    );
+    return BvhInstance(
+        m,
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t + 4u)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_instance_texels, t + 5u)),
+    );
+}
+
+fn bvh_triangle(i: u32) -> BvhTriangle {
+    return BvhTriangle(
+        bitcast<vec4<f32>>(bvh_texel(bvh_triangle_texels, 3u * i)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_triangle_texels, 3u * i + 1u)),
+        bitcast<vec4<f32>>(bvh_texel(bvh_triangle_texels, 3u * i + 2u)),
+    );
+}
 
 fn bvh_safe_inverse(d: vec3<f32>) -> vec3<f32> {
     let tiny = abs(d) < vec3<f32>(1e-20);
@@ -93,14 +140,14 @@ fn bvh_next(i: u32, node: BvhNode, entered: bool) -> u32 {
 
 fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triangle: u32) -> bool {
     let inv = bvh_safe_inverse(dir);
-    let end = bvh_walk_end(bvh_nodes[first_node]);
+    let end = bvh_walk_end(bvh_node(first_node));
     var i = 0u;
     while (i < end) {
-        let node = bvh_nodes[first_node + i];
+        let node = bvh_node(first_node + i);
         let entered = bvh_ray_box(origin, inv, 1.0, node.min, node.max);
         if (entered) {
             for (var k = 0u; k < node.prim_count; k++) {
-                if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangles[first_triangle + node.first + k])) {
+                if (bvh_ray_triangle(origin, dir, 1.0, bvh_triangle(first_triangle + node.first + k))) {
                     return true;
                 }
             }
@@ -114,14 +161,14 @@ fn bvh_mesh_hit(origin: vec3<f32>, dir: vec3<f32>, first_node: u32, first_triang
 fn segment_occluded(start: vec3<f32>, end: vec3<f32>) -> bool {
     let d = end - start;
     let inv = bvh_safe_inverse(d);
-    let last = bvh_walk_end(bvh_top[0]);
+    let last = bvh_walk_end(bvh_top_node(0u));
     var i = 0u;
     while (i < last) {
-        let node = bvh_top[i];
+        let node = bvh_top_node(i);
         let entered = bvh_ray_box(start, inv, 1.0, node.min, node.max);
         if (entered) {
             for (var k = node.first; k < node.first + node.prim_count; k++) {
-                let inst = bvh_instances[k];
+                let inst = bvh_instance(k);
                 if (!bvh_ray_box(start, inv, 1.0, inst.world_min.xyz, inst.world_max.xyz)) {
                     continue;
                 }
