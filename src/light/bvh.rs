@@ -41,7 +41,10 @@ const BVH_BINDINGS: &[Slot] = &[Slot::UintTexture; 4];
 /// invocation (65536 invocations) took 3.58 s from a storage buffer, 3.30 s from workgroup
 /// memory and 0.82 s from an rgba32 texture (each less the 0.10 s of its index arithmetic).
 pub const BVH_ROW_TEXELS: u32 = 4096;
-const _: () = assert!(BVH_ROW_TEXELS.is_power_of_two(), "bvh.wgsl shifts and masks");
+const _: () = assert!(
+    BVH_ROW_TEXELS.is_power_of_two(),
+    "bvh.wgsl shifts and masks"
+);
 
 /// One BVH node in [`threaded`] order: a leaf when `prim_count > 0` (triangles
 /// `first..first + prim_count` of its mesh), otherwise an inner node whose left child is the
