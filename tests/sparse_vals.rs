@@ -786,12 +786,7 @@ fn both_visibility_lookups_gather_the_same_sums() {
     let tree = run(OcclusionMode::Rays, VisibilityLookup::Tree, "tree");
     let switch = run(OcclusionMode::Rays, VisibilityLookup::Switch, "switch");
     // The same word, hence the same f32 sums in the same order: equal to the bit.
-    assert_eq!(tree.lights.len(), switch.lights.len());
-    for (i, (t, w)) in tree.lights.iter().zip(&switch.lights).enumerate() {
-        assert_eq!(t.diffuse, w.diffuse, "point {i}");
-        assert_eq!(t.glossy, w.glossy, "point {i}");
-        assert_eq!(t.diffuse_position, w.diffuse_position, "point {i}");
-    }
+    assert_same_points(&tree, &switch, "tree against switch");
     // And the lookup matters: the tall block hides some clusters from some points, so the
     // sums differ from those gathered without visibility.
     let off = run(OcclusionMode::Off, VisibilityLookup::Tree, "tree");
@@ -805,6 +800,24 @@ fn both_visibility_lookups_gather_the_same_sums() {
         darker > 10,
         "{darker} points lost a tenth of their light to visibility"
     );
+}
+
+/// Asserts that two gathers wrote the same bits at every point: sums, positions, spheres.
+fn assert_same_points(a: &PointsReadback, b: &PointsReadback, what: &str) {
+    assert_eq!(a.lights.len(), b.lights.len(), "{what}: point counts");
+    for (i, (x, y)) in a.lights.iter().zip(&b.lights).enumerate() {
+        assert_eq!(x.diffuse, y.diffuse, "{what}, point {i}: diffuse");
+        assert_eq!(x.glossy, y.glossy, "{what}, point {i}: glossy");
+        assert_eq!(
+            x.diffuse_position, y.diffuse_position,
+            "{what}, point {i}: position"
+        );
+        assert_eq!(
+            x.glossy_position, y.glossy_position,
+            "{what}, point {i}: glossy position"
+        );
+        assert_eq!(a.spheres[i], b.spheres[i], "{what}, point {i}: spheres");
+    }
 }
 
 /// The two ways the compute gather reads the VAL list (`gather-vals`: tiles of workgroup
@@ -839,18 +852,7 @@ fn windowed_gather_writes_what_the_tiled_gather_writes_to_the_bit() {
             .filter(|l| l.diffuse.max_element() > 0.0)
             .count();
         assert!(lit > tiles.lights.len() / 2, "{lit} points gathered light");
-        assert_eq!(windows.lights.len(), tiles.lights.len());
-        for (i, (a, b)) in tiles.lights.iter().zip(&windows.lights).enumerate() {
-            let what = format!("{occlusion:?}, point {i}");
-            assert_eq!(a.diffuse, b.diffuse, "{what}: diffuse");
-            assert_eq!(a.glossy, b.glossy, "{what}: glossy");
-            assert_eq!(a.diffuse_position, b.diffuse_position, "{what}: position");
-            assert_eq!(
-                a.glossy_position, b.glossy_position,
-                "{what}: glossy position"
-            );
-            assert_eq!(tiles.spheres[i], windows.spheres[i], "{what}: spheres");
-        }
+        assert_same_points(&tiles, &windows, &format!("{occlusion:?}"));
     }
     // A CPU device reads windows unless the gather is split; a GPU reads tiles.
     let mut s = sparse_settings(64, 700, OcclusionMode::Rays, true);
@@ -884,18 +886,8 @@ fn every_points_per_invocation_gathers_the_same_sums() {
         assert!(four.lights.len() > 1024, "{} points", four.lights.len());
         for per_invocation in [8, 16] {
             let other = run(occlusion, per_invocation);
-            assert_eq!(other.lights.len(), four.lights.len());
-            for (i, (a, b)) in four.lights.iter().zip(&other.lights).enumerate() {
-                let what = format!("{occlusion:?}, {per_invocation} per invocation, point {i}");
-                assert_eq!(a.diffuse, b.diffuse, "{what}: diffuse");
-                assert_eq!(a.glossy, b.glossy, "{what}: glossy");
-                assert_eq!(a.diffuse_position, b.diffuse_position, "{what}: position");
-                assert_eq!(
-                    a.glossy_position, b.glossy_position,
-                    "{what}: glossy position"
-                );
-                assert_eq!(four.spheres[i], other.spheres[i], "{what}: spheres");
-            }
+            let what = format!("{occlusion:?}, {per_invocation} per invocation");
+            assert_same_points(&four, &other, &what);
         }
         if occlusion == OcclusionMode::Sum {
             // The spheres are gathered for the disc occlusion.

@@ -27,7 +27,10 @@ override SENSOR_RAYS: bool = true;
 @group(0) @binding(1) var<storage, read> instances: array<InstanceData>;
 @group(0) @binding(2) var<storage, read> points_model: array<vec4<u32>>;
 @group(0) @binding(3) var<storage, read> points_meta: array<vec2<u32>>;
-@group(0) @binding(4) var<storage, read> vals: array<Val>;
+// The VALs as texels (`ValTexels` in `src/vals/sparse.rs`): VAL i at texels 3i..3i+2, read
+// with the BVH's texel addressing. Every lane of a workgroup (one cluster) reads the same
+// sample VAL; llvmpipe reads that from a storage buffer lane by lane.
+@group(0) @binding(4) var val_texels: texture_2d<u32>;
 @group(0) @binding(5) var<storage, read> cluster_samples: array<u32>;
 // Per point MAX_CLUSTERS / 4 words, four clusters' V·255 per word (low byte first); cleared
 // before the pass, each invocation ORs in its byte.
@@ -51,6 +54,14 @@ struct StratumSample {
     end: vec3<f32>,
 }
 
+fn val_texel_record(i: u32) -> Val {
+    return Val(
+        bitcast<vec4<f32>>(bvh_texel(val_texels, 3u * i)),
+        bitcast<vec4<f32>>(bvh_texel(val_texels, 3u * i + 1u)),
+        bitcast<vec4<f32>>(bvh_texel(val_texels, 3u * i + 2u)),
+    );
+}
+
 // Candidate `k` of stratum `s` of tile `tile`: an RSM tile's sample slot, or past the RSM's
 // tiles a sensor tile's surfel (area 0: none).
 fn candidate_val(tile: u32, s: u32, k: u32) -> Val {
@@ -64,7 +75,7 @@ fn candidate_val(tile: u32, s: u32, k: u32) -> Val {
         val.position_area = vec4<f32>(0.0);
         return val;
     }
-    return vals[slot - 1u];
+    return val_texel_record(slot - 1u);
 }
 
 // Stratum `s` of tile `tile` as a ray target: its first candidate (centre, then corners)

@@ -20,7 +20,7 @@ use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{compute_pipeline_groups, linear_groups, GpuBytes, GpuContext, GpuError, Passes};
-use crate::light::bvh::SceneBvh;
+use crate::light::bvh::{SceneBvh, BVH_ROW_TEXELS};
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::light::sensor::SensorBuffers;
 use crate::light::val_windows::{self, ValReads, ValWindows};
@@ -254,6 +254,97 @@ pub enum GatherForm {
 /// point i is texel (i mod W, i div W).
 pub const RASTER_GATHER_WIDTH: u32 = 256;
 
+/// The VAL buffer copied into an rgba32uint texture of [`BVH_ROW_TEXELS`]-wide rows, VAL i at
+/// texels 3i..3i+2 (`val_texel_record` in `vals_visibility.wgsl`), for the visibility pass's
+/// stratum samples. Every lane of a visibility workgroup (one cluster) reads the same sample
+/// VAL, which llvmpipe reads from a storage buffer lane by lane and from a texture with one
+/// gathered load per texel (`light::bvh::BVH_ROW_TEXELS` has the measurement).
+struct ValTexels {
+    texture: wgpu::Texture,
+    /// The VAL buffer, whole.
+    source: wgpu::Buffer,
+    bytes: u64,
+}
+
+impl ValTexels {
+    fn new(ctx: &GpuContext, vals: &wgpu::Buffer) -> Result<Self, GpuError> {
+        let row_bytes = u64::from(BVH_ROW_TEXELS) * 16;
+        let rows = vals.size().div_ceil(row_bytes);
+        let most = u64::from(ctx.device.limits().max_texture_dimension_2d);
+        let bytes = rows * row_bytes;
+        if rows > most {
+            return Err(GpuError::Allocation {
+                what: "the VALs as texels for the visibility rays".into(),
+                size: crate::gpu::format_bytes(bytes),
+                message: format!(
+                    "{rows} rows of {BVH_ROW_TEXELS} texels; the device's 2D textures have at \
+                     most {most}"
+                ),
+                remedy: "Lower --rsm, or use --occlusion sum or off".into(),
+            });
+        }
+        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("val texels"),
+            size: wgpu::Extent3d {
+                width: BVH_ROW_TEXELS,
+                height: rows as u32,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Uint,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        Ok(Self {
+            texture,
+            source: vals.clone(),
+            bytes,
+        })
+    }
+
+    /// Copies the VAL buffer in: its whole rows, then what is left as part of one more.
+    fn record_copy(&self, encoder: &mut wgpu::CommandEncoder) {
+        let row_bytes = u64::from(BVH_ROW_TEXELS) * 16;
+        let size = self.source.size();
+        let (full, rest) = (size / row_bytes, size % row_bytes);
+        let copy = |encoder: &mut wgpu::CommandEncoder, row: u64, width: u32, height: u32| {
+            encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer: &self.source,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: row * row_bytes,
+                        bytes_per_row: Some(row_bytes as u32),
+                        rows_per_image: None,
+                    },
+                },
+                wgpu::TexelCopyTextureInfo {
+                    texture: &self.texture,
+                    mip_level: 0,
+                    origin: wgpu::Origin3d {
+                        x: 0,
+                        y: row as u32,
+                        z: 0,
+                    },
+                    aspect: wgpu::TextureAspect::All,
+                },
+                wgpu::Extent3d {
+                    width,
+                    height,
+                    depth_or_array_layers: 1,
+                },
+            );
+        };
+        if full > 0 {
+            copy(encoder, 0, BVH_ROW_TEXELS, full as u32);
+        }
+        if rest > 0 {
+            copy(encoder, full, (rest / 16) as u32, 1);
+        }
+    }
+}
+
 /// The raster gather's pipeline and its (never stored) colour target, built on first use.
 struct RasterGather {
     pipeline: wgpu::RenderPipeline,
@@ -382,6 +473,8 @@ pub struct SparseGpu {
     interpolate: Kernel,
     bvh: SceneBvh,
     visibility_buffer: wgpu::Buffer,
+    /// The VAL buffer as texels, copied in before each visibility pass.
+    val_texels: ValTexels,
     /// Last frame's visibility, blended into this frame's (`visibility-history`).
     visibility_history: wgpu::Buffer,
     /// Solutions recorded so far: the first has no history to blend.
@@ -429,7 +522,7 @@ const OCCLUSION_BINDINGS: &[Slot] = &[R, R, R, R, W, W, R, R, R];
 /// Instances, points, point lights, instance ranges, links, the vertex lights it writes.
 const INTERPOLATE_BINDINGS: &[Slot] = &[R, R, R, R, R, R, R, R, R, R, W];
 /// Instances, points, VALs, RSM cluster samples, the visibility it writes, last frame's.
-const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, R, R, W, R];
+const VISIBILITY_BINDINGS: &[Slot] = &[R, R, R, R, Slot::UintTexture, R, W, R];
 /// Group 2 of the visibility pass (`sensor_occluder.wgsl`): a depth sensor's parameters,
 /// filtered depth and ray samples ([`crate::light::sensor::SensorBuffers`]).
 const SENSOR_BINDINGS: &[Slot] = &[Slot::Uniform, R, R];
@@ -1100,6 +1193,8 @@ impl SparseGpu {
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
         let bvh = SceneBvh::new(ctx, scene)?;
         bytes.add(GpuBytes(bvh.bytes.0));
+        let val_texels = ValTexels::new(ctx, vals_buffer)?;
+        bytes.add(GpuBytes(val_texels.bytes));
         let sensor_group = match sensor {
             Some(sensor) => pipelines
                 .sensor
@@ -1113,7 +1208,7 @@ impl SparseGpu {
                 instances,
                 &points_model_buffer,
                 &points_meta_buffer,
-                vals_buffer,
+                &val_texels.texture.create_view(&Default::default()),
                 &rsm.cluster_samples,
                 &visibility_buffer,
                 &visibility_history,
@@ -1157,6 +1252,7 @@ impl SparseGpu {
             interpolate,
             bvh,
             visibility_buffer,
+            val_texels,
             visibility_history,
             solutions_recorded: std::cell::Cell::new(0),
             pipelines,
@@ -1464,6 +1560,7 @@ impl SparseGpu {
             passes
                 .encoder()
                 .clear_buffer(&self.visibility_buffer, 0, None);
+            self.val_texels.record_copy(passes.encoder());
             self.solutions_recorded
                 .set(self.solutions_recorded.get() + 1);
             let clusters = (self.rsm_tiles + self.sensor_tiles).clamp(1, MAX_CLUSTERS);
