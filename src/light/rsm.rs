@@ -144,7 +144,7 @@ pub fn budget_resolution(requested: u32, views: u32, max_vals: u32) -> Option<u3
 /// VALs per uniform window of the VAL buffer: 48 KiB, a multiple of the 256-byte offset
 /// alignment and under the 64 KiB a uniform binding may hold. The buffer is padded to whole
 /// windows ([`Rsm::val_windows`]) so that a kernel can bind any window at a dynamic offset
-/// and read it as a uniform block (`WINDOW_VALS` in `vals_gather.wgsl`), which a CPU device
+/// and read it as a uniform block (`light::val_windows`, `val_windows.wgsl`), which a CPU device
 /// reads far faster than the same VALs from storage or workgroup memory when every
 /// invocation reads the same one (`src/vals/README.md`, "How lavapipe loads memory").
 pub const VAL_WINDOW: u64 = 1024;

@@ -87,7 +87,7 @@ pub const WINDOW_BINDINGS: &[Slot] = &[Slot::DynamicUniform, Slot::DynamicUnifor
 /// Bytes of one window of VALs.
 pub const WINDOW_BYTES: u64 = VAL_WINDOW * std::mem::size_of::<GpuVal>() as u64;
 
-/// A layout for [`WINDOW_BINDINGS`], seen by `visibility`.
+/// A layout for [`WINDOW_BINDINGS`], visible to the shader stages `visibility`.
 pub fn layout(device: &wgpu::Device, visibility: wgpu::ShaderStages) -> GroupLayout {
     GroupLayout::new(device, "val windows", visibility, WINDOW_BINDINGS)
 }
