@@ -116,17 +116,17 @@ pub struct SceneBvh {
     pub group: wgpu::BindGroup,
 }
 
-/// `words` (4 per texel) as an rgba32uint texture of [`BVH_ROW_TEXELS`]-wide rows, the last
-/// padded with zeros, and its bytes; an error naming `what` when its rows exceed the device's
-/// texture height.
-fn texel_rows(
+/// An rgba32uint texture of [`BVH_ROW_TEXELS`]-wide rows that holds `texels` texels, and its
+/// bytes; an error naming `what` when its rows exceed the device's texture height. The BVH's
+/// records and the visibility pass's copy of the VALs use this layout (texel t at
+/// (t mod width, t div width)).
+pub fn texel_row_texture(
     ctx: &GpuContext,
     what: &str,
-    words: &[u32],
+    texels: u64,
     remedy: &str,
 ) -> Result<(wgpu::Texture, u64), GpuError> {
-    use wgpu::util::DeviceExt;
-    let texels = (words.len() / 4).max(1) as u64;
+    let texels = texels.max(1);
     let rows = texels.div_ceil(u64::from(BVH_ROW_TEXELS));
     let size = rows * u64::from(BVH_ROW_TEXELS) * 16;
     let most = u64::from(ctx.device.limits().max_texture_dimension_2d);
@@ -141,27 +141,32 @@ fn texel_rows(
             remedy: remedy.to_string(),
         });
     }
-    let mut data = vec![0u32; (size / 4) as usize];
-    data[..words.len()].copy_from_slice(words);
-    let texture = ctx.device.create_texture_with_data(
-        &ctx.queue,
-        &wgpu::TextureDescriptor {
-            label: Some(what),
-            size: wgpu::Extent3d {
-                width: BVH_ROW_TEXELS,
-                height: rows as u32,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Uint,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
+    let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
+        label: Some(what),
+        size: wgpu::Extent3d {
+            width: BVH_ROW_TEXELS,
+            height: rows as u32,
+            depth_or_array_layers: 1,
         },
-        wgpu::util::TextureDataOrder::LayerMajor,
-        bytemuck::cast_slice(&data),
-    );
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Uint,
+        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+        view_formats: &[],
+    });
+    Ok((texture, size))
+}
+
+/// `words` (4 per texel) in a [`texel_row_texture`], the rest of its last row zero.
+fn texel_rows(
+    ctx: &GpuContext,
+    what: &str,
+    words: &[u32],
+    remedy: &str,
+) -> Result<(wgpu::Texture, u64), GpuError> {
+    let (texture, size) = texel_row_texture(ctx, what, (words.len() / 4) as u64, remedy)?;
+    write_texel_rows(ctx, &texture, words);
     Ok((texture, size))
 }
 

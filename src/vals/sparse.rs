@@ -268,35 +268,12 @@ struct ValTexels {
 
 impl ValTexels {
     fn new(ctx: &GpuContext, vals: &wgpu::Buffer) -> Result<Self, GpuError> {
-        let row_bytes = u64::from(BVH_ROW_TEXELS) * 16;
-        let rows = vals.size().div_ceil(row_bytes);
-        let most = u64::from(ctx.device.limits().max_texture_dimension_2d);
-        let bytes = rows * row_bytes;
-        if rows > most {
-            return Err(GpuError::Allocation {
-                what: "the VALs as texels for the visibility rays".into(),
-                size: crate::gpu::format_bytes(bytes),
-                message: format!(
-                    "{rows} rows of {BVH_ROW_TEXELS} texels; the device's 2D textures have at \
-                     most {most}"
-                ),
-                remedy: "Lower --rsm, or use --occlusion sum or off".into(),
-            });
-        }
-        let texture = ctx.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("val texels"),
-            size: wgpu::Extent3d {
-                width: BVH_ROW_TEXELS,
-                height: rows as u32,
-                depth_or_array_layers: 1,
-            },
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Uint,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
+        let (texture, bytes) = crate::light::bvh::texel_row_texture(
+            ctx,
+            "the VALs as texels for the visibility rays",
+            vals.size() / 16,
+            "Lower --rsm, or use --occlusion sum or off",
+        )?;
         Ok(Self {
             texture,
             source: vals.clone(),
