@@ -320,7 +320,7 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "gather-points",
         kind: OptionKind::Choice(&["auto", "4", "8", "16"]),
         default: "auto",
-        help: "sparse points per compute-gather invocation, each VAL read serving them all (auto: 4 on a GPU; on a CPU device 16 or 8 where every CPU thread still gets a workgroup, else 4); same sums",
+        help: "sparse points per compute-gather invocation, each VAL read serving them all (auto: 4 on a GPU; on a CPU device the count that balances the workgroups over its threads, more points where the VALs come through workgroup memory); same sums",
     },
     OptionSpec {
         name: "gather-slices",

@@ -72,14 +72,22 @@ pub const GATHER_POINTS_PER_INVOCATION_GPU: u32 = 4;
 pub const GATHER_POINTS_PER_INVOCATION_MAX: u32 = 16;
 
 /// Sparse points each gather invocation takes (`GATHER_SLOTS`): `requested` where it is 4, 8
-/// or 16 (`gather-points`); else on a GPU
-/// [`GATHER_POINTS_PER_INVOCATION_GPU`]; on a CPU device the most of 16, 8 and 4 that still
-/// gives every one of `threads` CPU threads a workgroup, since there each invocation reads
-/// every VAL from workgroup memory itself and more points per read ran the gather 1.4–2.1×
-/// faster (lavapipe, 16k VALs × 4k points, 16 points against 4).
+/// or 16 (`gather-points`); else on a GPU [`GATHER_POINTS_PER_INVOCATION_GPU`]. On a CPU
+/// device the workgroups of 64 × that many points run on `threads` CPU threads in rounds, and
+/// the count that takes the fewest rounds is not the one that takes the least time:
+/// - The tile form (`windows` false) reads every VAL from workgroup memory in each invocation,
+///   a loop over the SIMD lanes per float on llvmpipe, so it takes the most of 16, 8 and 4
+///   that still gives every thread a workgroup: more points per read ran it 1.4–2.1× faster
+///   (lavapipe, 16k VALs × 4k points, 16 points against 4).
+/// - The window form reads each VAL from a uniform block, one load for all lanes, so the
+///   per-VAL work an invocation shares among its points is small, about
+///   [`WINDOW_VAL_SLOTS`] points' worth; it takes the count with the least
+///   rounds × (points + that), which splits 4215 points (Sponza) into nine workgroups of 512
+///   instead of five of 1024 (three rounds, the last half idle).
 pub fn gather_points_per_invocation(
     requested: u32,
     cpu_device: bool,
+    windows: bool,
     point_count: u32,
     threads: u32,
 ) -> u32 {
@@ -89,11 +97,26 @@ pub fn gather_points_per_invocation(
     if !cpu_device {
         return GATHER_POINTS_PER_INVOCATION_GPU;
     }
-    [16, 8]
+    let threads = threads.max(1);
+    let workgroups = |slots: u32| point_count.div_ceil(POINT_GROUP * slots);
+    if !windows {
+        return [16, 8]
+            .into_iter()
+            .find(|&slots| workgroups(slots) >= threads)
+            .unwrap_or(4);
+    }
+    // Ties go to the most points an invocation: `min_by_key` keeps the first minimum.
+    [16, 8, 4]
         .into_iter()
-        .find(|&slots| point_count.div_ceil(POINT_GROUP * slots) >= threads.max(1))
-        .unwrap_or(4)
+        .min_by_key(|&slots| workgroups(slots).div_ceil(threads) * (slots + WINDOW_VAL_SLOTS))
+        .unwrap_or(GATHER_POINTS_PER_INVOCATION_MAX)
 }
+
+/// The per-VAL work of a window-form gather invocation (the VAL's uniform read, Φ/π, its
+/// position's square, the cluster word) in points' worth, from lavapipe's Cornell gather
+/// (4095 points, 16k VALs, diffuse): 16, 8 and 4 points an invocation in 2, 4 and 8 rounds of
+/// two threads took 54, 58 and 75 ms, which rounds × (points + c) matches with c = 1.3–2.4.
+pub const WINDOW_VAL_SLOTS: u32 = 2;
 
 /// The CPU threads a software device runs workgroups on: Mesa's `LP_NUM_THREADS` where set,
 /// else the machine's (asked once per process: every frame's gather dispatch needs it).
@@ -1297,6 +1320,7 @@ impl SparseGpu {
         gather_points_per_invocation(
             options.gather_points,
             self.cpu_device,
+            self.gathers_in_windows(options),
             self.point_count,
             cpu_device_threads(),
         )
@@ -1852,22 +1876,39 @@ mod tests {
     const MIB64: u64 = 64 << 20;
 
     #[test]
-    fn a_cpu_device_takes_the_most_points_per_invocation_that_keep_every_thread_busy() {
-        // A GPU keeps the four it was measured with, whatever the count.
-        assert_eq!(gather_points_per_invocation(0, false, 1 << 16, 2), 4);
-        // Two threads: 16 points an invocation while there are two workgroups of 1024.
-        assert_eq!(gather_points_per_invocation(0, true, 4096, 2), 16);
-        assert_eq!(gather_points_per_invocation(0, true, 2048, 2), 16);
-        assert_eq!(gather_points_per_invocation(0, true, 1025, 2), 16);
-        assert_eq!(gather_points_per_invocation(0, true, 1024, 2), 8);
-        assert_eq!(gather_points_per_invocation(0, true, 513, 2), 8);
-        assert_eq!(gather_points_per_invocation(0, true, 512, 2), 4);
+    fn a_cpu_device_takes_the_points_per_invocation_that_balance_its_threads() {
+        let tiles = |points, threads| gather_points_per_invocation(0, true, false, points, threads);
+        let windows =
+            |points, threads| gather_points_per_invocation(0, true, true, points, threads);
+        // A GPU keeps the four it was measured with, whatever the count and the form.
+        assert_eq!(gather_points_per_invocation(0, false, false, 1 << 16, 2), 4);
+        assert_eq!(gather_points_per_invocation(0, false, true, 1 << 16, 2), 4);
+        // Tiles, two threads: 16 points an invocation while there are two workgroups of 1024.
+        assert_eq!(tiles(4096, 2), 16);
+        assert_eq!(tiles(2048, 2), 16);
+        assert_eq!(tiles(1025, 2), 16);
+        assert_eq!(tiles(1024, 2), 8);
+        assert_eq!(tiles(513, 2), 8);
+        assert_eq!(tiles(512, 2), 4);
         // More threads want more workgroups.
-        assert_eq!(gather_points_per_invocation(0, true, 4096, 16), 4);
+        assert_eq!(tiles(4096, 16), 4);
+        // Windows, two threads: whole rounds of 1024 keep 16 (4096: 2 rounds × 18 against
+        // 4 × 10 and 8 × 6) ...
+        assert_eq!(windows(4096, 2), 16);
+        assert_eq!(windows(16384, 2), 16);
+        // ... but five workgroups of 1024 would leave a thread idle for a third of the time:
+        // Sponza's 4215 points take nine of 512 (5 rounds × 10 against 3 × 18).
+        assert_eq!(windows(4215, 2), 8);
+        assert_eq!(windows(4422, 2), 8);
+        // One workgroup of 1024 would idle the second thread.
+        assert_eq!(windows(1024, 2), 8);
+        // Equal estimates go to the most points (2049: 3 × 10 = 5 × 6).
+        assert_eq!(windows(2049, 2), 8);
+        assert_eq!(windows(4096, 16), 4);
         // An explicit choice stands; anything else is automatic.
-        assert_eq!(gather_points_per_invocation(16, false, 64, 2), 16);
-        assert_eq!(gather_points_per_invocation(8, true, 1 << 16, 2), 8);
-        assert_eq!(gather_points_per_invocation(5, true, 4096, 2), 16);
+        assert_eq!(gather_points_per_invocation(16, false, false, 64, 2), 16);
+        assert_eq!(gather_points_per_invocation(8, true, true, 1 << 16, 2), 8);
+        assert_eq!(gather_points_per_invocation(5, true, false, 4096, 2), 16);
     }
 
     #[test]
