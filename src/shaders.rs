@@ -165,6 +165,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/lpv/lpv_propagate.wgsl"),
     ),
     (
+        "lpv_pack.wgsl",
+        include_str!("../shaders/lpv/lpv_pack.wgsl"),
+    ),
+    (
         "lpv_lookup.wgsl",
         include_str!("../shaders/lpv/lpv_lookup.wgsl"),
     ),

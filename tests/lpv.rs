@@ -78,15 +78,15 @@ fn gpu_injection_and_propagation_agree_with_cpu_twins() {
         );
 
         // Step 1: no occlusion.
-        let step1 = method.read_volume(&ctx, VolumeId::Ping).unwrap();
+        let step1 = method.read_volume(&ctx, VolumeId::Odd).unwrap();
         let cpu1 = math::propagate(&injected, &method.faces, None);
         let e = volume_error(&step1, &cpu1);
         assert!(e < 1e-5, "{order:?} step 1: {e}");
 
         // Step 2: occluded by the geometry volume (RSM and camera surfels).
         let (method, _) = render(&ctx, &scene, 32, LpvSettings { steps: 2, ..s });
-        let step1 = method.read_volume(&ctx, VolumeId::Ping).unwrap();
-        let step2 = method.read_volume(&ctx, VolumeId::Injected).unwrap();
+        let step1 = method.read_volume(&ctx, VolumeId::Odd).unwrap();
+        let step2 = method.read_volume(&ctx, VolumeId::Even).unwrap();
         let gv = method.read_geometry(&ctx).unwrap();
         assert!(gv.iter().any(|&b| b > 0.0), "empty geometry volume");
         let cpu2 = math::propagate(&step1, &method.faces, Some(&gv));
@@ -130,8 +130,8 @@ fn accumulation_is_the_sum_of_the_steps() {
     let (method, _) = render(&ctx, &scene, 32, LpvSettings { steps: 1, ..s });
     let injected = method.read_volume(&ctx, VolumeId::Injected).unwrap();
     let (method, _) = render(&ctx, &scene, 32, s);
-    let step1 = method.read_volume(&ctx, VolumeId::Ping).unwrap();
-    let step2 = method.read_volume(&ctx, VolumeId::Injected).unwrap();
+    let step1 = method.read_volume(&ctx, VolumeId::Odd).unwrap();
+    let step2 = method.read_volume(&ctx, VolumeId::Even).unwrap();
     let accum = method.read_volume(&ctx, VolumeId::Accum).unwrap();
     let mut expected = injected.clone();
     for (i, v) in expected.data.iter_mut().enumerate() {
@@ -294,10 +294,14 @@ fn cli_reports_lpv_settings_passes_and_bytes() {
     assert_eq!(report["occlusion"], "on");
     assert_eq!(report["sh_coefficients"], 9);
     assert_eq!(report["propagation_faces"], 54);
-    // Three light volumes of 8³ cells × 27 floats and a 9³ × 4 geometry volume.
-    assert_eq!(report["volume_gpu_bytes"], 3 * 512 * 27 * 4 + 729 * 16);
-    assert!(report["gpu_bytes"].as_u64().unwrap() > 3 * 512 * 27 * 4);
-    for pass in ["inject", "geometry", "propagate", "lookup"] {
+    // Two light-volume buffers of 8³ cells × 27 floats (injected, accumulated), two step
+    // volumes of 8³ cells × 7 rgba32float texels and a 9³ × 4 geometry volume.
+    assert_eq!(
+        report["volume_gpu_bytes"],
+        2 * 512 * 27 * 4 + 2 * 512 * 7 * 16 + 729 * 16
+    );
+    assert!(report["gpu_bytes"].as_u64().unwrap() > 2 * 512 * 27 * 4 + 2 * 512 * 7 * 16);
+    for pass in ["inject", "geometry", "pack", "propagate", "lookup"] {
         assert!(report["passes"][pass].is_number(), "pass {pass}");
     }
     assert!(out.exists());

@@ -77,3 +77,10 @@ fn lpv_cell_index(c: vec3<i32>, dims: vec3<u32>) -> u32 {
 fn lpv_inside(c: vec3<i32>, dims: vec3<u32>) -> bool {
     return all(c >= vec3<i32>(0)) && all(c < vec3<i32>(dims));
 }
+
+// rgba32float texels per cell of a light volume stored as a 3D texture (`lpv_propagate.wgsl`):
+// its 3·SH_COUNT floats in order, the last texel zero-padded (3 for LPV, 7 for HO-LPV). Cell
+// (x, y, z) starts at texel (x · lpv_cell_texels(), y, z).
+fn lpv_cell_texels() -> u32 {
+    return (3u * SH_COUNT + 3u) / 4u;
+}

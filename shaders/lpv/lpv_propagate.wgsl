@@ -3,13 +3,16 @@
 // HO-LPV), the flux Φ_f = Ω_f·max(0, I_src(ω_f))·V_f from the source d − offset, and
 // re-emits it as the lobe Φ_f/π·max(0, n_f·ω) about the face's normal. Fluxes are summed per
 // normal axis first, so the lobes are expanded six times per cell, not once per face; the
-// table comes grouped by offset, so each source is read from workgroup memory once (26 or 6
-// times per cell, not 54 or 30; 8 % faster than per-axis order on lavapipe).
+// table comes grouped by offset, so each source is read once per neighbour (26 or 6 times per
+// cell, not 54 or 30; 8 % faster than per-axis order on lavapipe).
 // V_f = 1 − clamp(B(−ω_f), 0, 1) with B the geometry volume at the midpoint of source and
 // destination (off in the first step), from the destination's 8 corner GV cells with per-face
-// weights from the table. The source block (tile + one-cell halo) goes through
-// workgroup memory, so each source coefficient is read from memory about (6/4)³ ≈ 3.4 times
-// per step instead of 7 or 27 times. The result is written to `dst` and added to `accum`.
+// weights from the table. The light volumes being read and written are 3D textures of
+// `lpv_cell_texels()` rgba32float texels a cell along x (`lpv_pack.wgsl` packs the injected
+// volume): a CPU device (Mesa's llvmpipe) fetches a texel at per-lane coordinates with one
+// gathered load, where it reads workgroup memory or a storage buffer as a loop over the lanes
+// per float; HO-LPV reads 26 × 27 floats a cell. The result is written to `dst` and added to
+// `accum` (a buffer in the injected volume's layout, which the lookup reads).
 // CPU twin: math::propagate.
 #include "lpv_common.wgsl"
 
@@ -19,38 +22,37 @@
 // steps on lavapipe: LPV's propagation 2.3× faster, HO-LPV's 1.8×).
 const FACE_BLOCK: u32 = 64u;
 @group(0) @binding(1) var<uniform> faces: array<LpvFace, FACE_BLOCK>;
-@group(0) @binding(2) var<storage, read> src: array<f32>;
-@group(0) @binding(3) var<storage, read_write> dst: array<f32>;
+@group(0) @binding(2) var src: texture_3d<f32>;
+@group(0) @binding(3) var dst: texture_storage_3d<rgba32float, write>;
 @group(0) @binding(4) var<storage, read_write> accum: array<f32>;
 @group(0) @binding(5) var<storage, read> gv: array<vec4<f32>>;
 
-const TILE: u32 = 4u;
-const HALO: i32 = 6;
-const HALO_CELLS: u32 = 216u;
-// 216 cells × 3 channels × 9 coefficients (HO-LPV; LPV uses the first 216 × 12).
-var<workgroup> block: array<f32, 5832>;
+// The 3·SH_COUNT floats of source cell c ([channel][coefficient]), zero outside the grid.
+fn read_source(c: vec3<i32>) -> array<vec3<f32>, 9> {
+    var coefficients: array<vec3<f32>, 9>;
+    if (!lpv_inside(c, params.dims.xyz)) {
+        return coefficients;
+    }
+    var floats: array<f32, 28>;
+    let texels = lpv_cell_texels();
+    for (var t = 0u; t < texels; t++) {
+        let texel = textureLoad(src, vec3<i32>(c.x * i32(texels) + i32(t), c.y, c.z), 0);
+        floats[4u * t] = texel.x;
+        floats[4u * t + 1u] = texel.y;
+        floats[4u * t + 2u] = texel.z;
+        floats[4u * t + 3u] = texel.w;
+    }
+    for (var k = 0u; k < SH_COUNT; k++) {
+        coefficients[k] = vec3<f32>(floats[k], floats[SH_COUNT + k], floats[2u * SH_COUNT + k]);
+    }
+    return coefficients;
+}
 
 @compute @workgroup_size(4, 4, 4)
-fn cs_main(
-    @builtin(workgroup_id) group: vec3<u32>,
-    @builtin(local_invocation_id) local: vec3<u32>,
-    @builtin(local_invocation_index) lid: u32,
-) {
+fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let dims = params.dims.xyz;
     let stride = 3u * SH_COUNT;
-    let origin = vec3<i32>(group * TILE) - 1;
-    for (var i = lid; i < HALO_CELLS * stride; i += 64u) {
-        let cell = i32(i / stride);
-        let c = origin + vec3<i32>(cell % HALO, (cell / HALO) % HALO, cell / (HALO * HALO));
-        var v = 0.0;
-        if (lpv_inside(c, dims)) {
-            v = src[lpv_cell_index(c, dims) * stride + i % stride];
-        }
-        block[i] = v;
-    }
-    workgroupBarrier();
-
-    let d = vec3<i32>(group * TILE + local);
+    let d = vec3<i32>(id);
     if (!lpv_inside(d, dims)) {
         return;
     }
@@ -65,8 +67,8 @@ fn cs_main(
             corners[i] = gv[u32(g.x + gd.x * (g.y + gd.y * g.z))];
         }
     }
-    // Faces come grouped by source offset: each source's coefficients are read from
-    // workgroup memory once per group, and each face's flux goes to one of six per-axis sums.
+    // Faces come grouped by source offset: each source's coefficients are read once per
+    // group, and each face's flux goes to one of six per-axis sums.
     var src_c: array<vec3<f32>, 9>;
     var last = vec3<i32>(2);
     var flux: array<vec3<f32>, 6>;
@@ -80,11 +82,7 @@ fn cs_main(
         let face = faces[f];
         let o = face.offset.xyz;
         if (any(o != last)) {
-            let s = vec3<i32>(local) + 1 - o;
-            let base = u32(s.x + HALO * (s.y + HALO * s.z)) * stride;
-            for (var k = 0u; k < SH_COUNT; k++) {
-                src_c[k] = vec3<f32>(block[base + k], block[base + SH_COUNT + k], block[base + 2u * SH_COUNT + k]);
-            }
+            src_c = read_source(d - o);
             last = o;
         }
         var visibility = 1.0;
@@ -124,11 +122,17 @@ fn cs_main(
         }
     }
     let cell = lpv_cell_index(d, dims) * stride;
+    var floats: array<f32, 28>;
     for (var k = 0u; k < SH_COUNT; k++) {
         for (var ch = 0u; ch < 3u; ch++) {
-            let index = cell + ch * SH_COUNT + k;
-            dst[index] = out[k][ch];
-            accum[index] += out[k][ch];
+            let index = ch * SH_COUNT + k;
+            floats[index] = out[k][ch];
+            accum[cell + index] += out[k][ch];
         }
+    }
+    let texels = lpv_cell_texels();
+    for (var t = 0u; t < texels; t++) {
+        let texel = vec4<f32>(floats[4u * t], floats[4u * t + 1u], floats[4u * t + 2u], floats[4u * t + 3u]);
+        textureStore(dst, vec3<i32>(d.x * i32(texels) + i32(t), d.y, d.z), texel);
     }
 }

@@ -37,6 +37,10 @@ pub enum Slot {
     ComparisonSampler,
     /// `texture_storage_2d<FORMAT, write>`.
     StorageTexture(wgpu::TextureFormat),
+    /// `texture_3d<f32>` read with `textureLoad`.
+    Texture3d,
+    /// `texture_storage_3d<FORMAT, write>`.
+    StorageTexture3d(wgpu::TextureFormat),
 }
 
 impl Slot {
@@ -79,6 +83,12 @@ impl Slot {
                 access: wgpu::StorageTextureAccess::WriteOnly,
                 format,
                 view_dimension: wgpu::TextureViewDimension::D2,
+            },
+            Slot::Texture3d => texture(float, wgpu::TextureViewDimension::D3),
+            Slot::StorageTexture3d(format) => wgpu::BindingType::StorageTexture {
+                access: wgpu::StorageTextureAccess::WriteOnly,
+                format,
+                view_dimension: wgpu::TextureViewDimension::D3,
             },
         };
         wgpu::BindGroupLayoutEntry {

@@ -36,7 +36,7 @@ pub fn read_texture_rgba32f(
 }
 
 /// Reads mip 0, layer 0 of a texture of `texel_bytes` bytes per texel (it must have
-/// `COPY_SRC`): packed rows from the top-left texel.
+/// `COPY_SRC`): packed rows from the top-left texel; of a 3D texture, every slice in turn.
 pub fn read_texture_bytes(
     ctx: &GpuContext,
     texture: &wgpu::Texture,
@@ -44,12 +44,16 @@ pub fn read_texture_bytes(
 ) -> Result<Vec<u8>, GpuError> {
     let width = texture.width();
     let height = texture.height();
+    let depth = match texture.dimension() {
+        wgpu::TextureDimension::D3 => texture.depth_or_array_layers(),
+        _ => 1,
+    };
     let unpadded = width * texel_bytes;
     let padded =
         unpadded.div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
     let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
         label: Some("texture readback staging"),
-        size: padded as u64 * height as u64,
+        size: padded as u64 * height as u64 * depth as u64,
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
@@ -76,12 +80,12 @@ pub fn read_texture_bytes(
         wgpu::Extent3d {
             width,
             height,
-            depth_or_array_layers: 1,
+            depth_or_array_layers: depth,
         },
     );
     ctx.queue.submit([encoder.finish()]);
     let bytes = map_and_copy(ctx, &staging)?;
-    let mut texels = Vec::with_capacity((unpadded * height) as usize);
+    let mut texels = Vec::with_capacity(unpadded as usize * height as usize * depth as usize);
     for row in bytes.chunks_exact(padded as usize) {
         texels.extend_from_slice(&row[..unpadded as usize]);
     }

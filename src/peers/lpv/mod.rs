@@ -38,18 +38,35 @@ const GEOMETRY_BINDINGS: &[Slot] = &[
     Slot::Texture,
 ];
 
-/// `lpv_propagate.wgsl`: parameters, the face table, the source volume, the destination and
-/// accumulated volumes, and the geometry volume.
+/// `lpv_propagate.wgsl`: parameters, the face table, the source volume (a 3D texture), the
+/// destination (a storage texture), the accumulated volume (a buffer) and the geometry volume.
 /// Faces in `lpv_propagate.wgsl`'s uniform face table (`FACE_BLOCK` there): HO-LPV has 54.
 pub const FACE_BLOCK: u32 = 64;
 const PROPAGATE_BINDINGS: &[Slot] = &[
     Slot::Uniform,
     Slot::Uniform,
-    Slot::Storage,
-    Slot::StorageRw,
+    Slot::Texture3d,
+    Slot::StorageTexture3d(STEP_FORMAT),
     Slot::StorageRw,
     Slot::Storage,
 ];
+
+/// `lpv_pack.wgsl`: parameters, the injected volume (a buffer) and the texture it fills.
+const PACK_BINDINGS: &[Slot] = &[
+    Slot::Uniform,
+    Slot::Storage,
+    Slot::StorageTexture3d(STEP_FORMAT),
+];
+
+/// Texel format of the volumes the propagation steps read and write: a cell is
+/// [`cell_texels`] texels along x, its 3·SH floats in order (`lpv_cell_texels` in
+/// `lpv_common.wgsl`).
+const STEP_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// rgba32float texels a cell of a step volume takes (3 for LPV, 7 for HO-LPV).
+pub fn cell_texels(sh_count: usize) -> u32 {
+    (3 * sh_count as u32).div_ceil(4)
+}
 
 /// `lpv_lookup.wgsl`: frame and parameters, the accumulated volume, the G-buffer and the
 /// indirect target.
@@ -68,7 +85,8 @@ const LOOKUP_BINDINGS: &[Slot] = &[
 /// (`cs_main` in `lpv_inject.wgsl`, `cs_rsm` in `lpv_geometry.wgsl`).
 pub const TEXEL_GROUP: u32 = 64;
 
-/// Cells per side of a propagation workgroup (`lpv_propagate.wgsl`: a 4³ block).
+/// Cells per side of a propagation or pack workgroup (`@workgroup_size(4, 4, 4)` in
+/// `lpv_propagate.wgsl` and `lpv_pack.wgsl`).
 pub const PROPAGATE_BLOCK: u32 = 4;
 
 /// `LpvParams` in `shaders/lpv/lpv_common.wgsl`.
@@ -180,10 +198,12 @@ impl LpvSettings {
 /// Which of the method's volumes to read back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VolumeId {
-    /// Injection target and odd-step source ("b").
+    /// Injection's sums (a buffer), packed into `Even` before the first step.
     Injected,
-    /// Target of odd steps ("a"); step 2 writes back into `Injected`.
-    Ping,
+    /// Target of steps 1, 3, … (a 3D texture).
+    Odd,
+    /// The packed injection, source of step 1 and target of steps 2, 4, … (a 3D texture).
+    Even,
     Accum,
 }
 
@@ -195,8 +215,12 @@ pub struct LpvMethod {
     pub faces: Vec<Face>,
     params_off: wgpu::Buffer,
     params_on: wgpu::Buffer,
-    /// [b (injected), a, accum].
-    volumes: [wgpu::Buffer; 3],
+    /// [injected, accum], in [`Volume`]'s layout.
+    volumes: [wgpu::Buffer; 2],
+    /// The volumes the steps read and write, [even, odd] ([`VolumeId`]).
+    step_volumes: [wgpu::Texture; 2],
+    pack_pipeline: wgpu::ComputePipeline,
+    pack_group: wgpu::BindGroup,
     gv_buffer: wgpu::Buffer,
     bytes: GpuBytes,
     volume_bytes: u64,
@@ -206,7 +230,7 @@ pub struct LpvMethod {
     geometry_camera: wgpu::ComputePipeline,
     geometry_layout: GroupLayout,
     propagate_pipeline: wgpu::ComputePipeline,
-    /// b→a without occlusion (step 1), a→b, b→a (with occlusion when on).
+    /// even→odd without occlusion (step 1), odd→even, even→odd (with occlusion when on).
     propagate_groups: [wgpu::BindGroup; 3],
     lookup_pipeline: wgpu::ComputePipeline,
     lookup_layout: GroupLayout,
@@ -240,7 +264,7 @@ fn pipeline(
             entry_point: Some(entry),
             compilation_options: wgpu::PipelineCompilationOptions {
                 constants: &[("SH_COUNT", sh_count as f64)],
-                // Every workgroup writes its whole block before reading it.
+                // No LPV pass keeps workgroup memory.
                 zero_initialize_workgroup_memory: false,
             },
             cache: None,
@@ -255,13 +279,6 @@ impl LpvMethod {
         settings: LpvSettings,
     ) -> Result<Self, RenderError> {
         let device = &ctx.device;
-        let needed_shared = 216 * 27 * 4;
-        if device.limits().max_compute_workgroup_storage_size < needed_shared {
-            return Err(RenderError::Settings(format!(
-                "LPV propagation needs {needed_shared} bytes of workgroup memory; the device has {}",
-                device.limits().max_compute_workgroup_storage_size
-            )));
-        }
         let raster = Rasterizer::new(ctx, scene, render)?;
         let rsm = Rsm::new(ctx, scene, &raster, settings.rsm)?;
         // Fitted once to the rest pose, so that animation does not move the grid (no flicker).
@@ -289,6 +306,23 @@ impl LpvMethod {
                 settings.grid
             )));
         }
+        let texels = cell_texels(sh);
+        let step_extent = wgpu::Extent3d {
+            width: grid.dims.x * texels,
+            height: grid.dims.y,
+            depth_or_array_layers: grid.dims.z,
+        };
+        let max_3d = device.limits().max_texture_dimension_3d;
+        if step_extent.width.max(grid.dims.y).max(grid.dims.z) > max_3d {
+            return Err(RenderError::Settings(format!(
+                "--grid {}: a step volume is {} × {} × {} texels ({texels} a cell along x); the \
+                 device's 3D textures have at most {max_3d} a side: use a smaller --grid",
+                settings.grid,
+                step_extent.width,
+                step_extent.height,
+                step_extent.depth_or_array_layers
+            )));
+        }
 
         let mut bytes = GpuBytes::default();
         let storage = wgpu::BufferUsages::STORAGE
@@ -307,11 +341,34 @@ impl LpvMethod {
         };
         let volumes = [
             volume("lpv injected", volume_size),
-            volume("lpv ping", volume_size),
             volume("lpv accum", volume_size),
         ];
         let gv_buffer = volume("lpv geometry", gv_size);
-        let volume_bytes = 3 * volume_size + gv_size;
+        let mut step_volume = |label: &str| {
+            bytes.texture(
+                device,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size: step_extent,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D3,
+                    format: STEP_FORMAT,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
+                    view_formats: &[],
+                },
+            )
+        };
+        let step_volumes = [step_volume("lpv even steps"), step_volume("lpv odd steps")];
+        let step_views = step_volumes
+            .each_ref()
+            .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
+        let step_bytes = u64::from(step_extent.width * step_extent.height)
+            * u64::from(step_extent.depth_or_array_layers)
+            * 16;
+        let volume_bytes = 2 * volume_size + 2 * step_bytes + gv_size;
         let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let params_size = std::mem::size_of::<LpvParams>() as u64;
         let mut params = || {
@@ -396,9 +453,9 @@ impl LpvMethod {
                 &[
                     params,
                     &faces_buffer,
-                    &volumes[src],
-                    &volumes[dst],
-                    &volumes[2],
+                    &step_views[src],
+                    &step_views[dst],
+                    &volumes[1],
                     &gv_buffer,
                 ],
             )
@@ -414,6 +471,16 @@ impl LpvMethod {
             "lpv_propagate.wgsl",
             "cs_main",
             &propagate_layout.layout,
+            sh,
+        );
+        let pack_layout = GroupLayout::new(device, "lpv pack", cs, PACK_BINDINGS);
+        let pack_group = pack_layout.bind(device, &[&params_off, &volumes[0], &step_views[0]]);
+        let pack_pipeline = pipeline(
+            ctx,
+            "lpv pack",
+            "lpv_pack.wgsl",
+            "cs_main",
+            &pack_layout.layout,
             sh,
         );
         // Lookup.
@@ -435,6 +502,9 @@ impl LpvMethod {
             params_off,
             params_on,
             volumes,
+            step_volumes,
+            pack_pipeline,
+            pack_group,
             gv_buffer,
             bytes,
             volume_bytes,
@@ -453,22 +523,33 @@ impl LpvMethod {
         })
     }
 
-    /// Bytes of the three light volumes and the geometry volume.
+    /// Bytes of the four light volumes (injected, accumulated, two step volumes) and the
+    /// geometry volume.
     pub fn volume_bytes(&self) -> u64 {
         self.volume_bytes
     }
 
     /// One of the light volumes of the last frame, in [`Volume`]'s layout.
     pub fn read_volume(&self, ctx: &GpuContext, which: VolumeId) -> Result<Volume, GpuError> {
-        let buffer = match which {
-            VolumeId::Injected => &self.volumes[0],
-            VolumeId::Ping => &self.volumes[1],
-            VolumeId::Accum => &self.volumes[2],
+        let sh = self.settings.order.sh_count();
+        let data = match which {
+            VolumeId::Injected => crate::gpu::read_buffer(ctx, &self.volumes[0])?,
+            VolumeId::Accum => crate::gpu::read_buffer(ctx, &self.volumes[1])?,
+            VolumeId::Even | VolumeId::Odd => {
+                let texture = &self.step_volumes[usize::from(which == VolumeId::Odd)];
+                let texels = crate::gpu::read_texture_rgba32f(ctx, texture)?;
+                // Each cell's texels are its floats in order, the last one padded.
+                let per_cell = cell_texels(sh) as usize;
+                texels
+                    .chunks_exact(per_cell)
+                    .flat_map(|cell| cell.iter().flatten().take(3 * sh).copied())
+                    .collect()
+            }
         };
         Ok(Volume {
             dims: self.grid.dims,
-            sh: self.settings.order.sh_count(),
-            data: crate::gpu::read_buffer(ctx, buffer)?,
+            sh,
+            data,
         })
     }
 
@@ -573,7 +654,7 @@ impl Method for LpvMethod {
         passes.encoder().copy_buffer_to_buffer(
             &self.volumes[0],
             0,
-            &self.volumes[2],
+            &self.volumes[1],
             0,
             volume_size,
         );
@@ -583,6 +664,11 @@ impl Method for LpvMethod {
                 .dims
                 .to_array()
                 .map(|n| n.div_ceil(PROPAGATE_BLOCK));
+            passes.compute("pack", |pass| {
+                pass.set_pipeline(&self.pack_pipeline);
+                pass.set_bind_group(0, &self.pack_group, &[]);
+                pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+            })?;
             passes.compute("propagate", |pass| {
                 pass.set_pipeline(&self.propagate_pipeline);
                 for step in 0..self.settings.steps {
@@ -617,7 +703,7 @@ impl Method for LpvMethod {
             &[
                 &view.frame_buffer,
                 &self.params_off,
-                &self.volumes[2],
+                &self.volumes[1],
                 &t.depth,
                 &t.normal,
                 &t.diffuse,
