@@ -1,7 +1,8 @@
-//! Light propagation volumes on the software Vulkan device: injection and one propagation
-//! step (with and without occlusion) against their CPU twins (`valgi::peers::lpv::math`), for
-//! LPV and HO-LPV; the image's units against brute-force VALs; HO-LPV delivering more light
-//! diagonally than LPV in a scene. Tiny grids, so each test takes seconds.
+//! Light propagation volumes on the software Vulkan device: injection, one propagation step
+//! (with and without occlusion) and the per-pixel lookup against their CPU twins
+//! (`valgi::peers::lpv::math`), for LPV and HO-LPV; the image's units against brute-force
+//! VALs; HO-LPV delivering more light diagonally than LPV in a scene. Tiny grids, so each
+//! test takes seconds.
 
 mod common;
 
@@ -11,6 +12,7 @@ use valgi::method::{Method, MethodOptions};
 use valgi::peers::lpv::math::{self, Volume};
 use valgi::peers::lpv::{LpvMethod, LpvSettings, Order, VolumeId};
 use valgi::raster::FrameOutput;
+use valgi::reference::{self, Tracer};
 use valgi::scene::builtin::{self, BuiltinParams};
 use valgi::scene::Scene;
 
@@ -113,6 +115,52 @@ fn gpu_injection_and_propagation_agree_with_cpu_twins() {
         let from_rsm: f32 = rsm_part.iter().step_by(4).sum();
         let all: f32 = gv.iter().step_by(4).sum();
         assert!(all > from_rsm * 1.01, "camera surfels: {all} vs {from_rsm}");
+    }
+}
+
+#[test]
+fn the_lookup_agrees_with_its_cpu_twin() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell();
+    let size = 32;
+    let world = scene.world_from_node();
+    let camera = scene.camera_view(None, 1.0, &world).expect("camera");
+    let tracer = Tracer::new(&scene, &world);
+    for order in [Order::Lpv, Order::HoLpv] {
+        let s = LpvSettings {
+            order,
+            grid: 8,
+            steps: 2,
+            occlusion: false,
+            rsm: 32,
+        };
+        let (method, frame) = render(&ctx, &scene, size, s);
+        let accum = method.read_volume(&ctx, VolumeId::Accum).unwrap();
+        let (mut compared, mut close) = (0, 0);
+        for y in 0..size {
+            for x in 0..size {
+                let (o, d) =
+                    reference::camera_ray(&camera, size, size, x as f32 + 0.5, y as f32 + 0.5);
+                let Some(hit) = tracer.intersect(o, d, f32::INFINITY) else {
+                    continue;
+                };
+                let twin = math::lookup(&method.grid, &accum, hit.position, hit.normal, hit.rho_d);
+                let gpu = Vec3::from_slice(&frame.indirect.get(x, y)[..3]);
+                compared += 1;
+                if (gpu - twin).abs().max_element() <= 0.01 * twin.max_element() + 1e-6 {
+                    close += 1;
+                }
+            }
+        }
+        // Pixels straddling an edge see another surface at the pixel centre than the ray.
+        assert!(
+            compared > (size * size / 2) as usize,
+            "{order:?}: {compared}"
+        );
+        assert!(
+            close as f64 > 0.95 * compared as f64,
+            "{order:?}: {close} of {compared} pixels within 1 % of the CPU twin"
+        );
     }
 }
 
@@ -294,14 +342,20 @@ fn cli_reports_lpv_settings_passes_and_bytes() {
     assert_eq!(report["occlusion"], "on");
     assert_eq!(report["sh_coefficients"], 9);
     assert_eq!(report["propagation_faces"], 54);
-    // Two light-volume buffers of 8³ cells × 27 floats (injected, accumulated), two step
-    // volumes of 8³ cells × 7 rgba32float texels and a 9³ × 4 geometry volume.
-    assert_eq!(
-        report["volume_gpu_bytes"],
-        2 * 512 * 27 * 4 + 2 * 512 * 7 * 16 + 729 * 16
-    );
-    assert!(report["gpu_bytes"].as_u64().unwrap() > 2 * 512 * 27 * 4 + 2 * 512 * 7 * 16);
-    for pass in ["inject", "geometry", "pack", "propagate", "lookup"] {
+    // Two light-volume buffers of 8³ cells × 27 floats (injected, accumulated), three
+    // textures of 8³ cells × 7 rgba32float texels (two step volumes, the packed
+    // accumulation) and a 9³ × 4 geometry volume.
+    let volumes = 2 * 512 * 27 * 4 + 3 * 512 * 7 * 16 + 729 * 16;
+    assert_eq!(report["volume_gpu_bytes"], volumes);
+    assert!(report["gpu_bytes"].as_u64().unwrap() > volumes);
+    for pass in [
+        "inject",
+        "geometry",
+        "pack",
+        "propagate",
+        "pack accumulated",
+        "lookup",
+    ] {
         assert!(report["passes"][pass].is_number(), "pass {pass}");
     }
     assert!(out.exists());

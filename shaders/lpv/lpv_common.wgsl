@@ -84,3 +84,22 @@ fn lpv_inside(c: vec3<i32>, dims: vec3<u32>) -> bool {
 fn lpv_cell_texels() -> u32 {
     return (3u * SH_COUNT + 3u) / 4u;
 }
+
+// The 3·SH_COUNT floats of cell c of a volume stored that way, as one vec3 (r, g, b) per
+// coefficient.
+fn lpv_texel_cell(volume: texture_3d<f32>, c: vec3<i32>) -> array<vec3<f32>, 9> {
+    var floats: array<f32, 28>;
+    let texels = lpv_cell_texels();
+    for (var t = 0u; t < texels; t++) {
+        let texel = textureLoad(volume, vec3<i32>(c.x * i32(texels) + i32(t), c.y, c.z), 0);
+        floats[4u * t] = texel.x;
+        floats[4u * t + 1u] = texel.y;
+        floats[4u * t + 2u] = texel.z;
+        floats[4u * t + 3u] = texel.w;
+    }
+    var coefficients: array<vec3<f32>, 9>;
+    for (var k = 0u; k < SH_COUNT; k++) {
+        coefficients[k] = vec3<f32>(floats[k], floats[SH_COUNT + k], floats[2u * SH_COUNT + k]);
+    }
+    return coefficients;
+}

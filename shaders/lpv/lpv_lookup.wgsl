@@ -1,12 +1,15 @@
 // LPV lookup: per pixel, the accumulated intensity SH trilinearly interpolated half a cell
 // along the normal (cell centres, clamped at the grid's edge), the cosine-lobe integral
 // E = max(0, Σ c·Â_l·Y_lm(−n))/h² (intensity over the cell's cross-section h² → radiance)
-// and the diffuse reflection ρ_d/π·E. CPU twin: math::lookup.
+// and the diffuse reflection ρ_d/π·E. The accumulated volume comes packed as a 3D texture
+// (`lpv_pack.wgsl`, `lpv_cell_texels()` texels a cell along x): a CPU device (llvmpipe) fetches
+// a texel with one gathered load where it reads a storage buffer lane by lane per float, and
+// every pixel reads 8 cells. CPU twin: math::lookup.
 #include "lpv_common.wgsl"
 
 @group(0) @binding(0) var<uniform> frame: Frame;
 @group(0) @binding(1) var<uniform> params: LpvParams;
-@group(0) @binding(2) var<storage, read> accum: array<f32>;
+@group(0) @binding(2) var accum: texture_3d<f32>;
 @group(0) @binding(3) var gbuffer_depth: texture_depth_2d;
 @group(0) @binding(4) var gbuffer_normal: texture_2d<f32>;
 @group(0) @binding(5) var gbuffer_diffuse: texture_2d<f32>;
@@ -37,17 +40,15 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let base = max(min(floor(q), hi - 1.0), vec3<f32>(0.0));
     let t = q - base;
     let b = vec3<i32>(base);
-    let stride = 3u * SH_COUNT;
     let lobe = sh9(-n);
     var e = vec3<f32>(0.0);
     for (var corner = 0; corner < 8; corner++) {
         let bit = vec3<i32>(corner & 1, (corner >> 1) & 1, (corner >> 2) & 1);
         let wv = select(1.0 - t, t, bit == vec3<i32>(1));
         let w = wv.x * wv.y * wv.z;
-        let cell = lpv_cell_index(min(b + bit, vec3<i32>(dims) - 1), dims) * stride;
+        let coefficients = lpv_texel_cell(accum, min(b + bit, vec3<i32>(dims) - 1));
         for (var k = 0u; k < SH_COUNT; k++) {
-            let f = w * clamped_cosine_factor(k) * lobe[k];
-            e += f * vec3<f32>(accum[cell + k], accum[cell + SH_COUNT + k], accum[cell + 2u * SH_COUNT + k]);
+            e += (w * clamped_cosine_factor(k) * lobe[k]) * coefficients[k];
         }
     }
     let radiance = rho_d / PI * max(e, vec3<f32>(0.0)) / (h * h);

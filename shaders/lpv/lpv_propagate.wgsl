@@ -27,25 +27,12 @@ const FACE_BLOCK: u32 = 64u;
 @group(0) @binding(4) var<storage, read_write> accum: array<f32>;
 @group(0) @binding(5) var<storage, read> gv: array<vec4<f32>>;
 
-// The 3·SH_COUNT floats of source cell c ([channel][coefficient]), zero outside the grid.
+// The coefficients of source cell c, zero outside the grid.
 fn read_source(c: vec3<i32>) -> array<vec3<f32>, 9> {
-    var coefficients: array<vec3<f32>, 9>;
     if (!lpv_inside(c, params.dims.xyz)) {
-        return coefficients;
+        return array<vec3<f32>, 9>();
     }
-    var floats: array<f32, 28>;
-    let texels = lpv_cell_texels();
-    for (var t = 0u; t < texels; t++) {
-        let texel = textureLoad(src, vec3<i32>(c.x * i32(texels) + i32(t), c.y, c.z), 0);
-        floats[4u * t] = texel.x;
-        floats[4u * t + 1u] = texel.y;
-        floats[4u * t + 2u] = texel.z;
-        floats[4u * t + 3u] = texel.w;
-    }
-    for (var k = 0u; k < SH_COUNT; k++) {
-        coefficients[k] = vec3<f32>(floats[k], floats[SH_COUNT + k], floats[2u * SH_COUNT + k]);
-    }
-    return coefficients;
+    return lpv_texel_cell(src, c);
 }
 
 @compute @workgroup_size(4, 4, 4)

@@ -73,7 +73,7 @@ pub fn cell_texels(sh_count: usize) -> u32 {
 const LOOKUP_BINDINGS: &[Slot] = &[
     Slot::Uniform,
     Slot::Uniform,
-    Slot::Storage,
+    Slot::Texture3d,
     Slot::DepthTexture,
     Slot::Texture,
     Slot::Texture,
@@ -219,8 +219,12 @@ pub struct LpvMethod {
     volumes: [wgpu::Buffer; 2],
     /// The volumes the steps read and write, [even, odd] ([`VolumeId`]).
     step_volumes: [wgpu::Texture; 2],
+    /// The accumulated volume packed as the steps' volumes are, which the lookup reads.
+    accum_texels: wgpu::TextureView,
     pack_pipeline: wgpu::ComputePipeline,
-    pack_group: wgpu::BindGroup,
+    /// Packs the injected volume into the even step volume, and the accumulated one into
+    /// `accum_texels`.
+    pack_groups: [wgpu::BindGroup; 2],
     gv_buffer: wgpu::Buffer,
     bytes: GpuBytes,
     volume_bytes: u64,
@@ -365,10 +369,12 @@ impl LpvMethod {
         let step_views = step_volumes
             .each_ref()
             .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
+        let accum_texels = step_volume("lpv accumulated texels")
+            .create_view(&wgpu::TextureViewDescriptor::default());
         let step_bytes = u64::from(step_extent.width * step_extent.height)
             * u64::from(step_extent.depth_or_array_layers)
             * 16;
-        let volume_bytes = 2 * volume_size + 2 * step_bytes + gv_size;
+        let volume_bytes = 2 * volume_size + 3 * step_bytes + gv_size;
         let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let params_size = std::mem::size_of::<LpvParams>() as u64;
         let mut params = || {
@@ -474,7 +480,10 @@ impl LpvMethod {
             sh,
         );
         let pack_layout = GroupLayout::new(device, "lpv pack", cs, PACK_BINDINGS);
-        let pack_group = pack_layout.bind(device, &[&params_off, &volumes[0], &step_views[0]]);
+        let pack_groups = [
+            pack_layout.bind(device, &[&params_off, &volumes[0], &step_views[0]]),
+            pack_layout.bind(device, &[&params_off, &volumes[1], &accum_texels]),
+        ];
         let pack_pipeline = pipeline(
             ctx,
             "lpv pack",
@@ -503,8 +512,9 @@ impl LpvMethod {
             params_on,
             volumes,
             step_volumes,
+            accum_texels,
             pack_pipeline,
-            pack_group,
+            pack_groups,
             gv_buffer,
             bytes,
             volume_bytes,
@@ -523,8 +533,8 @@ impl LpvMethod {
         })
     }
 
-    /// Bytes of the four light volumes (injected, accumulated, two step volumes) and the
-    /// geometry volume.
+    /// Bytes of the light volumes (injected and accumulated as buffers, two step volumes and
+    /// the accumulated one as textures) and the geometry volume.
     pub fn volume_bytes(&self) -> u64 {
         self.volume_bytes
     }
@@ -666,7 +676,7 @@ impl Method for LpvMethod {
                 .map(|n| n.div_ceil(PROPAGATE_BLOCK));
             passes.compute("pack", |pass| {
                 pass.set_pipeline(&self.pack_pipeline);
-                pass.set_bind_group(0, &self.pack_group, &[]);
+                pass.set_bind_group(0, &self.pack_groups[0], &[]);
                 pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
             })?;
             passes.compute("propagate", |pass| {
@@ -682,6 +692,16 @@ impl Method for LpvMethod {
                 }
             })?;
         }
+        let groups = self
+            .grid
+            .dims
+            .to_array()
+            .map(|n| n.div_ceil(PROPAGATE_BLOCK));
+        passes.compute("pack accumulated", |pass| {
+            pass.set_pipeline(&self.pack_pipeline);
+            pass.set_bind_group(0, &self.pack_groups[1], &[]);
+            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+        })?;
         Ok(())
     }
 
@@ -703,7 +723,7 @@ impl Method for LpvMethod {
             &[
                 &view.frame_buffer,
                 &self.params_off,
-                &self.volumes[1],
+                &self.accum_texels,
                 &t.depth,
                 &t.normal,
                 &t.diffuse,
