@@ -149,6 +149,7 @@ fn workgroup_sizes_match_the_dispatches() {
         ("lpv_inject.wgsl", "cs_main", [texels, 1, 1]),
         ("lpv_geometry.wgsl", "cs_rsm", [texels, 1, 1]),
         ("lpv_propagate.wgsl", "cs_main", [block, block, block]),
+        ("lpv_pack.wgsl", "cs_main", [block, block, block]),
         ("bench_fma.wgsl", "cs_main", [valgi::bench::FMA_GROUP, 1, 1]),
     ]);
     for (file, entry, size) in &expected {
