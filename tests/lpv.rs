@@ -165,6 +165,33 @@ fn the_lookup_agrees_with_its_cpu_twin() {
 }
 
 #[test]
+fn a_grid_past_the_devices_3d_textures_is_refused_with_the_limit() {
+    // A device whose 3D textures are at most 256 texels a side (WebGPU's downlevel limit):
+    // HO-LPV's step volumes are 7 texels a cell along x, so a 37³ grid no longer fits.
+    let Some(ctx) = common::gpu_with_limits(|limits| limits.max_texture_dimension_3d = 256) else {
+        return;
+    };
+    let scene = cornell();
+    let s = |grid| LpvSettings {
+        order: Order::HoLpv,
+        grid,
+        steps: 1,
+        occlusion: false,
+        rsm: 16,
+    };
+    let err = match LpvMethod::new(&ctx, &scene, settings(8), s(40)) {
+        Ok(_) => panic!("a 40³ HO-LPV grid was accepted with 256-texel 3D textures"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("--grid 40") && err.contains("280") && err.contains("256"),
+        "{err}"
+    );
+    // 36 cells × 7 texels = 252 fit.
+    assert!(LpvMethod::new(&ctx, &scene, settings(8), s(36)).is_ok());
+}
+
+#[test]
 fn accumulation_is_the_sum_of_the_steps() {
     let Some(ctx) = common::gpu() else { return };
     let scene = cornell();
