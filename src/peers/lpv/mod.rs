@@ -668,17 +668,21 @@ impl Method for LpvMethod {
             0,
             volume_size,
         );
-        if self.settings.steps > 0 {
-            let groups = self
-                .grid
-                .dims
-                .to_array()
-                .map(|n| n.div_ceil(PROPAGATE_BLOCK));
-            passes.compute("pack", |pass| {
+        // One invocation per cell (propagation and packing alike).
+        let cell_groups = self
+            .grid
+            .dims
+            .to_array()
+            .map(|n| n.div_ceil(PROPAGATE_BLOCK));
+        let pack = |passes: &mut Passes, label: &str, group: &wgpu::BindGroup| {
+            passes.compute(label, |pass| {
                 pass.set_pipeline(&self.pack_pipeline);
-                pass.set_bind_group(0, &self.pack_groups[0], &[]);
-                pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-            })?;
+                pass.set_bind_group(0, group, &[]);
+                pass.dispatch_workgroups(cell_groups[0], cell_groups[1], cell_groups[2]);
+            })
+        };
+        if self.settings.steps > 0 {
+            pack(passes, "pack", &self.pack_groups[0])?;
             passes.compute("propagate", |pass| {
                 pass.set_pipeline(&self.propagate_pipeline);
                 for step in 0..self.settings.steps {
@@ -688,20 +692,11 @@ impl Method for LpvMethod {
                         _ => &self.propagate_groups[2],
                     };
                     pass.set_bind_group(0, group, &[]);
-                    pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
+                    pass.dispatch_workgroups(cell_groups[0], cell_groups[1], cell_groups[2]);
                 }
             })?;
         }
-        let groups = self
-            .grid
-            .dims
-            .to_array()
-            .map(|n| n.div_ceil(PROPAGATE_BLOCK));
-        passes.compute("pack accumulated", |pass| {
-            pass.set_pipeline(&self.pack_pipeline);
-            pass.set_bind_group(0, &self.pack_groups[1], &[]);
-            pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
-        })?;
+        pack(passes, "pack accumulated", &self.pack_groups[1])?;
         Ok(())
     }
 
