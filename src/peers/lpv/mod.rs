@@ -3,9 +3,10 @@
 //! lobes into an N³ grid fitted to the scene (`lpv_inject.wgsl`); a geometry volume of blocker
 //! potentials from the RSM and the camera's G-buffer sits half a cell off (`lpv_geometry.wgsl`);
 //! S gather steps propagate the light to 6 (LPV, 2-band SH) or 26 (HO-LPV, 3-band SH)
-//! neighbours with ping-pong and accumulation volumes (`lpv_propagate.wgsl`); every pixel
-//! reads the accumulated volume (`lpv_lookup.wgsl`). Equations, units and choices: README.md
-//! in this folder; CPU twins: [`math`].
+//! neighbours with ping-pong volumes (3D textures, `lpv_pack.wgsl` packs the injection into
+//! the first) and an accumulation buffer (`lpv_propagate.wgsl`); every pixel reads the
+//! accumulation, packed the same way (`lpv_lookup.wgsl`). Equations, units and choices:
+//! README.md in this folder; CPU twins: [`math`].
 
 pub mod math;
 
