@@ -203,7 +203,8 @@ pub enum VolumeId {
     Injected,
     /// Target of steps 1, 3, … (a 3D texture).
     Odd,
-    /// The packed injection, source of step 1 and target of steps 2, 4, … (a 3D texture).
+    /// The packed injection, source of step 1 and target of steps 2, 4, … (a 3D texture;
+    /// packed only when there is a step).
     Even,
     Accum,
 }
@@ -349,20 +350,25 @@ impl LpvMethod {
             volume("lpv accum", volume_size),
         ];
         let gv_buffer = volume("lpv geometry", gv_size);
+        let step_desc = wgpu::TextureDescriptor {
+            label: None,
+            size: step_extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: STEP_FORMAT,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        };
+        let step_bytes = crate::gpu::resources::texture_bytes(&step_desc);
         let mut step_volume = |label: &str| {
             bytes.texture(
                 device,
                 &wgpu::TextureDescriptor {
                     label: Some(label),
-                    size: step_extent,
-                    mip_level_count: 1,
-                    sample_count: 1,
-                    dimension: wgpu::TextureDimension::D3,
-                    format: STEP_FORMAT,
-                    usage: wgpu::TextureUsages::TEXTURE_BINDING
-                        | wgpu::TextureUsages::STORAGE_BINDING
-                        | wgpu::TextureUsages::COPY_SRC,
-                    view_formats: &[],
+                    ..step_desc.clone()
                 },
             )
         };
@@ -372,9 +378,6 @@ impl LpvMethod {
             .map(|t| t.create_view(&wgpu::TextureViewDescriptor::default()));
         let accum_texels = step_volume("lpv accumulated texels")
             .create_view(&wgpu::TextureViewDescriptor::default());
-        let step_bytes = u64::from(step_extent.width * step_extent.height)
-            * u64::from(step_extent.depth_or_array_layers)
-            * 16;
         let volume_bytes = 2 * volume_size + 3 * step_bytes + gv_size;
         let uniform = wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST;
         let params_size = std::mem::size_of::<LpvParams>() as u64;
