@@ -262,7 +262,12 @@ fn gpu_matches_cpu(ctx: &GpuContext, falloff_name: &str, weight: &str, positive:
             let e_n_cpu =
                 cpu::negative_irradiance(p.position(), p.normal(), &rb.negatives, falloff);
             let e_n = if flagged(x, y) {
-                assert!(close(e_n_cpu, v3(rb.full_en[i]), 1e-3));
+                assert!(
+                    close(e_n_cpu, v3(rb.full_en[i]), 1e-3),
+                    "({x}, {y}): {e_n_cpu} vs {:?} low {:?}",
+                    rb.full_en[i],
+                    rb.low_en[parent(x, y) as usize]
+                );
                 v3(rb.full_en[i])
             } else {
                 v3(rb.low_en[parent(x, y) as usize])

@@ -131,7 +131,12 @@ fn workgroup_sizes_match_the_dispatches() {
     ];
     let mut expected = expected.to_vec();
     for entry in valgi::negative::VIEW_ENTRIES {
-        expected.push(("negative_view.wgsl", entry, [tile, tile, 1]));
+        let size = if valgi::negative::PATCH_ENTRIES.contains(entry) {
+            [tile, tile / valgi::negative::COLUMN, 1]
+        } else {
+            [tile, tile, 1]
+        };
+        expected.push(("negative_view.wgsl", entry, size));
     }
     let select = valgi::negative::SELECT_GROUP;
     expected.push(("negative_view.wgsl", "select_negatives", [select, 1, 1]));
@@ -262,7 +267,10 @@ fn shared_constants_match() {
         ),
         (
             "negative_view.wgsl",
-            &[("LIGHT_BLOCK", valgi::negative::LIGHT_BLOCK)],
+            &[
+                ("LIGHT_BLOCK", valgi::negative::LIGHT_BLOCK),
+                ("COLUMN", valgi::negative::COLUMN),
+            ],
         ),
         (
             "lpv_propagate.wgsl",

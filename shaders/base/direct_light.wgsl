@@ -14,7 +14,7 @@
 @group(0) @binding(9) var gbuffer_emissive: texture_2d<f32>;
 @group(0) @binding(10) var radiance_direct: texture_storage_2d<rgba32float, write>;
 // The lights and shadow views again as uniform blocks, which every pixel reads alike: a CPU
-// device (Mesa's llvmpipe) reads a uniform block with one scalar load per value where it
+// device (Mesa's llvmpipe) reads a uniform block with one gathered load per value where it
 // reads a storage buffer lane by lane under a per-lane test. A scene with more lights or views
 // than a block holds reads the storage buffers (LIGHTS_IN_BLOCK false; `Rasterizer::new`).
 const LIGHT_BLOCK: u32 = 256u;

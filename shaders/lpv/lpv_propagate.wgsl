@@ -18,7 +18,7 @@
 
 @group(0) @binding(0) var<uniform> params: LpvParams;
 // A uniform block, read alike by every cell: a CPU device (Mesa's llvmpipe) reads a storage
-// buffer lane by lane and a uniform block with one scalar load per value (Cornell 32³, 16
+// buffer lane by lane and a uniform block with one gathered load per value (Cornell 32³, 16
 // steps on lavapipe: LPV's propagation 2.3× faster, HO-LPV's 1.8×).
 const FACE_BLOCK: u32 = 64u;
 @group(0) @binding(1) var<uniform> faces: array<LpvFace, FACE_BLOCK>;

@@ -49,7 +49,8 @@ struct NegativeParams {
     positive_count: u32,
     candidate_count: u32,
     negative_target: u32,
-    weight_mode: u32,
+    // The weight and the falloff are pipeline constants (`negative_view.wgsl`).
+    pad0: u32,
     lowres: u32,
     tiles_x: u32,
     d2_min: f32,
@@ -58,8 +59,7 @@ struct NegativeParams {
     // 2·tan(fov_y/2)/H: the pixel footprint at unit distance.
     footprint_scale: f32,
     omega_frustum: f32,
-    // 0: 1/max(d², d²_min) (point lights); 1: 1/(d² + r²) (each light the disc it stands for).
-    falloff: u32,
+    pad1: u32,
 }
 
 const WEIGHT_LITERAL: u32 = 0u;

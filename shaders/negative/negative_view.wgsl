@@ -42,7 +42,7 @@
 // pixels), (Y of ρ/π·E_n, positive lights that hit the d²_min guard, summed over pixels, 0, 0).
 @group(0) @binding(18) var<storage, read_write> stats: array<vec4<f32>>;
 // The lights every pixel loops over, read alike by all invocations, as uniform blocks: a CPU
-// device (Mesa's llvmpipe) reads a uniform block with one scalar load per value where it
+// device (Mesa's llvmpipe) reads a uniform block with one gathered load per value where it
 // reads a storage buffer, or workgroup memory, lane by lane under a per-lane test (bunny-box
 // 640×480 on lavapipe, N = 100: the positive pass 315 → 41 ms). Each block holds LIGHT_BLOCK
 // lights, copied in after the pass that writes them; with more positive lights than that
@@ -60,6 +60,14 @@ fn positive_light(i: u32) -> IndirectLight {
     }
     return positives[i];
 }
+
+// The variants of the light sums, fixed per pipeline (`NegativeMethod::new`), so that the
+// loops over the lights carry no branch on them: llvmpipe runs every uniform branch inside a
+// loop under a mask (bunny-box 640×480, N = 100: the positive pass 26.5 → 21.4 ms).
+// WEIGHT_LITERAL, WEIGHT_ARRIVING or WEIGHT_PROPAGATION (§A.4).
+override WEIGHT_MODE: u32 = 0u;
+// false: 1/max(d², d²_min) (point lights); true: 1/(d² + r²) (each light the disc it stands for).
+override DISC_FALLOFF: bool = false;
 
 const TILE: u32 = 8u;
 const TILE_HEADER: u32 = 4u;
@@ -111,85 +119,170 @@ fn en_at(pixel: vec2<u32>) -> vec3<f32> {
     return low_en[parent_index(pixel)].rgb;
 }
 
-// Emitter side of a Lambertian point light seen from p: Φ/π·max(0, n_l·t̂_{l→p})/max(d², d²_min)
-// (or /(d² + r²) with the disc falloff)
-// in rgb and t̂_{p→l} in `to_light`; zero for an inactive light.
-struct Arriving {
-    rgb: vec3<f32>,
+// Emitter side of a Lambertian point light seen from p, per unit Φ/π:
+// max(0, n_l·t̂_{l→p})/max(d², d²_min) (or /(d² + r²) with the disc falloff) in `factor`, so
+// that the light's irradiance arriving at p is Φ/π·factor, and t̂_{p→l} in `to_light`; zero
+// for an inactive light or one at p. The flux is applied by the caller, once per light for
+// all its points: on a CPU device (Mesa's llvmpipe) each division and square root is a slow
+// vector instruction, so this takes one of each per pair.
+struct Emitter {
+    factor: f32,
     to_light: vec3<f32>,
     // 1 when the point falloff's d²_min guard replaced d².
     clamped: f32,
 }
 
-fn arriving(p: vec3<f32>, light: IndirectLight) -> Arriving {
-    var out: Arriving;
-    out.rgb = vec3<f32>(0.0);
-    out.to_light = vec3<f32>(0.0, 0.0, 1.0);
-    out.clamped = 0.0;
+fn emitter(p: vec3<f32>, light: IndirectLight) -> Emitter {
     let d = light.position.xyz - p;
     let d2 = dot(d, d);
-    if (light.position.w < 0.5 || d2 <= 0.0) {
-        return out;
-    }
-    out.to_light = d / sqrt(d2);
-    let cos_l = max(0.0, dot(light.normal.xyz, -out.to_light));
+    let lit = light.position.w >= 0.5 && d2 > 0.0;
+    var out: Emitter;
+    // 1/sqrt rather than inverseSqrt: both round correctly, as the CPU twin's t̂ does.
+    out.to_light = d * select(0.0, 1.0 / sqrt(d2), lit);
+    let cos_l = max(0.0, -dot(light.normal.xyz, out.to_light));
     var denominator = max(d2, params.d2_min);
-    if (params.falloff == 1u) {
+    out.clamped = select(0.0, 1.0, lit && d2 < params.d2_min);
+    if (DISC_FALLOFF) {
         denominator = d2 + light.normal.w;
-    } else if (d2 < params.d2_min) {
-        out.clamped = 1.0;
+        out.clamped = 0.0;
     }
-    out.rgb = light.flux.rgb / PI * cos_l / denominator;
+    out.factor = select(0.0, cos_l / denominator, lit);
     return out;
 }
 
-fn positive_terms(point: SurfacePoint) -> PositiveTerms {
+// The light loops take a column of four pixels per invocation (pixel k of invocation (x, y)
+// is (x, 4y + k)), so that each light, read once, serves four pixels: a CPU device (Mesa's
+// llvmpipe) reads a uniform block at a loop-varying index with one gathered load per float,
+// which was three quarters of the loops' time with one pixel per invocation (bunny-box
+// 640×480 on lavapipe, N = 100: src/negative/README.md, "Four pixels per invocation").
+const COLUMN: u32 = 4u;
+
+struct PositiveSums {
+    e_s: vec3<f32>,
+    e_neg: vec3<f32>,
+    direction: vec3<f32>,
+    clamped: f32,
+}
+
+// One positive light's share of E_s, E_neg and D at `point` (flux_over_pi = Φ/π, y its
+// luminance).
+fn add_positive(sums: ptr<function, PositiveSums>, point: SurfacePoint, light: IndirectLight, flux_over_pi: vec3<f32>, y: f32) {
+    let a = emitter(point.position.xyz, light);
+    (*sums).clamped += a.clamped;
+    let cos_p = dot(point.normal.xyz, a.to_light);
+    (*sums).e_s += flux_over_pi * (a.factor * max(0.0, cos_p));
+    // The share arriving from behind the tangent plane, per unit Φ/π.
+    let behind = a.factor * select(0.0, -cos_p, -cos_p > COPLANAR_COS);
+    (*sums).e_neg += flux_over_pi * behind;
+    // Y(Φ/π·x) = Y(Φ/π)·x: the weights are luminances of the sums' terms.
+    if (WEIGHT_MODE == WEIGHT_ARRIVING) {
+        (*sums).direction += (y * a.factor) * light.normal.xyz;
+    } else if (WEIGHT_MODE == WEIGHT_PROPAGATION) {
+        (*sums).direction += (y * behind) * -a.to_light;
+    } else {
+        (*sums).direction += (y * behind) * light.normal.xyz;
+    }
+}
+
+fn positive_result(point: SurfacePoint, sums: PositiveSums) -> PositiveTerms {
     var t: PositiveTerms;
     t.e_s = vec4<f32>(0.0);
     t.e_neg = vec4<f32>(0.0);
     t.direction = vec4<f32>(0.0);
-    if (point.position.w < 0.5) {
-        return t;
+    if (point.position.w > 0.5) {
+        t.e_s = vec4<f32>(sums.e_s, sums.clamped);
+        t.e_neg = vec4<f32>(sums.e_neg, 0.0);
+        t.direction = vec4<f32>(sums.direction, 0.0);
     }
-    let p = point.position.xyz;
-    let n = point.normal.xyz;
-    var e_s = vec3<f32>(0.0);
-    var e_neg = vec3<f32>(0.0);
-    var dir = vec3<f32>(0.0);
-    var clamped = 0.0;
-    for (var i = 0u; i < params.positive_count; i++) {
-        let light = positive_light(i);
-        let a = arriving(p, light);
-        clamped += a.clamped;
-        let cos_p = dot(n, a.to_light);
-        e_s += a.rgb * max(0.0, cos_p);
-        let behind = a.rgb * select(0.0, -cos_p, -cos_p > COPLANAR_COS);
-        e_neg += behind;
-        if (params.weight_mode == WEIGHT_ARRIVING) {
-            dir += luminance(a.rgb) * light.normal.xyz;
-        } else if (params.weight_mode == WEIGHT_PROPAGATION) {
-            dir += luminance(behind) * -a.to_light;
-        } else {
-            dir += luminance(behind) * light.normal.xyz;
-        }
-    }
-    t.e_s = vec4<f32>(e_s, clamped);
-    t.e_neg = vec4<f32>(e_neg, 0.0);
-    t.direction = vec4<f32>(dir, 0.0);
     return t;
 }
 
-fn negative_irradiance(point: SurfacePoint) -> vec3<f32> {
-    if (point.position.w < 0.5) {
-        return vec3<f32>(0.0);
+// E_s, E_neg and D at four points (zero where a point is uncovered).
+fn positive_terms(q: array<SurfacePoint, COLUMN>) -> array<PositiveTerms, COLUMN> {
+    var s0: PositiveSums;
+    var s1: PositiveSums;
+    var s2: PositiveSums;
+    var s3: PositiveSums;
+    for (var i = 0u; i < params.positive_count; i++) {
+        let light = positive_light(i);
+        let flux_over_pi = light.flux.rgb * (1.0 / PI);
+        let y = luminance(flux_over_pi);
+        add_positive(&s0, q[0], light, flux_over_pi, y);
+        add_positive(&s1, q[1], light, flux_over_pi, y);
+        add_positive(&s2, q[2], light, flux_over_pi, y);
+        add_positive(&s3, q[3], light, flux_over_pi, y);
     }
+    return array<PositiveTerms, COLUMN>(
+        positive_result(q[0], s0),
+        positive_result(q[1], s1),
+        positive_result(q[2], s2),
+        positive_result(q[3], s3),
+    );
+}
+
+fn add_negative(e: ptr<function, vec3<f32>>, point: SurfacePoint, light: IndirectLight, flux_over_pi: vec3<f32>) {
+    let a = emitter(point.position.xyz, light);
+    *e += flux_over_pi * (a.factor * max(0.0, dot(point.normal.xyz, a.to_light)));
+}
+
+// E_n at four points (zero where a point is uncovered), as vec4 (rgb, 0).
+fn negative_irradiance(q: array<SurfacePoint, COLUMN>) -> array<vec4<f32>, COLUMN> {
     let count = min(negative_state[0], params.negative_target);
-    var e = vec3<f32>(0.0);
+    var e0 = vec3<f32>(0.0);
+    var e1 = vec3<f32>(0.0);
+    var e2 = vec3<f32>(0.0);
+    var e3 = vec3<f32>(0.0);
     for (var i = 0u; i < count; i++) {
-        let a = arriving(point.position.xyz, negatives_block[i]);
-        e += a.rgb * max(0.0, dot(point.normal.xyz, a.to_light));
+        let light = negatives_block[i];
+        let flux_over_pi = light.flux.rgb * (1.0 / PI);
+        add_negative(&e0, q[0], light, flux_over_pi);
+        add_negative(&e1, q[1], light, flux_over_pi);
+        add_negative(&e2, q[2], light, flux_over_pi);
+        add_negative(&e3, q[3], light, flux_over_pi);
     }
-    return e;
+    let zero = vec3<f32>(0.0);
+    return array<vec4<f32>, COLUMN>(
+        vec4<f32>(select(zero, e0, q[0].position.w > 0.5), 0.0),
+        vec4<f32>(select(zero, e1, q[1].position.w > 0.5), 0.0),
+        vec4<f32>(select(zero, e2, q[2].position.w > 0.5), 0.0),
+        vec4<f32>(select(zero, e3, q[3].position.w > 0.5), 0.0),
+    );
+}
+
+fn inside(pixel: vec2<u32>, size: vec2<u32>) -> bool {
+    return pixel.x < size.x && pixel.y < size.y;
+}
+
+fn low_size() -> vec2<u32> {
+    return vec2<u32>(params.low_width, params.low_height);
+}
+
+fn full_size() -> vec2<u32> {
+    return vec2<u32>(params.full_width, params.full_height);
+}
+
+// The column of four low-resolution points from `first` down (uncovered past the image).
+fn low_column(first: vec2<u32>) -> array<SurfacePoint, COLUMN> {
+    var q: array<SurfacePoint, COLUMN>;
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, low_size())) {
+            q[k] = low_points[pixel.y * params.low_width + pixel.x];
+        }
+    }
+    return q;
+}
+
+// The column of four full-resolution points from `first` down (uncovered past the image).
+fn full_column(first: vec2<u32>) -> array<SurfacePoint, COLUMN> {
+    var q: array<SurfacePoint, COLUMN>;
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, full_size())) {
+            q[k] = points[full_index(pixel)];
+        }
+    }
+    return q;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -266,11 +359,14 @@ fn downsample(@builtin(global_invocation_id) id: vec3<u32>) {
 
 @compute @workgroup_size(8, 8, 1)
 fn positive_low(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= params.low_width || id.y >= params.low_height) {
-        return;
+    let first = vec2<u32>(id.x, id.y * COLUMN);
+    let t = positive_terms(low_column(first));
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, low_size())) {
+            low_terms[pixel.y * params.low_width + pixel.x] = t[k];
+        }
     }
-    let i = id.y * params.low_width + id.x;
-    low_terms[i] = positive_terms(low_points[i]);
 }
 
 var<workgroup> tile_flagged: atomic<u32>;
@@ -313,29 +409,32 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocat
     }
 }
 
-// The pixel of this invocation in the flagged tile `wid.x` of the list.
-fn patch_pixel(wid: vec3<u32>, lid: vec3<u32>) -> vec2<u32> {
+// The first pixel of this invocation's column in the flagged tile `wid.x` of the list (a
+// workgroup of 8 × 2 columns covers the 8 × 8 tile).
+fn patch_column(wid: vec3<u32>, lid: vec3<u32>) -> vec2<u32> {
     let tile = atomicLoad(&tiles[tile_list_slot(wid.x)]);
-    return vec2<u32>(tile % params.tiles_x, tile / params.tiles_x) * TILE + lid.xy;
+    return vec2<u32>(tile % params.tiles_x, tile / params.tiles_x) * TILE + vec2<u32>(lid.x, lid.y * COLUMN);
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn positive_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let pixel = patch_pixel(wid, lid);
-    if (pixel.x >= params.full_width || pixel.y >= params.full_height) {
-        return;
+fn store_full_terms(first: vec2<u32>, t: array<PositiveTerms, COLUMN>) {
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, full_size())) {
+            full_terms[full_index(pixel)] = t[k];
+        }
     }
-    let i = full_index(pixel);
-    full_terms[i] = positive_terms(points[i]);
+}
+
+@compute @workgroup_size(8, 2, 1)
+fn positive_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let first = patch_column(wid, lid);
+    store_full_terms(first, positive_terms(full_column(first)));
 }
 
 @compute @workgroup_size(8, 8, 1)
 fn positive_full(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= params.full_width || id.y >= params.full_height) {
-        return;
-    }
-    let i = full_index(id.xy);
-    full_terms[i] = positive_terms(points[i]);
+    let first = vec2<u32>(id.x, id.y * COLUMN);
+    store_full_terms(first, positive_terms(full_column(first)));
 }
 
 var<workgroup> accepted: array<u32, SELECT_GROUP>;
@@ -408,30 +507,35 @@ fn select_negatives(@builtin(local_invocation_index) lid: u32) {
 
 @compute @workgroup_size(8, 8, 1)
 fn negative_low(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= params.low_width || id.y >= params.low_height) {
-        return;
+    let first = vec2<u32>(id.x, id.y * COLUMN);
+    let e = negative_irradiance(low_column(first));
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, low_size())) {
+            low_en[pixel.y * params.low_width + pixel.x] = e[k];
+        }
     }
-    let i = id.y * params.low_width + id.x;
-    low_en[i] = vec4<f32>(negative_irradiance(low_points[i]), 0.0);
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn negative_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
-    let pixel = patch_pixel(wid, lid);
-    if (pixel.x >= params.full_width || pixel.y >= params.full_height) {
-        return;
+fn store_full_en(first: vec2<u32>, e: array<vec4<f32>, COLUMN>) {
+    for (var k = 0u; k < COLUMN; k++) {
+        let pixel = first + vec2<u32>(0u, k);
+        if (inside(pixel, full_size())) {
+            full_en[full_index(pixel)] = e[k];
+        }
     }
-    let i = full_index(pixel);
-    full_en[i] = vec4<f32>(negative_irradiance(points[i]), 0.0);
+}
+
+@compute @workgroup_size(8, 2, 1)
+fn negative_tiles(@builtin(workgroup_id) wid: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>) {
+    let first = patch_column(wid, lid);
+    store_full_en(first, negative_irradiance(full_column(first)));
 }
 
 @compute @workgroup_size(8, 8, 1)
 fn negative_full(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= params.full_width || id.y >= params.full_height) {
-        return;
-    }
-    let i = full_index(id.xy);
-    full_en[i] = vec4<f32>(negative_irradiance(points[i]), 0.0);
+    let first = vec2<u32>(id.x, id.y * COLUMN);
+    store_full_en(first, negative_irradiance(full_column(first)));
 }
 
 var<workgroup> partial: array<vec4<f32>, 64>;

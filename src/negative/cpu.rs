@@ -350,7 +350,9 @@ fn light_terms(p: Vec3, light: &IndirectLight, falloff: Falloff) -> Option<(Vec3
     if d2 <= 0.0 {
         return None;
     }
-    let t = to_light / d2.sqrt();
+    // One reciprocal, as the shader takes it (`emitter`), so that t̂ rounds alike on both and
+    // near-grazing cosines agree.
+    let t = to_light * (1.0 / d2.sqrt());
     let cos_l = light.normal().dot(-t).max(0.0);
     let arriving = light.flux() / PI * cos_l / falloff.denominator(d2, light.normal[3]);
     Some((arriving, t, cos_l))

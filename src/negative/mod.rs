@@ -214,7 +214,8 @@ pub struct NegativeParams {
     pub positive_count: u32,
     pub candidate_count: u32,
     pub negative_target: u32,
-    pub weight_mode: u32,
+    /// The weight and the falloff are pipeline constants (`WEIGHT_MODE`, `DISC_FALLOFF`).
+    pub pad0: u32,
     pub lowres: u32,
     pub tiles_x: u32,
     pub d2_min: f32,
@@ -222,7 +223,7 @@ pub struct NegativeParams {
     pub threshold_normal: f32,
     pub footprint_scale: f32,
     pub omega_frustum: f32,
-    pub falloff: u32,
+    pub pad1: u32,
 }
 
 /// `SampleCount` in `shaders/negative/negative_positives.wgsl`.
@@ -276,7 +277,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 positive_count,
                 candidate_count,
                 negative_target,
-                weight_mode,
+                pad0,
                 lowres,
                 tiles_x,
                 d2_min,
@@ -284,7 +285,7 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
                 threshold_normal,
                 footprint_scale,
                 omega_frustum,
-                falloff
+                pad1
             ]
         ),
         shared_layout!(
@@ -313,6 +314,12 @@ pub const VIEW_ENTRIES: &[&str] = &[
     "negative_full",
     "gather",
 ];
+/// The entry points that recompute the flagged tiles: one workgroup of 8 × 8 / `COLUMN`
+/// invocations per tile.
+pub const PATCH_ENTRIES: &[&str] = &["positive_tiles", "negative_tiles"];
+/// Pixels per invocation of the light loops (`COLUMN` in `negative_view.wgsl`): a column of
+/// them, so that each light read serves that many pixels.
+pub const COLUMN: u32 = 4;
 /// Header words of the tile buffer (flagged count, 1, 1, recomputed pixels).
 const TILE_HEADER: u64 = 4;
 
@@ -483,15 +490,19 @@ impl NegativeMethod {
         );
         let view_layout = GroupLayout::new(device, "negative view", cs, VIEW_BINDINGS);
         let module = ctx.shader("negative_view.wgsl");
-        let in_block = [(
-            "POSITIVES_IN_BLOCK",
-            f64::from(u8::from(positives_in_block)),
-        )];
+        let constants = [
+            (
+                "POSITIVES_IN_BLOCK",
+                f64::from(u8::from(positives_in_block)),
+            ),
+            ("WEIGHT_MODE", f64::from(settings.weight as u32)),
+            ("DISC_FALLOFF", f64::from(u8::from(settings.disc))),
+        ];
         let view_pipelines = VIEW_ENTRIES
             .iter()
             .map(|e| {
                 let layouts = [&view_layout.layout];
-                let pipeline = compute_pipeline_groups(device, e, &module, &layouts, e, &in_block);
+                let pipeline = compute_pipeline_groups(device, e, &module, &layouts, e, &constants);
                 (*e, pipeline)
             })
             .collect();
@@ -853,7 +864,7 @@ impl Method for NegativeMethod {
             positive_count: self.samples.len() as u32,
             candidate_count,
             negative_target: s.negative,
-            weight_mode: s.weight as u32,
+            pad0: 0,
             lowres: s.lowres as u32,
             tiles_x: w.div_ceil(PIXEL_TILE),
             d2_min: self.d2_min,
@@ -861,7 +872,7 @@ impl Method for NegativeMethod {
             threshold_normal: s.threshold_normal,
             footprint_scale: (top - bottom) / h as f32,
             omega_frustum,
-            falloff: s.disc as u32,
+            pad1: 0,
         };
         ctx.queue
             .write_buffer(&state.params, 0, bytemuck::bytes_of(&params));
@@ -878,6 +889,9 @@ impl Method for NegativeMethod {
             w.div_ceil(2).div_ceil(PIXEL_TILE),
             h.div_ceil(2).div_ceil(PIXEL_TILE),
         );
+        // The light loops' workgroups cover COLUMN times as many rows.
+        let full_columns = (full.0, h.div_ceil(PIXEL_TILE * COLUMN));
+        let low_columns = (low.0, h.div_ceil(2).div_ceil(PIXEL_TILE * COLUMN));
         let group = &state.group;
         let run = |passes: &mut Passes, label: &str, entry: &str, groups: (u32, u32)| {
             let pipeline = self.pipeline(entry);
@@ -898,14 +912,19 @@ impl Method for NegativeMethod {
         run(passes, "negative points", "points_main", full)?;
         if s.lowres {
             run(passes, "negative downsample", "downsample", low)?;
-            run(passes, "negative positive low", "positive_low", low)?;
+            run(passes, "negative positive low", "positive_low", low_columns)?;
             run(passes, "negative classify", "classify", full)?;
             passes
                 .encoder()
                 .copy_buffer_to_buffer(&state.tiles, 0, &state.dispatch_args, 0, 12);
             patch(passes, "negative positive tiles", "positive_tiles")?;
         } else {
-            run(passes, "negative positive full", "positive_full", full)?;
+            run(
+                passes,
+                "negative positive full",
+                "positive_full",
+                full_columns,
+            )?;
         }
         if s.negative > 0 {
             let pipeline = &self.select_pipeline;
@@ -922,10 +941,15 @@ impl Method for NegativeMethod {
                 state.negatives.size(),
             );
             if s.lowres {
-                run(passes, "negative negative low", "negative_low", low)?;
+                run(passes, "negative negative low", "negative_low", low_columns)?;
                 patch(passes, "negative negative tiles", "negative_tiles")?;
             } else {
-                run(passes, "negative negative full", "negative_full", full)?;
+                run(
+                    passes,
+                    "negative negative full",
+                    "negative_full",
+                    full_columns,
+                )?;
             }
         }
         run(passes, "negative gather", "gather", full)?;
