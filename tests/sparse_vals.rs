@@ -309,7 +309,7 @@ fn dispatches_past_the_workgroup_limit_wrap_without_changing_the_image() {
             let points = method.sparse.point_count.div_ceil(64);
             let vertices = method.sparse.vertex_count.div_ceil(64);
             let frame = method
-                .render(&ctx, &scene, &world, &camera(&scene, 24))
+                .render(&ctx, &scene, &world, &camera(&scene, 27))
                 .unwrap();
             (frame.indirect.pixels, points, vertices)
         };
@@ -683,10 +683,11 @@ fn brute_force_windows_write_the_tile_forms_image_to_the_bit() {
         let mut options = MethodOptions::default();
         options.set("rsm", 64);
         options.set("vals", reads);
-        let mut brute = BruteMethod::new(&ctx, &scene, settings(24), &options).unwrap();
+        // 27 rows: the window form's last column of four pixels hangs past the image.
+        let mut brute = BruteMethod::new(&ctx, &scene, settings(27), &options).unwrap();
         let world = scene.world_from_node();
         let frame = brute
-            .render(&ctx, &scene, &world, &camera(&scene, 24))
+            .render(&ctx, &scene, &world, &camera(&scene, 27))
             .unwrap();
         assert_eq!(Method::report(&brute)["vals_read"], reads);
         let count = brute.rsm.read_count(&ctx).unwrap() as u64;

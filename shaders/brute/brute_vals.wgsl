@@ -133,6 +133,33 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocati
     }
 }
 
+// The window form takes a column of four pixels per invocation (pixel k of invocation (x, y)
+// is (x, 4y + k)), so that each VAL, read once from the window, serves four pixels: a CPU
+// device (Mesa's llvmpipe) reads a uniform block at a loop-varying index with one gathered
+// load per float (`src/vals/README.md`, "How lavapipe loads memory"). Each pixel adds the VALs
+// in the same order as with one pixel per invocation, to the same bits.
+const COLUMN: u32 = 4u;
+
+// The pixel's sum before this window: its running sum after the first window, else zero.
+fn running_before(setup: PixelSetup, pixel: vec2<u32>, begin: u32) -> vec3<f32> {
+    if (begin > 0u && setup.inside) {
+        return running[pixel.y * frame.render_size.x + pixel.x].xyz;
+    }
+    return vec3<f32>(0.0);
+}
+
+// The last window writes the pixel, the others its running sum.
+fn write_window_sum(setup: PixelSetup, pixel: vec2<u32>, radiance: vec3<f32>, last: bool) {
+    if (!setup.inside) {
+        return;
+    }
+    if (last) {
+        textureStore(radiance_indirect, vec2<i32>(pixel), vec4<f32>(radiance, 1.0));
+    } else {
+        running[pixel.y * frame.render_size.x + pixel.x] = vec4<f32>(radiance, 0.0);
+    }
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn cs_window(@builtin(global_invocation_id) id: vec3<u32>) {
     let count = min(val_count[0], arrayLength(&vals));
@@ -142,29 +169,44 @@ fn cs_window(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let begin = window.first;
     let end = window_end(count);
-    let setup = pixel_setup(id);
-    let px = setup.px;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
-    let at = id.y * frame.render_size.x + id.x;
-    var radiance = vec3<f32>(0.0);
-    if (begin > 0u && setup.inside) {
-        radiance = running[at].xyz;
-    }
-    if (setup.covered) {
+    let p0 = vec2<u32>(id.x, id.y * COLUMN);
+    let p1 = p0 + vec2<u32>(0u, 1u);
+    let p2 = p0 + vec2<u32>(0u, 2u);
+    let p3 = p0 + vec2<u32>(0u, 3u);
+    let s0 = pixel_setup(vec3<u32>(p0, 0u));
+    let s1 = pixel_setup(vec3<u32>(p1, 0u));
+    let s2 = pixel_setup(vec3<u32>(p2, 0u));
+    let s3 = pixel_setup(vec3<u32>(p3, 0u));
+    var r0 = running_before(s0, p0, begin);
+    var r1 = running_before(s1, p1, begin);
+    var r2 = running_before(s2, p2, begin);
+    var r3 = running_before(s3, p3, begin);
+    if (s0.covered || s1.covered || s2.covered || s3.covered) {
+        // Uncovered pixels of the column sum too (their setup may not be finite) and keep
+        // their running sum below.
+        var a0 = r0;
+        var a1 = r1;
+        var a2 = r2;
+        var a3 = r3;
         // A plain loop: at most WINDOW_VALS steps per dispatch, far from llvmpipe's 65535-step
         // limit that makes `cs_main` unroll, and unrolling measured no faster here.
         let m = end - begin;
         for (var j = 0u; j < m; j++) {
-            radiance += val_radiance(px, window_vals[j], glossy_on);
+            let val = window_vals[j];
+            a0 += val_radiance(s0.px, val, glossy_on);
+            a1 += val_radiance(s1.px, val, glossy_on);
+            a2 += val_radiance(s2.px, val, glossy_on);
+            a3 += val_radiance(s3.px, val, glossy_on);
         }
+        r0 = select(r0, a0, s0.covered);
+        r1 = select(r1, a1, s1.covered);
+        r2 = select(r2, a2, s2.covered);
+        r3 = select(r3, a3, s3.covered);
     }
-    if (!setup.inside) {
-        return;
-    }
-    // The last window writes the pixel, the others its running sum.
-    if (end < count) {
-        running[at] = vec4<f32>(radiance, 0.0);
-    } else {
-        textureStore(radiance_indirect, vec2<i32>(id.xy), vec4<f32>(radiance, 1.0));
-    }
+    let last = end >= count;
+    write_window_sum(s0, p0, r0, last);
+    write_window_sum(s1, p1, r1, last);
+    write_window_sum(s2, p2, r2, last);
+    write_window_sum(s3, p3, r3, last);
 }

@@ -86,6 +86,10 @@ pub struct BruteMethod {
     vals: u32,
 }
 
+/// Pixels per invocation of the window form (`COLUMN` in `brute_vals.wgsl`): a column of them,
+/// so that each VAL read from the window serves that many pixels.
+pub const WINDOW_COLUMN: u32 = 4;
+
 /// What the window form of brute force needs besides the tile form's group.
 struct BruteWindows {
     pipeline: wgpu::ComputePipeline,
@@ -265,7 +269,7 @@ impl Method for BruteMethod {
                     w.windows.for_each(pass, 2, |pass| {
                         pass.dispatch_workgroups(
                             width.div_ceil(PIXEL_TILE),
-                            height.div_ceil(PIXEL_TILE),
+                            height.div_ceil(PIXEL_TILE * WINDOW_COLUMN),
                             1,
                         );
                     });
