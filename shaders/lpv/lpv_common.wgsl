@@ -30,11 +30,6 @@ struct LpvFace {
     y2: vec4<f32>,
     // xyz: destination − source (cells); w: the face normal's axis 0..6 (+x −x +y −y +z −z).
     offset: vec4<i32>,
-    // Weights of the destination's 8 geometry-volume corners (corner i at offset
-    // (i & 1, i >> 1 & 1, i >> 2 & 1)) that interpolate the GV at the midpoint between source
-    // and destination: corners 0..3, 4..7.
-    corners_lo: vec4<f32>,
-    corners_hi: vec4<f32>,
 }
 
 // Real SH up to band 2, the order of math::sh9.

@@ -6,8 +6,9 @@
 // table comes grouped by offset, so each source is read once per neighbour (26 or 6 times per
 // cell, not 54 or 30; 8 % faster than per-axis order on lavapipe).
 // V_f = 1 − clamp(B(−ω_f), 0, 1) with B the geometry volume at the midpoint of source and
-// destination (off in the first step), from the destination's 8 corner GV cells with per-face
-// weights from the table. The light volumes being read and written are 3D textures of
+// destination (off in the first step), trilinear in the destination's 8 corner GV cells (the
+// weights follow from the offset alone; as a table they were 8 more floats a face to read,
+// at a loop-varying index, which llvmpipe gathers per float: 11 % of LPV's propagation). The light volumes being read and written are 3D textures of
 // `lpv_cell_texels()` rgba32float texels a cell along x (`lpv_pack.wgsl` packs the injected
 // volume): a CPU device (Mesa's llvmpipe) fetches a texel at per-lane coordinates with one
 // gathered load, where it reads workgroup memory or a storage buffer as a loop over the lanes
@@ -74,10 +75,14 @@ fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
         }
         var visibility = 1.0;
         if (occlusion) {
-            let lo = face.corners_lo;
-            let hi = face.corners_hi;
-            let b = lo.x * corners[0] + lo.y * corners[1] + lo.z * corners[2] + lo.w * corners[3]
-                + hi.x * corners[4] + hi.y * corners[5] + hi.z * corners[6] + hi.w * corners[7];
+            // Trilinear weights of the midpoint d + 0.5 − o/2 in the destination's corner frame
+            // (corner i at (i & 1, i >> 1 & 1, i >> 2 & 1); CPU twin: math::corner_weights).
+            let u = 0.5 - 0.5 * vec3<f32>(o);
+            let v = 1.0 - u;
+            let b = (v.x * v.y * v.z) * corners[0] + (u.x * v.y * v.z) * corners[1]
+                + (v.x * u.y * v.z) * corners[2] + (u.x * u.y * v.z) * corners[3]
+                + (v.x * v.y * u.z) * corners[4] + (u.x * v.y * u.z) * corners[5]
+                + (v.x * u.y * u.z) * corners[6] + (u.x * u.y * u.z) * corners[7];
             let back = vec4<f32>(face.y0.x, -face.y0.yzw);
             visibility = 1.0 - clamp(dot(b, back), 0.0, 1.0);
         }

@@ -110,21 +110,16 @@ pub struct LpvFace {
     pub y1: [f32; 4],
     pub y2: [f32; 4],
     pub offset: [i32; 4],
-    pub corners_lo: [f32; 4],
-    pub corners_hi: [f32; 4],
 }
 
 impl LpvFace {
     pub fn from_face(f: &Face) -> Self {
         let y = math::sh9(f.direction);
-        let w = math::corner_weights(f.offset);
         Self {
             y0: [y[0], y[1], y[2], y[3]],
             y1: [y[4], y[5], y[6], y[7]],
             y2: [y[8], f.solid_angle, 0.0, 0.0],
             offset: [f.offset.x, f.offset.y, f.offset.z, f.axis as i32],
-            corners_lo: [w[0], w[1], w[2], w[3]],
-            corners_hi: [w[4], w[5], w[6], w[7]],
         }
     }
 }
@@ -830,11 +825,6 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
             LpvParams,
             [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
         ),
-        layout!(
-            "LpvFace",
-            "lpv_common.wgsl",
-            LpvFace,
-            [y0, y1, y2, offset, corners_lo, corners_hi]
-        ),
+        layout!("LpvFace", "lpv_common.wgsl", LpvFace, [y0, y1, y2, offset]),
     ]
 }
