@@ -104,7 +104,11 @@ fn workgroup_sizes_match_the_dispatches() {
         ("atlas_apply.wgsl", "cs_main", [tile, tile, 1]),
         ("atlas_apply.wgsl", "cs_add", [tile, tile, 1]),
         ("vals_gather.wgsl", "cs_main", [group, 1, 1]),
-        ("vals_gather.wgsl", "cs_window", [group, 1, 1]),
+        (
+            "vals_gather.wgsl",
+            "cs_window",
+            [valgi::vals::sparse::WINDOW_POINT_GROUP, 1, 1],
+        ),
         ("brute_vals.wgsl", "cs_window", [tile, tile, 1]),
         ("vals_gather_reduce.wgsl", "cs_main", [group, 1, 1]),
         ("vals_renormalize.wgsl", "cs_main", [group, 1, 1]),

@@ -1,5 +1,5 @@
-// Step 1 — gather: every VAL at every sparse point. Each workgroup takes 64 invocations ×
-// GATHER_SLOTS points. Two entry points read the VAL list two ways (`GatherVals` in
+// Step 1 — gather: every VAL at every sparse point, GATHER_SLOTS points an invocation. Two
+// entry points read the VAL list two ways (`GatherVals` in
 // `src/vals/sparse.rs` picks one):
 // - `cs_main` streams it through workgroup memory `tile` records at a time, so every VAL is
 //   fetched from the buffer once per workgroup and read from workgroup memory once per
@@ -15,6 +15,14 @@
 
 const GROUP: u32 = 64u;
 const TILE_MAX: u32 = 256u;
+// Invocations per workgroup of the window form: a CPU device runs whole workgroups on its
+// threads, and small ones let the last round take only what is left (see `cs_window`).
+const WINDOW_GROUP: u32 = 16u;
+
+// The distance between an invocation's points: GROUP in the tile form (a workgroup's points
+// are a block, each invocation's strided through it), every invocation of the dispatch in the
+// window form (each invocation's points strided through all of them).
+var<private> slot_stride: u32;
 
 var<workgroup> tile_vals: array<Val, TILE_MAX>;
 var<workgroup> shared_count: u32;
@@ -38,9 +46,9 @@ var<private> visibility_words: array<array<vec4<u32>, 8>, 4>;
 fn words_of(first: u32, w: u32, use_visibility: bool) -> vec4<u32> {
     return vec4<u32>(
         visibility_word(first, w, use_visibility),
-        visibility_word(first + GROUP, w, use_visibility),
-        visibility_word(first + 2u * GROUP, w, use_visibility),
-        visibility_word(first + 3u * GROUP, w, use_visibility),
+        visibility_word(first + slot_stride, w, use_visibility),
+        visibility_word(first + 2u * slot_stride, w, use_visibility),
+        visibility_word(first + 3u * slot_stride, w, use_visibility),
     );
 }
 
@@ -127,15 +135,15 @@ fn accumulate_all(val: Val, glossy_on: bool, flux_weights: bool, use_visibility:
     }
 }
 
-// Slot group g's points (from `first`, strided by GROUP), their words, cleared sums; true
-// when one of them is a point.
+// Slot group g's points (from `first`, strided by `slot_stride`), their words, cleared sums;
+// true when one of them is a point.
 fn load_group(g: u32, first: u32, use_visibility: bool) -> bool {
     let q = 4u * g;
-    let base = first + q * GROUP;
+    let base = first + q * slot_stride;
     var any_active = load_slot(q, base);
-    any_active = load_slot(q + 1u, base + GROUP) || any_active;
-    any_active = load_slot(q + 2u, base + 2u * GROUP) || any_active;
-    any_active = load_slot(q + 3u, base + 3u * GROUP) || any_active;
+    any_active = load_slot(q + 1u, base + slot_stride) || any_active;
+    any_active = load_slot(q + 2u, base + 2u * slot_stride) || any_active;
+    any_active = load_slot(q + 3u, base + 3u * slot_stride) || any_active;
     visibility_words[g] = group_words(base, use_visibility);
     return any_active;
 }
@@ -153,10 +161,10 @@ fn write_group(g: u32, first: u32, count: u32, glossy_on: bool, to_partials: boo
 // Slot group g's running sums as an earlier window left them.
 fn resume_group(g: u32, first: u32) {
     let q = 4u * g;
-    resume_slot(q, first + q * GROUP);
-    resume_slot(q + 1u, first + (q + 1u) * GROUP);
-    resume_slot(q + 2u, first + (q + 2u) * GROUP);
-    resume_slot(q + 3u, first + (q + 3u) * GROUP);
+    resume_slot(q, first + q * slot_stride);
+    resume_slot(q + 1u, first + (q + 1u) * slot_stride);
+    resume_slot(q + 2u, first + (q + 2u) * slot_stride);
+    resume_slot(q + 3u, first + (q + 3u) * slot_stride);
 }
 
 fn resume_slot(q: u32, index: u32) {
@@ -179,6 +187,7 @@ fn cs_main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroup
     let end = min(begin + chunk, count);
     // The workgroup's GROUP · GATHER_SLOTS points, strided by GROUP so that the invocations
     // of a SIMD row read neighbouring points.
+    slot_stride = GROUP;
     let first = (linear_index(gid, groups) / GROUP) * GROUP * GATHER_SLOTS + lid;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
     let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
@@ -254,7 +263,7 @@ fn load_groups(first: u32, use_visibility: bool) -> bool {
 }
 
 fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, to_partials: bool, slice: u32) {
-    let index = first + q * GROUP;
+    let index = first + q * slot_stride;
     if (index >= params.point_count) {
         return;
     }
@@ -270,9 +279,14 @@ fn write_slot(q: u32, first: u32, count: u32, glossy_on: bool, to_partials: bool
 // same for the whole workgroup, so from a uniform window it costs one load where workgroup
 // memory costs one per lane. Each point's sums go to the partial-sums buffer after a window
 // and come back before the next as the same f32 values, so the VALs are added in the order
-// `cs_main` adds them, to the same bits.
-@compute @workgroup_size(64, 1, 1)
-fn cs_window(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>, @builtin(local_invocation_index) lid: u32) {
+// `cs_main` adds them, to the same bits. Invocation i takes points i, i + T, i + 2T, … (T the
+// dispatch's invocations, about points / GATHER_SLOTS), so every invocation but the last few
+// has all its slots filled, and WINDOW_GROUP-invocation workgroups leave the CPU threads at
+// most one small workgroup apart: with 64-invocation blocks of GROUP · GATHER_SLOTS points,
+// 4423 points took five blocks, three rounds of two threads, for 8 % more points than 4095
+// took in two (lavapipe, `src/vals/README.md`).
+@compute @workgroup_size(WINDOW_GROUP, 1, 1)
+fn cs_window(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let count = min(val_count[0], arrayLength(&vals));
     // Past the last VAL: an earlier window has written the points.
     if (window_past_count(count)) {
@@ -280,7 +294,8 @@ fn cs_window(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgro
     }
     let begin = window.first;
     let end = window_end(count);
-    let first = (linear_index(gid, groups) / GROUP) * GROUP * GATHER_SLOTS + lid;
+    slot_stride = groups.x * groups.y * WINDOW_GROUP;
+    let first = gid.x + gid.y * groups.x * WINDOW_GROUP;
     let glossy_on = (params.flags & FLAG_GLOSSY) != 0u;
     let flux_weights = (params.flags & FLAG_FLUX_WEIGHTS) != 0u;
     let use_visibility = (params.flags & FLAG_VISIBILITY) != 0u;

@@ -63,6 +63,11 @@ pub fn occlusion_levels(point_count: u32, tile: u32) -> Vec<u32> {
 /// `tests/shader_layout.rs`).
 pub const POINT_GROUP: u32 = 64;
 
+/// Invocations per workgroup of the window-form gather (`WINDOW_GROUP` in
+/// `shaders/vals/vals_gather.wgsl`): small, so that a CPU device's threads end at most one
+/// small workgroup apart.
+pub const WINDOW_POINT_GROUP: u32 = 16;
+
 /// Sparse points a gather invocation takes on a GPU (`GATHER_SLOTS` in
 /// `shaders/vals/vals_gather.wgsl`), the count the H200's figures were measured with: a gather
 /// workgroup covers `POINT_GROUP` times this many.
@@ -73,8 +78,9 @@ pub const GATHER_POINTS_PER_INVOCATION_MAX: u32 = 16;
 
 /// Sparse points each gather invocation takes (`GATHER_SLOTS`): `requested` where it is 4, 8
 /// or 16 (`gather-points`); else on a GPU [`GATHER_POINTS_PER_INVOCATION_GPU`]. On a CPU
-/// device the workgroups of 64 × that many points run on `threads` CPU threads in rounds, and
-/// the count that takes the fewest rounds is not the one that takes the least time:
+/// device the workgroups (of [`POINT_GROUP`] invocations in the tile form, of
+/// [`WINDOW_POINT_GROUP`] in the window form) run on `threads` CPU threads in rounds, and the
+/// count that takes the fewest rounds is not the one that takes the least time:
 /// - The tile form (`windows` false) reads every VAL from workgroup memory in each invocation,
 ///   a loop over the SIMD lanes per float on llvmpipe, so it takes the most of 16, 8 and 4
 ///   that still gives every thread a workgroup: more points per read ran it 1.4–2.1× faster
@@ -82,8 +88,9 @@ pub const GATHER_POINTS_PER_INVOCATION_MAX: u32 = 16;
 /// - The window form reads each VAL from a uniform block, one load for all lanes, so the
 ///   per-VAL work an invocation shares among its points is small, about
 ///   [`WINDOW_VAL_SLOTS`] points' worth; it takes the count with the least
-///   rounds × (points + that), which splits 4215 points (Sponza) into nine workgroups of 512
-///   instead of five of 1024 (three rounds, the last half idle).
+///   rounds × (points + that). Its workgroups of 256 points (at 16) leave little idle in the
+///   last round, so that is 16 from 1024 points up on two threads; with workgroups of 64 it
+///   had split 4215 points (Sponza) into nine of 512 rather than five of 1024.
 pub fn gather_points_per_invocation(
     requested: u32,
     cpu_device: bool,
@@ -98,7 +105,12 @@ pub fn gather_points_per_invocation(
         return GATHER_POINTS_PER_INVOCATION_GPU;
     }
     let threads = threads.max(1);
-    let workgroups = |slots: u32| point_count.div_ceil(POINT_GROUP * slots);
+    let group = if windows {
+        WINDOW_POINT_GROUP
+    } else {
+        POINT_GROUP
+    };
+    let workgroups = |slots: u32| point_count.div_ceil(group * slots);
     if !windows {
         return [16, 8]
             .into_iter()
@@ -1643,10 +1655,13 @@ impl SparseGpu {
                     slots: self.gather_points_per_invocation(options),
                     windows: windows.is_some(),
                 };
-                let (x, y) = linear_groups(
-                    self.point_count.div_ceil(POINT_GROUP * code.slots),
-                    max_groups,
-                );
+                let group = if code.windows {
+                    WINDOW_POINT_GROUP
+                } else {
+                    POINT_GROUP
+                };
+                let (x, y) =
+                    linear_groups(self.point_count.div_ceil(group * code.slots), max_groups);
                 let pipeline = if code == GatherCode::full(passes.ctx()) {
                     &self.gather.pipeline
                 } else {
@@ -1892,19 +1907,23 @@ mod tests {
         assert_eq!(tiles(512, 2), 4);
         // More threads want more workgroups.
         assert_eq!(tiles(4096, 16), 4);
-        // Windows, two threads: whole rounds of 1024 keep 16 (4096: 2 rounds × 18 against
-        // 4 × 10 and 8 × 6) ...
+        // Windows, two threads, workgroups of 16 invocations (256 points at 16 an invocation):
+        // rounds × (points + 2) keeps 16 (4096: 8 rounds × 18 against 16 × 10 and 32 × 6) ...
         assert_eq!(windows(4096, 2), 16);
         assert_eq!(windows(16384, 2), 16);
-        // ... but five workgroups of 1024 would leave a thread idle for a third of the time:
-        // Sponza's 4215 points take nine of 512 (5 rounds × 10 against 3 × 18).
-        assert_eq!(windows(4215, 2), 8);
-        assert_eq!(windows(4422, 2), 8);
-        // One workgroup of 1024 would idle the second thread.
-        assert_eq!(windows(1024, 2), 8);
-        // Equal estimates go to the most points (2049: 3 × 10 = 5 × 6).
-        assert_eq!(windows(2049, 2), 8);
-        assert_eq!(windows(4096, 16), 4);
+        // ... and Sponza's 4215 and the door room's 4422 points too, now that the last round
+        // is one small workgroup (9 × 18 against 17 × 10 and 18 × 10); with workgroups of 64
+        // they took 8 (nine of 512 against five of 1024, three rounds with a thread idle).
+        assert_eq!(windows(4215, 2), 16);
+        assert_eq!(windows(4422, 2), 16);
+        assert_eq!(windows(1024, 2), 16);
+        // One workgroup would idle the second thread.
+        assert_eq!(windows(256, 2), 8);
+        // Equal estimates go to the most points (2049: 5 × 18 = 9 × 10).
+        assert_eq!(windows(2049, 2), 16);
+        // Sixteen threads: one round of sixteen workgroups.
+        assert_eq!(windows(4096, 16), 16);
+        assert_eq!(windows(1024, 16), 4);
         // An explicit choice stands; anything else is automatic.
         assert_eq!(gather_points_per_invocation(16, false, false, 64, 2), 16);
         assert_eq!(gather_points_per_invocation(8, true, true, 1 << 16, 2), 8);
