@@ -137,7 +137,8 @@ fn emitter(p: vec3<f32>, light: IndirectLight) -> Emitter {
     let d2 = dot(d, d);
     let lit = light.position.w >= 0.5 && d2 > 0.0;
     var out: Emitter;
-    // 1/sqrt rather than inverseSqrt: both round correctly, as the CPU twin's t̂ does.
+    // 1/sqrt, not inverseSqrt: a correctly rounded square root and division, the CPU twin's
+    // operations, so that near-grazing cosines agree with it.
     out.to_light = d * select(0.0, 1.0 / sqrt(d2), lit);
     let cos_l = max(0.0, -dot(light.normal.xyz, out.to_light));
     var denominator = max(d2, params.d2_min);
