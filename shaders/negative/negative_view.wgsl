@@ -371,18 +371,15 @@ fn positive_low(@builtin(global_invocation_id) id: vec3<u32>) {
 }
 
 var<workgroup> tile_flagged: atomic<u32>;
-var<workgroup> tile_pixels: atomic<u32>;
 
 // One workgroup per tile: flag it when any pixel is discontinuous from its parent.
 @compute @workgroup_size(8, 8, 1)
 fn classify(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
     if (lid == 0u) {
         atomicStore(&tile_flagged, 0u);
-        atomicStore(&tile_pixels, 0u);
     }
     workgroupBarrier();
     if (id.x < params.full_width && id.y < params.full_height) {
-        atomicAdd(&tile_pixels, 1u);
         let p = points[full_index(id.xy)];
         let parent = low_points[parent_index(id.xy)];
         if (p.position.w > 0.5) {
@@ -405,7 +402,12 @@ fn classify(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocat
         if (flagged != 0u) {
             let slot = atomicAdd(&tiles[0], 1u);
             atomicStore(&tiles[tile_list_slot(slot)], tile);
-            atomicAdd(&tiles[3], atomicLoad(&tile_pixels));
+            // The tile's pixels inside the image, counted here rather than by an atomic add in
+            // every invocation (which llvmpipe runs lane by lane: the pass 3.9–4.2 → 3.1–3.5 ms
+            // at 640×480).
+            let origin = wid.xy * TILE;
+            let size = min(vec2<u32>(TILE), full_size() - origin);
+            atomicAdd(&tiles[3], size.x * size.y);
         }
     }
 }
