@@ -135,7 +135,7 @@ fn workgroup_sizes_match_the_dispatches() {
     ];
     let mut expected = expected.to_vec();
     for entry in valgi::negative::VIEW_ENTRIES {
-        let size = if valgi::negative::PATCH_ENTRIES.contains(entry) {
+        let size = if valgi::negative::TILE_COLUMN_ENTRIES.contains(entry) {
             [tile, tile / valgi::negative::COLUMN, 1]
         } else {
             [tile, tile, 1]

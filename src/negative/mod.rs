@@ -314,9 +314,9 @@ pub const VIEW_ENTRIES: &[&str] = &[
     "negative_full",
     "gather",
 ];
-/// The entry points that recompute the flagged tiles: one workgroup of 8 × 8 / `COLUMN`
-/// invocations per tile.
-pub const PATCH_ENTRIES: &[&str] = &["positive_tiles", "negative_tiles"];
+/// The entry points that run one workgroup of 8 × 8 / `COLUMN` invocations per 8 × 8 tile
+/// (the flagged tiles' light loops, and the gather), a column of `COLUMN` pixels each.
+pub const TILE_COLUMN_ENTRIES: &[&str] = &["positive_tiles", "negative_tiles", "gather"];
 /// Pixels per invocation of the light loops (`COLUMN` in `negative_view.wgsl`): a column of
 /// them, so that each light read serves that many pixels.
 pub const COLUMN: u32 = 4;
