@@ -68,6 +68,16 @@ pub const POINT_GROUP: u32 = 64;
 /// small workgroup apart.
 pub const WINDOW_POINT_GROUP: u32 = 16;
 
+/// Invocations per workgroup of the compute gather: [`WINDOW_POINT_GROUP`] in the window form,
+/// [`POINT_GROUP`] in the tile form.
+pub fn gather_workgroup_invocations(windows: bool) -> u32 {
+    if windows {
+        WINDOW_POINT_GROUP
+    } else {
+        POINT_GROUP
+    }
+}
+
 /// Sparse points a gather invocation takes on a GPU (`GATHER_SLOTS` in
 /// `shaders/vals/vals_gather.wgsl`), the count the H200's figures were measured with: a gather
 /// workgroup covers `POINT_GROUP` times this many.
@@ -105,11 +115,7 @@ pub fn gather_points_per_invocation(
         return GATHER_POINTS_PER_INVOCATION_GPU;
     }
     let threads = threads.max(1);
-    let group = if windows {
-        WINDOW_POINT_GROUP
-    } else {
-        POINT_GROUP
-    };
+    let group = gather_workgroup_invocations(windows);
     let workgroups = |slots: u32| point_count.div_ceil(group * slots);
     if !windows {
         return [16, 8]
@@ -1655,11 +1661,7 @@ impl SparseGpu {
                     slots: self.gather_points_per_invocation(options),
                     windows: windows.is_some(),
                 };
-                let group = if code.windows {
-                    WINDOW_POINT_GROUP
-                } else {
-                    POINT_GROUP
-                };
+                let group = gather_workgroup_invocations(code.windows);
                 let (x, y) =
                     linear_groups(self.point_count.div_ceil(group * code.slots), max_groups);
                 let pipeline = if code == GatherCode::full(passes.ctx()) {
