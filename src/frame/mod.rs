@@ -414,6 +414,12 @@ pub trait Method: Send {
         passes: &mut Passes,
     ) -> Result<ViewResult, RenderError>;
 
+    /// False for a method that renders its frames on the CPU (the path tracer): it has no
+    /// pipelines to compile, so a benchmark need not warm it up before timing it.
+    fn renders_on_gpu(&self) -> bool {
+        true
+    }
+
     /// After the frame's submission: read back the counters the report shows.
     fn end_frame(&mut self, _ctx: &GpuContext, _timings: &FrameTimings) -> Result<(), RenderError> {
         Ok(())

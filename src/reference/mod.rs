@@ -621,6 +621,10 @@ impl Method for ReferenceMethod {
         "reference"
     }
 
+    fn renders_on_gpu(&self) -> bool {
+        false
+    }
+
     fn settings(&self) -> RenderSettings {
         RenderSettings {
             width: self.settings.width,

@@ -795,8 +795,14 @@ pub mod model {
     /// glossy-row, 0.32 door room, 0.14 aligned occluders, 0.09 bunny box; the corridor and
     /// the thin wall (p ≤ 0.001) lost nothing.
     pub const C_PARTIAL: f64 = 1.0;
-    /// Gather cost per point–VAL pair, ms (lavapipe, 2 cores: 1.08e8 pairs/s over the sweep).
-    pub const GATHER_MS_PER_PAIR: f64 = 9.3e-6;
+    /// Gather cost per point–VAL pair, ms, before [`gather_cost`]: lavapipe on a 2-core AMD
+    /// EPYC (FMA peak 57 GFMA/s), with the visibility constants below, fitted to the frame
+    /// times of `valgi eval --sweep --frames 3` over nine built-in scenes at 128² (the `off`,
+    /// `rays-adaptive` and `rays-all` rows; relative least squares with a fixed part per
+    /// scene; rms log error 0.23). The constants before, 9.3e-6 ms a pair and 1.88e-3 ms a
+    /// point and cluster, had been fitted before the gather's uniform windows and its 16
+    /// points per invocation made a pair 3.4× cheaper, and were 0.54 off.
+    pub const GATHER_MS_PER_PAIR: f64 = 2.74e-6;
     /// The gather's cost per pair relative to [`GATHER_MS_PER_PAIR`], which was fitted when
     /// every gather ran the glossy lobes and the cluster-visibility lookup whatever the
     /// options. A gather is now compiled without the parts its solution does not use
@@ -819,12 +825,9 @@ pub mod model {
             (false, false) => 0.23,
         }
     }
-    /// Visibility cost per point and cluster (16 rays), ms, and its fixed part: refitted for
-    /// the stackless BVH walk (log-space least squares over six built-in scenes × 1024, 4096
-    /// and 16 384 points at 128², rms log error 0.34; the stack walk's 4.4e-3 and 47 now
-    /// over-predict 2.6×).
-    pub const VISIBILITY_MS_PER_POINT_CLUSTER: f64 = 1.88e-3;
-    pub const VISIBILITY_MS_FIXED: f64 = 11.5;
+    /// Visibility cost per point and cluster (16 rays), ms, and its fixed part (the same fit).
+    pub const VISIBILITY_MS_PER_POINT_CLUSTER: f64 = 2.35e-3;
+    pub const VISIBILITY_MS_FIXED: f64 = 18.7;
     /// The share of that per-point cost adaptive rays keep: the same sweep's visibility time
     /// (frame with rays less the frame without) with adaptive rays over all strata, median
     /// over the grid per scene, was 0.61–0.62 on five scenes, 0.67 bunny box, 0.74 door room,
@@ -832,15 +835,14 @@ pub mod model {
     /// split).
     pub const ADAPTIVE_RAY_COST: f64 = 0.7;
     /// The rest of a frame (shadow maps, RSM, G-buffer, direct, interpolation, apply) at
-    /// 128², ms: the same for every choice, so it only shifts the budget.
+    /// 128², ms: the same for every choice, so it only shifts the budget. The fit's fixed
+    /// part per scene ran from 14 ms (Cornell) to 195 ms (glossy-row), median 66.
     pub const FRAME_MS_FIXED: f64 = 60.0;
-    /// The FMA peak (`gpu::peak::fma_peak`) of the device the times above were fitted on,
-    /// FMA/s: lavapipe on 2 cores. The kernel with its body written out eight times measures
-    /// 61 GFMA/s there (the hardware's 2 cores × 2 FMA units × 8 lanes at about 2 GHz); the
-    /// kernel of the fit's time, loop-bound, read 21–38 (26.7 in the same session as the 61),
-    /// so the fit's 30 becomes 30 × 61/26.7 ≈ 68. On another device the times are scaled by
-    /// this over that device's peak ([`Survey::time_scale`]).
-    pub const FIT_FMA_PEAK: f64 = 68e9;
+    /// The FMA peak (`gpu::peak::fma_peak`, the kernel with its body written out eight
+    /// times) of the device the times above were fitted on, FMA/s: 56.5–56.9 GFMA/s on the
+    /// fit's machine. On another device the times are scaled by this over that device's
+    /// peak ([`Survey::time_scale`]).
+    pub const FIT_FMA_PEAK: f64 = 57e9;
 }
 
 /// The point counts and RSM sides budget mode chooses among: the range the model was fitted
