@@ -165,6 +165,14 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../shaders/lpv/lpv_propagate.wgsl"),
     ),
     (
+        "lpv_propagate_cell.wgsl",
+        include_str!("../shaders/lpv/lpv_propagate_cell.wgsl"),
+    ),
+    (
+        "lpv_faces.wgsl",
+        include_str!("../shaders/lpv/lpv_faces.wgsl"),
+    ),
+    (
         "lpv_pack.wgsl",
         include_str!("../shaders/lpv/lpv_pack.wgsl"),
     ),

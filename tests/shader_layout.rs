@@ -277,10 +277,6 @@ fn shared_constants_match() {
             ],
         ),
         (
-            "lpv_propagate.wgsl",
-            &[("FACE_BLOCK", valgi::peers::lpv::FACE_BLOCK)],
-        ),
-        (
             "brute_vals.wgsl",
             &[("COLUMN", valgi::peers::brute::WINDOW_COLUMN)],
         ),

@@ -12,24 +12,12 @@ struct LpvParams {
     origin_cell: vec4<f32>,
     // xyz: cells per axis; w: cells in all.
     dims: vec4<u32>,
-    face_count: u32,
     // 1: attenuate the propagated flux by the geometry volume in this step.
     occlusion: u32,
     // Camera surfels for the geometry volume: one per stride×stride render pixels.
     surfel_stride: u32,
-    pad: u32,
-}
-
-// One face of one destination cell as seen from the source cell's centre.
-struct LpvFace {
-    // The SH basis at ω_f (source centre → face centre): Y00, Y1-1, Y10, Y11.
-    y0: vec4<f32>,
-    // Y2-2, Y2-1, Y20, Y21.
-    y1: vec4<f32>,
-    // x: Y22; y: the face's solid angle Ω_f (sr).
-    y2: vec4<f32>,
-    // xyz: destination − source (cells); w: the face normal's axis 0..6 (+x −x +y −y +z −z).
-    offset: vec4<i32>,
+    pad0: u32,
+    pad1: u32,
 }
 
 // Real SH up to band 2, the order of math::sh9.

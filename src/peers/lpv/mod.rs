@@ -8,6 +8,7 @@
 //! accumulation, packed the same way (`lpv_lookup.wgsl`). Equations, units and choices:
 //! README.md in this folder; CPU twins: [`math`].
 
+pub mod face_code;
 pub mod math;
 
 use bytemuck::{Pod, Zeroable};
@@ -39,12 +40,10 @@ const GEOMETRY_BINDINGS: &[Slot] = &[
     Slot::Texture,
 ];
 
-/// `lpv_propagate.wgsl`: parameters, the face table, the source volume (a 3D texture), the
-/// destination (a storage texture), the accumulated volume (a buffer) and the geometry volume.
-/// Faces in `lpv_propagate.wgsl`'s uniform face table (`FACE_BLOCK` there): HO-LPV has 54.
-pub const FACE_BLOCK: u32 = 64;
+/// `lpv_propagate.wgsl`: parameters, the source volume (a 3D texture), the destination (a
+/// storage texture), the accumulated volume (a buffer) and the geometry volume. The faces are
+/// written into the shader (`lpv_faces.wgsl`, [`face_code`]).
 const PROPAGATE_BINDINGS: &[Slot] = &[
-    Slot::Uniform,
     Slot::Uniform,
     Slot::Texture3d,
     Slot::StorageTexture3d(STEP_FORMAT),
@@ -90,50 +89,16 @@ pub const TEXEL_GROUP: u32 = 64;
 /// `lpv_propagate.wgsl` and `lpv_pack.wgsl`).
 pub const PROPAGATE_BLOCK: u32 = 4;
 
-/// Cells per propagation invocation along x (`CELLS_ALONG_X` in `lpv_propagate.wgsl`): two on
-/// a CPU device, where each face record read at the loop's index is a gathered load per float
-/// and two neighbouring cells share it (lavapipe, Cornell 32³, 16 steps: LPV's propagation
-/// 20 %, HO-LPV's 17 % faster); one on a GPU, whose occupancy wants every cell its own thread.
-pub fn propagate_cells_along_x(cpu_device: bool) -> u32 {
-    if cpu_device {
-        2
-    } else {
-        1
-    }
-}
-
 /// `LpvParams` in `shaders/lpv/lpv_common.wgsl`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
 pub struct LpvParams {
     pub origin_cell: [f32; 4],
     pub dims: [u32; 4],
-    pub face_count: u32,
     pub occlusion: u32,
     pub surfel_stride: u32,
-    pub pad: u32,
-}
-
-/// `LpvFace` in `shaders/lpv/lpv_common.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
-pub struct LpvFace {
-    pub y0: [f32; 4],
-    pub y1: [f32; 4],
-    pub y2: [f32; 4],
-    pub offset: [i32; 4],
-}
-
-impl LpvFace {
-    pub fn from_face(f: &Face) -> Self {
-        let y = math::sh9(f.direction);
-        Self {
-            y0: [y[0], y[1], y[2], y[3]],
-            y1: [y[4], y[5], y[6], y[7]],
-            y2: [y[8], f.solid_angle, 0.0, 0.0],
-            offset: [f.offset.x, f.offset.y, f.offset.z, f.axis as i32],
-        }
-    }
+    pub pad0: u32,
+    pub pad1: u32,
 }
 
 /// LPV (2 bands, 6 directions) or HO-LPV (3 bands, 26 directions).
@@ -243,8 +208,6 @@ pub struct LpvMethod {
     geometry_camera: wgpu::ComputePipeline,
     geometry_layout: GroupLayout,
     propagate_pipeline: wgpu::ComputePipeline,
-    /// Cells per propagation invocation along x (`propagate_cells_along_x`).
-    cells_along_x: u32,
     /// even→odd without occlusion (step 1), odd→even, even→odd (with occlusion when on).
     propagate_groups: [wgpu::BindGroup; 3],
     lookup_pipeline: wgpu::ComputePipeline,
@@ -406,23 +369,6 @@ impl LpvMethod {
         };
         let params_off = params();
         let params_on = params();
-        // The shader reads each source once per group of faces with the same offset.
-        let mut by_offset = faces.clone();
-        by_offset.sort_by_key(|f| f.offset.to_array());
-        let mut gpu_faces: Vec<LpvFace> = by_offset.iter().map(LpvFace::from_face).collect();
-        // The table is a uniform block of FACE_BLOCK faces (`lpv_propagate.wgsl`); the
-        // shader reads the first `face_count`.
-        assert!(
-            gpu_faces.len() <= FACE_BLOCK as usize,
-            "face table larger than its block"
-        );
-        gpu_faces.resize(FACE_BLOCK as usize, LpvFace::zeroed());
-        let faces_buffer = bytes.buffer_init(
-            device,
-            "lpv faces",
-            bytemuck::cast_slice(&gpu_faces),
-            wgpu::BufferUsages::UNIFORM,
-        );
 
         let cs = wgpu::ShaderStages::COMPUTE;
         // Injection.
@@ -477,7 +423,6 @@ impl LpvMethod {
                 device,
                 &[
                     params,
-                    &faces_buffer,
                     &step_views[src],
                     &step_views[dst],
                     &volumes[1],
@@ -490,7 +435,6 @@ impl LpvMethod {
             group(later, 1, 0),
             group(later, 0, 1),
         ];
-        let cells_along_x = propagate_cells_along_x(ctx.is_software());
         let propagate_pipeline = pipeline(
             ctx,
             "lpv propagate",
@@ -498,7 +442,7 @@ impl LpvMethod {
             "cs_main",
             &propagate_layout.layout,
             sh,
-            &[("CELLS_ALONG_X", f64::from(cells_along_x))],
+            &[],
         );
         let pack_layout = GroupLayout::new(device, "lpv pack", cs, PACK_BINDINGS);
         let pack_groups = [
@@ -548,7 +492,6 @@ impl LpvMethod {
             geometry_layout,
             propagate_pipeline,
             propagate_groups,
-            cells_along_x,
             lookup_pipeline,
             lookup_layout,
             surfel_stride: 1,
@@ -597,10 +540,10 @@ impl LpvMethod {
         let mut p = LpvParams {
             origin_cell: g.origin.extend(g.cell).to_array(),
             dims: [g.dims.x, g.dims.y, g.dims.z, g.dims.x * g.dims.y * g.dims.z],
-            face_count: self.faces.len() as u32,
             occlusion: 0,
             surfel_stride: self.surfel_stride,
-            pad: 0,
+            pad0: 0,
+            pad1: 0,
         };
         ctx.queue
             .write_buffer(&self.params_off, 0, bytemuck::bytes_of(&p));
@@ -692,7 +635,7 @@ impl Method for LpvMethod {
             0,
             volume_size,
         );
-        // One invocation per cell for packing; propagation takes `cells_along_x` cells each.
+        // One invocation per cell, for packing and propagation.
         let cell_groups = self
             .grid
             .dims
@@ -705,11 +648,6 @@ impl Method for LpvMethod {
                 pass.dispatch_workgroups(cell_groups[0], cell_groups[1], cell_groups[2]);
             })
         };
-        let propagate_x = self
-            .grid
-            .dims
-            .x
-            .div_ceil(PROPAGATE_BLOCK * self.cells_along_x);
         if self.settings.steps > 0 {
             pack(passes, "pack", &self.pack_groups[0])?;
             passes.compute("propagate", |pass| {
@@ -721,7 +659,7 @@ impl Method for LpvMethod {
                         _ => &self.propagate_groups[2],
                     };
                     pass.set_bind_group(0, group, &[]);
-                    pass.dispatch_workgroups(propagate_x, cell_groups[1], cell_groups[2]);
+                    pass.dispatch_workgroups(cell_groups[0], cell_groups[1], cell_groups[2]);
                 }
             })?;
         }
@@ -848,13 +786,10 @@ pub fn create(
 /// LPV's structs shared with WGSL, for the layout test.
 pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
     use crate::raster::types::shared_layout as layout;
-    vec![
-        layout!(
-            "LpvParams",
-            "lpv_common.wgsl",
-            LpvParams,
-            [origin_cell, dims, face_count, occlusion, surfel_stride, pad]
-        ),
-        layout!("LpvFace", "lpv_common.wgsl", LpvFace, [y0, y1, y2, offset]),
-    ]
+    vec![layout!(
+        "LpvParams",
+        "lpv_common.wgsl",
+        LpvParams,
+        [origin_cell, dims, occlusion, surfel_stride, pad0, pad1]
+    )]
 }
