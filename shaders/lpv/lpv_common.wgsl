@@ -46,12 +46,6 @@ fn clamped_cosine_factor(k: u32) -> f32 {
     return PI / 4.0;
 }
 
-fn axis_vector(a: u32) -> vec3<f32> {
-    var v = vec3<f32>(0.0);
-    v[a / 2u] = select(1.0, -1.0, (a & 1u) == 1u);
-    return v;
-}
-
 fn lpv_cell_index(c: vec3<i32>, dims: vec3<u32>) -> u32 {
     let n = vec3<i32>(dims);
     return u32(c.x + n.x * (c.y + n.y * c.z));

@@ -4,7 +4,8 @@
 // destination cell, its numbers as literals (see face_code.rs why): per neighbour, the
 // source's coefficients and the geometry volume at the midpoint (only the nonzero
 // corner weights); per face, Φ_f = Ω_f·V_f·max(0, Σ_k c_k·Y_k(ω_f)) added to the sum
-// of its normal axis (`face_flux`, `lpv_propagate_cell.wgsl`).
+// of its normal axis (`face_flux`, `lpv_propagate_cell.wgsl`). One more per order ends
+// the cell's step: the six axes' fluxes re-emitted as clamped-cosine lobes, stored.
 #include "lpv_propagate_cell.wgsl"
 
 // 6 neighbours, 30 faces, 4 SH terms.
@@ -771,4 +772,62 @@ fn holpv_faces(c: ptr<function, Cell>, occlusion: bool) {
         + source[6] * 0.18552452
         + source[7] * 0.38560537,
         blocker, vec4<f32>(0.2820948, -0.23700704, -0.35551053, -0.23700704), 0.17273939, occlusion);
+}
+
+fn lpv_end(c: Cell) {
+    let l0 = c.f0 * 0.2820948 + c.f1 * 0.2820948 + c.f2 * 0.2820948 + c.f3 * 0.2820948 + c.f4 * 0.2820948 + c.f5 * 0.2820948;
+    let l1 = c.f2 * 0.325735 + c.f3 * -0.325735;
+    let l2 = c.f4 * 0.325735 + c.f5 * -0.325735;
+    let l3 = c.f0 * 0.325735 + c.f1 * -0.325735;
+    let cell = lpv_cell_index(c.d, params.dims.xyz) * 12u;
+    accum[cell + 0u] += l0.x;
+    accum[cell + 1u] += l1.x;
+    accum[cell + 2u] += l2.x;
+    accum[cell + 3u] += l3.x;
+    accum[cell + 4u] += l0.y;
+    accum[cell + 5u] += l1.y;
+    accum[cell + 6u] += l2.y;
+    accum[cell + 7u] += l3.y;
+    accum[cell + 8u] += l0.z;
+    accum[cell + 9u] += l1.z;
+    accum[cell + 10u] += l2.z;
+    accum[cell + 11u] += l3.z;
+    textureStore(dst, vec3<i32>(c.d.x * 3 + 0, c.d.y, c.d.z), vec4<f32>(l0.x, l1.x, l2.x, l3.x));
+    textureStore(dst, vec3<i32>(c.d.x * 3 + 1, c.d.y, c.d.z), vec4<f32>(l0.y, l1.y, l2.y, l3.y));
+    textureStore(dst, vec3<i32>(c.d.x * 3 + 2, c.d.y, c.d.z), vec4<f32>(l0.z, l1.z, l2.z, l3.z));
+}
+
+fn holpv_end(c: Cell) {
+    let l0 = c.f0 * 0.2820948 + c.f1 * 0.2820948 + c.f2 * 0.2820948 + c.f3 * 0.2820948 + c.f4 * 0.2820948 + c.f5 * 0.2820948;
+    let l1 = c.f2 * 0.325735 + c.f3 * -0.325735;
+    let l2 = c.f4 * 0.325735 + c.f5 * -0.325735;
+    let l3 = c.f0 * 0.325735 + c.f1 * -0.325735;
+    let l6 = c.f0 * -0.07884789 + c.f1 * -0.07884789 + c.f2 * -0.07884789 + c.f3 * -0.07884789 + c.f4 * 0.15769579 + c.f5 * 0.15769579;
+    let l8 = c.f0 * 0.13656855 + c.f1 * 0.13656855 + c.f2 * -0.13656855 + c.f3 * -0.13656855;
+    let cell = lpv_cell_index(c.d, params.dims.xyz) * 27u;
+    accum[cell + 0u] += l0.x;
+    accum[cell + 1u] += l1.x;
+    accum[cell + 2u] += l2.x;
+    accum[cell + 3u] += l3.x;
+    accum[cell + 6u] += l6.x;
+    accum[cell + 8u] += l8.x;
+    accum[cell + 9u] += l0.y;
+    accum[cell + 10u] += l1.y;
+    accum[cell + 11u] += l2.y;
+    accum[cell + 12u] += l3.y;
+    accum[cell + 15u] += l6.y;
+    accum[cell + 17u] += l8.y;
+    accum[cell + 18u] += l0.z;
+    accum[cell + 19u] += l1.z;
+    accum[cell + 20u] += l2.z;
+    accum[cell + 21u] += l3.z;
+    accum[cell + 24u] += l6.z;
+    accum[cell + 26u] += l8.z;
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 0, c.d.y, c.d.z), vec4<f32>(l0.x, l1.x, l2.x, l3.x));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 1, c.d.y, c.d.z), vec4<f32>(0.0, 0.0, l6.x, 0.0));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 2, c.d.y, c.d.z), vec4<f32>(l8.x, l0.y, l1.y, l2.y));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 3, c.d.y, c.d.z), vec4<f32>(l3.y, 0.0, 0.0, l6.y));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 4, c.d.y, c.d.z), vec4<f32>(0.0, l8.y, l0.z, l1.z));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 5, c.d.y, c.d.z), vec4<f32>(l2.z, l3.z, 0.0, 0.0));
+    textureStore(dst, vec3<i32>(c.d.x * 7 + 6, c.d.y, c.d.z), vec4<f32>(l6.z, 0.0, l8.z, 0.0));
 }

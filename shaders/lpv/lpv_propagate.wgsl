@@ -28,6 +28,19 @@ fn cell_faces(c: ptr<function, Cell>, occlusion: bool) {
     }
 }
 
+// The cell's six lobes expanded, written to `dst` and added to `accum` (`lpv_end` and
+// `holpv_end` in `lpv_faces.wgsl`; SH_COUNT is a pipeline constant, so one is compiled).
+fn cell_end(c: Cell) {
+    if (!c.inside) {
+        return;
+    }
+    if (SH_COUNT == 9u) {
+        holpv_end(c);
+    } else {
+        lpv_end(c);
+    }
+}
+
 @compute @workgroup_size(4, 4, 4)
 fn cs_main(@builtin(global_invocation_id) id: vec3<u32>) {
     let d = vec3<i32>(id);

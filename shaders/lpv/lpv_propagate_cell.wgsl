@@ -1,6 +1,6 @@
 // One destination cell of an LPV propagation step (`lpv_propagate.wgsl`): the step's bindings,
-// the cell's state through its faces, one face's flux and the six re-emitted lobes. The faces
-// themselves are in `lpv_faces.wgsl`.
+// the cell's state through its faces and one face's flux. The faces themselves and the
+// re-emitted lobes are in `lpv_faces.wgsl`.
 #include "lpv_common.wgsl"
 
 @group(0) @binding(0) var<uniform> params: LpvParams;
@@ -55,39 +55,4 @@ fn face_flux(intensity: vec3<f32>, blocker: vec4<f32>, back: vec4<f32>, solid_an
         visibility = 1.0 - clamp(dot(blocker, back), 0.0, 1.0);
     }
     return (solid_angle * visibility) * max(intensity, vec3<f32>(0.0));
-}
-
-// The cell's six lobes expanded, written to `dst` and added to `accum`.
-fn cell_end(c: Cell) {
-    if (!c.inside) {
-        return;
-    }
-    var flux: array<vec3<f32>, 6>;
-    flux[0] = c.f0;
-    flux[1] = c.f1;
-    flux[2] = c.f2;
-    flux[3] = c.f3;
-    flux[4] = c.f4;
-    flux[5] = c.f5;
-    var out: array<vec3<f32>, 9>;
-    for (var a = 0u; a < 6u; a++) {
-        let lobe = sh9(axis_vector(a));
-        for (var k = 0u; k < SH_COUNT; k++) {
-            out[k] += flux[a] * (lobe[k] * clamped_cosine_factor(k) / PI);
-        }
-    }
-    let cell = lpv_cell_index(c.d, params.dims.xyz) * (3u * SH_COUNT);
-    var floats: array<f32, 28>;
-    for (var k = 0u; k < SH_COUNT; k++) {
-        for (var ch = 0u; ch < 3u; ch++) {
-            let index = ch * SH_COUNT + k;
-            floats[index] = out[k][ch];
-            accum[cell + index] += out[k][ch];
-        }
-    }
-    let texels = lpv_cell_texels();
-    for (var t = 0u; t < texels; t++) {
-        let texel = vec4<f32>(floats[4u * t], floats[4u * t + 1u], floats[4u * t + 2u], floats[4u * t + 3u]);
-        textureStore(dst, vec3<i32>(c.d.x * i32(texels) + i32(t), c.d.y, c.d.z), texel);
-    }
 }

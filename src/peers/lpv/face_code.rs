@@ -6,7 +6,9 @@
 //! literals in straight-line code instead of a table read at a loop index. On a CPU device
 //! (Mesa's llvmpipe) a uniform block read at a loop-varying index is one gathered load per
 //! float, and the table's reads were most of LPV's propagation; written out, the compiler also
-//! drops the per-axis selects, the zero corner weights and the SH terms that vanish.
+//! drops the per-axis selects, the zero corner weights and the SH terms that vanish. The end
+//! of a cell's step, the six per-axis fluxes re-emitted as clamped-cosine lobes and stored, is
+//! written out the same way (`write_end`).
 //!
 //! The file is checked in so that it can be read and validated like every other shader; a test
 //! (`lpv_faces_wgsl_matches_the_face_tables`) regenerates it from [`math::faces6`] and
@@ -14,14 +16,15 @@
 
 use std::fmt::Write;
 
-use super::math::{corner_weights, sh9, Face};
+use super::math::{axis_vector, corner_weights, sh9, Face, BAND, CLAMPED_COSINE};
 use super::Order;
 
 /// Where the generated file lives, from the crate root.
 pub const FACES_WGSL_PATH: &str = "shaders/lpv/lpv_faces.wgsl";
 
-/// The text of `shaders/lpv/lpv_faces.wgsl`: one function per order, `lpv_faces` (6
-/// neighbours, 30 faces, 4 SH terms) and `holpv_faces` (26 neighbours, 54 faces, 9 terms).
+/// The text of `shaders/lpv/lpv_faces.wgsl`: per order the faces, `lpv_faces` (6 neighbours,
+/// 30 faces, 4 SH terms) and `holpv_faces` (26 neighbours, 54 faces, 9 terms), and the end of
+/// a cell's step, `lpv_end` and `holpv_end`.
 pub fn faces_wgsl() -> String {
     let mut out = String::new();
     out.push_str(
@@ -31,14 +34,88 @@ pub fn faces_wgsl() -> String {
          // destination cell, its numbers as literals (see face_code.rs why): per neighbour, the\n\
          // source's coefficients and the geometry volume at the midpoint (only the nonzero\n\
          // corner weights); per face, Φ_f = Ω_f·V_f·max(0, Σ_k c_k·Y_k(ω_f)) added to the sum\n\
-         // of its normal axis (`face_flux`, `lpv_propagate_cell.wgsl`).\n\
+         // of its normal axis (`face_flux`, `lpv_propagate_cell.wgsl`). One more per order ends\n\
+         // the cell's step: the six axes' fluxes re-emitted as clamped-cosine lobes, stored.\n\
          #include \"lpv_propagate_cell.wgsl\"\n",
     );
     for order in [Order::Lpv, Order::HoLpv] {
         out.push('\n');
         write_order(&mut out, order);
     }
+    for order in [Order::Lpv, Order::HoLpv] {
+        out.push('\n');
+        write_end(&mut out, order);
+    }
     out
+}
+
+/// Coefficient k of the lobe re-emitted along `axis` per unit flux, Â_l·Y_lm(n_a)/π
+/// (`math::clamped_cosine` over π), rounded once from f64.
+fn lobe_coefficient(axis: usize, k: usize) -> f32 {
+    let y = f64::from(sh9(axis_vector(axis))[k]);
+    (f64::from(CLAMPED_COSINE[BAND[k]]) * y / std::f64::consts::PI) as f32
+}
+
+/// The end of a cell's step: the six per-axis fluxes re-emitted into it as clamped-cosine
+/// lobes about their axes, Φ_a/π·Â_l·Y_lm(n_a) per coefficient (`math::propagate`'s
+/// reprojection), written to the step's texels and added to the accumulation. The axes'
+/// coefficients are literals, and most are zero: an axis has one band-1 term and two band-2
+/// terms, so HO-LPV's Y2−2, Y2−1 and Y21 stay zero and are not added to the accumulation.
+/// Written as loops over the axes and coefficients, the private arrays they indexed were a
+/// fifth of HO-LPV's propagation on llvmpipe.
+fn write_end(out: &mut String, order: Order) {
+    let sh = order.sh_count();
+    let name = match order {
+        Order::Lpv => "lpv_end",
+        Order::HoLpv => "holpv_end",
+    };
+    let _ = writeln!(out, "fn {name}(c: Cell) {{");
+    let mut nonzero = [false; 9];
+    for (k, is_nonzero) in nonzero.iter_mut().enumerate().take(sh) {
+        let terms: Vec<String> = (0..6)
+            .filter_map(|axis| {
+                let coefficient = lobe_coefficient(axis, k);
+                (coefficient != 0.0).then(|| format!("c.f{axis} * {}", literal(coefficient)))
+            })
+            .collect();
+        if !terms.is_empty() {
+            *is_nonzero = true;
+            let _ = writeln!(out, "    let l{k} = {};", terms.join(" + "));
+        }
+    }
+    // [channel][coefficient], as `Volume` and the injected buffer lay a cell out.
+    let floats: Vec<Option<String>> = (0..3)
+        .flat_map(|ch| (0..sh).map(move |k| (ch, k)))
+        .map(|(ch, k)| nonzero[k].then(|| format!("l{k}.{}", ["x", "y", "z"][ch])))
+        .collect();
+    let _ = writeln!(
+        out,
+        "    let cell = lpv_cell_index(c.d, params.dims.xyz) * {}u;",
+        3 * sh
+    );
+    for (i, f) in floats.iter().enumerate() {
+        if let Some(f) = f {
+            let _ = writeln!(out, "    accum[cell + {i}u] += {f};");
+        }
+    }
+    let texels = super::cell_texels(sh) as usize;
+    for t in 0..texels {
+        let texel: Vec<String> = (4 * t..4 * t + 4)
+            .map(|i| {
+                floats
+                    .get(i)
+                    .cloned()
+                    .flatten()
+                    .unwrap_or_else(|| "0.0".to_string())
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "    textureStore(dst, vec3<i32>(c.d.x * {texels} + {t}, c.d.y, c.d.z), vec4<f32>({}));",
+            texel.join(", ")
+        );
+    }
+    out.push_str("}\n");
 }
 
 fn write_order(out: &mut String, order: Order) {
@@ -176,6 +253,40 @@ mod tests {
         assert!(text.contains("blocker = (*c).corners[7];"));
         for face in math::faces26() {
             assert!(text.contains(&literal(face.solid_angle)));
+        }
+    }
+
+    #[test]
+    fn the_written_lobes_are_the_cpu_twins_and_skip_only_zero_coefficients() {
+        let text = faces_wgsl();
+        for (order, adds) in [(Order::Lpv, 12), (Order::HoLpv, 18)] {
+            let sh = order.sh_count();
+            for axis in 0..6 {
+                let twin = math::clamped_cosine(axis_vector(axis), sh);
+                for (k, c) in twin.iter().enumerate().take(sh) {
+                    let written = lobe_coefficient(axis, k);
+                    assert!(
+                        (written - c / std::f32::consts::PI).abs() <= 1e-7,
+                        "{order:?} axis {axis} k {k}: {written} vs {}",
+                        c / std::f32::consts::PI
+                    );
+                }
+            }
+            let name = if order == Order::Lpv {
+                "fn lpv_end"
+            } else {
+                "fn holpv_end"
+            };
+            let body = text
+                .split(name)
+                .nth(1)
+                .unwrap()
+                .split("\n}")
+                .next()
+                .unwrap();
+            assert_eq!(body.matches("accum[cell").count(), adds, "{order:?}");
+            let texels = crate::peers::lpv::cell_texels(sh) as usize;
+            assert_eq!(body.matches("textureStore(").count(), texels);
         }
     }
 
