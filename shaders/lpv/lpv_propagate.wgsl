@@ -18,11 +18,21 @@
 // CPU twin: math::propagate.
 #include "lpv_faces.wgsl"
 
-// Every face of the order this pipeline is built for (SH_COUNT is a pipeline constant, so
-// the other function is compiled out).
+// True in HO-LPV's pipeline for the steps after the first (`peers::lpv::face_code::
+// steps_read_fewer_coefficients`): their sources are volumes a step wrote, which hold only the
+// coefficients the axes' lobes have (`holpv_step_source`); the first step reads the injected
+// volume, every coefficient.
+override STEP_SOURCES: bool = false;
+
+// Every face of the order this pipeline is built for (SH_COUNT and STEP_SOURCES are pipeline
+// constants, so the other functions are compiled out).
 fn cell_faces(c: ptr<function, Cell>, occlusion: bool) {
     if (SH_COUNT == 9u) {
-        holpv_faces(c, occlusion);
+        if (STEP_SOURCES) {
+            holpv_step_faces(c, occlusion);
+        } else {
+            holpv_faces(c, occlusion);
+        }
     } else {
         lpv_faces(c, occlusion);
     }

@@ -40,7 +40,13 @@ pub fn faces_wgsl() -> String {
     );
     for order in [Order::Lpv, Order::HoLpv] {
         out.push('\n');
-        write_order(&mut out, order);
+        write_order(&mut out, order, SourceForm::Full);
+        if steps_read_fewer_coefficients(order) {
+            out.push('\n');
+            write_step_source(&mut out, order);
+            out.push('\n');
+            write_order(&mut out, order, SourceForm::Step);
+        }
     }
     for order in [Order::Lpv, Order::HoLpv] {
         out.push('\n');
@@ -70,23 +76,24 @@ fn write_end(out: &mut String, order: Order) {
         Order::HoLpv => "holpv_end",
     };
     let _ = writeln!(out, "fn {name}(c: Cell) {{");
-    let mut nonzero = [false; 9];
-    for (k, is_nonzero) in nonzero.iter_mut().enumerate().take(sh) {
+    let written = step_coefficients(order);
+    for &k in &written {
         let terms: Vec<String> = (0..6)
             .filter_map(|axis| {
                 let coefficient = lobe_coefficient(axis, k);
                 (coefficient != 0.0).then(|| format!("c.f{axis} * {}", literal(coefficient)))
             })
             .collect();
-        if !terms.is_empty() {
-            *is_nonzero = true;
-            let _ = writeln!(out, "    let l{k} = {};", terms.join(" + "));
-        }
+        let _ = writeln!(out, "    let l{k} = {};", terms.join(" + "));
     }
     // [channel][coefficient], as `Volume` and the injected buffer lay a cell out.
     let floats: Vec<Option<String>> = (0..3)
         .flat_map(|ch| (0..sh).map(move |k| (ch, k)))
-        .map(|(ch, k)| nonzero[k].then(|| format!("l{k}.{}", ["x", "y", "z"][ch])))
+        .map(|(ch, k)| {
+            written
+                .contains(&k)
+                .then(|| format!("l{k}.{}", ["x", "y", "z"][ch]))
+        })
         .collect();
     let _ = writeln!(
         out,
@@ -98,15 +105,17 @@ fn write_end(out: &mut String, order: Order) {
             let _ = writeln!(out, "    accum[cell + {i}u] += {f};");
         }
     }
-    let texels = super::cell_texels(sh) as usize;
+    // The step volume keeps only the coefficients a step writes ([`step_coefficients`]).
+    let texels = step_texels(order) as usize;
     for t in 0..texels {
-        let texel: Vec<String> = (4 * t..4 * t + 4)
+        let texel: Vec<String> = (0..4)
             .map(|i| {
-                floats
-                    .get(i)
-                    .cloned()
-                    .flatten()
-                    .unwrap_or_else(|| "0.0".to_string())
+                (0..3)
+                    .flat_map(|ch| (0..sh).map(move |k| (ch, k)))
+                    .find(|&(ch, k)| step_slot(order, ch, k) == Some((t, i)))
+                    .map_or("0.0".to_string(), |(ch, k)| {
+                        format!("l{k}.{}", ["x", "y", "z"][ch])
+                    })
             })
             .collect();
         let _ = writeln!(
@@ -118,18 +127,46 @@ fn write_end(out: &mut String, order: Order) {
     out.push_str("}\n");
 }
 
-fn write_order(out: &mut String, order: Order) {
+/// Which layout a propagation step reads its sources in.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum SourceForm {
+    /// Every coefficient (`lpv_texel_cell`): the first step reads the injected volume.
+    Full,
+    /// Only the coefficients a step writes ([`step_coefficients`], `{order}_step_source`):
+    /// every later step reads the one before.
+    Step,
+}
+
+fn write_order(out: &mut String, order: Order, form: SourceForm) {
     let faces = order.faces();
     let sh = order.sh_count();
-    let name = match order {
-        Order::Lpv => "lpv_faces",
-        Order::HoLpv => "holpv_faces",
+    let base = match order {
+        Order::Lpv => "lpv",
+        Order::HoLpv => "holpv",
+    };
+    let (name, reader, coefficients) = match form {
+        SourceForm::Full => (
+            format!("{base}_faces"),
+            "read_source".to_string(),
+            (0..sh).collect(),
+        ),
+        SourceForm::Step => (
+            format!("{base}_step_faces"),
+            format!("{base}_step_source"),
+            step_coefficients(order),
+        ),
     };
     let _ = writeln!(
         out,
-        "// {} neighbours, {} faces, {sh} SH terms.",
+        "// {} neighbours, {} faces, {} SH terms{}.",
         neighbour_offsets(&faces).len(),
-        faces.len()
+        faces.len(),
+        coefficients.len(),
+        if form == SourceForm::Step {
+            " (the sources a step wrote)"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(out, "fn {name}(c: ptr<function, Cell>, occlusion: bool) {{");
     out.push_str("    var source: array<vec3<f32>, 9>;\n");
@@ -138,7 +175,7 @@ fn write_order(out: &mut String, order: Order) {
         let [x, y, z] = offset.to_array();
         let _ = writeln!(
             out,
-            "    source = read_source((*c).d - vec3<i32>({x}, {y}, {z}));"
+            "    source = {reader}((*c).d - vec3<i32>({x}, {y}, {z}));"
         );
         let _ = writeln!(
             out,
@@ -146,10 +183,75 @@ fn write_order(out: &mut String, order: Order) {
             blocker_expression(offset)
         );
         for face in faces.iter().filter(|f| f.offset == offset) {
-            write_face(out, face, sh);
+            write_face(out, face, &coefficients);
         }
     }
     out.push_str("}\n");
+}
+
+/// The coefficients a propagation step writes: those of the clamped-cosine lobes about the six
+/// axes that are not zero for every axis. All four of LPV's; six of HO-LPV's nine (Y2−2, Y2−1
+/// and Y21 vanish on every axis), so from the second step on HO-LPV's sources hold 18 floats,
+/// not 27.
+pub fn step_coefficients(order: Order) -> Vec<usize> {
+    (0..order.sh_count())
+        .filter(|&k| (0..6).any(|axis| lobe_coefficient(axis, k) != 0.0))
+        .collect()
+}
+
+/// rgba32float texels a cell takes in a step volume: the step's coefficients, [channel][one of
+/// [`step_coefficients`]], the last texel padded (3 for LPV, 5 for HO-LPV).
+pub fn step_texels(order: Order) -> u32 {
+    (3 * step_coefficients(order).len() as u32).div_ceil(4)
+}
+
+/// True when a step writes fewer coefficients than the injected volume holds, so that later
+/// steps read their sources in a layout of their own (HO-LPV).
+pub fn steps_read_fewer_coefficients(order: Order) -> bool {
+    step_coefficients(order).len() < order.sh_count()
+}
+
+/// The float of channel `ch` and coefficient `k` in a cell of the step layout, as
+/// (texel, component).
+fn step_slot(order: Order, ch: usize, k: usize) -> Option<(usize, usize)> {
+    let coefficients = step_coefficients(order);
+    let j = coefficients.iter().position(|&c| c == k)?;
+    let i = ch * coefficients.len() + j;
+    Some((i / 4, i % 4))
+}
+
+/// `{order}_step_source`: a source cell's coefficients read from a step volume (zero outside
+/// the grid and for the coefficients a step does not write).
+fn write_step_source(out: &mut String, order: Order) {
+    let base = match order {
+        Order::Lpv => "lpv",
+        Order::HoLpv => "holpv",
+    };
+    let texels = step_texels(order);
+    let _ = writeln!(
+        out,
+        "fn {base}_step_source(c: vec3<i32>) -> array<vec3<f32>, 9> {{\n    \
+         if (!lpv_inside(c, params.dims.xyz)) {{\n        return array<vec3<f32>, 9>();\n    }}"
+    );
+    for t in 0..texels {
+        let _ = writeln!(
+            out,
+            "    let t{t} = textureLoad(src, vec3<i32>(c.x * {texels} + {t}, c.y, c.z), 0);"
+        );
+    }
+    out.push_str("    return array<vec3<f32>, 9>(\n");
+    for k in 0..9 {
+        let channels: Option<Vec<String>> = (0..3)
+            .map(|ch| {
+                step_slot(order, ch, k).map(|(t, i)| format!("t{t}.{}", ["x", "y", "z", "w"][i]))
+            })
+            .collect();
+        let _ = match channels {
+            Some(c) => writeln!(out, "        vec3<f32>({}),", c.join(", ")),
+            None => writeln!(out, "        vec3<f32>(0.0),"),
+        };
+    }
+    out.push_str("    );\n}\n");
 }
 
 /// The neighbours in the order the shader visits them (sorted by offset).
@@ -180,11 +282,12 @@ fn blocker_expression(offset: glam::IVec3) -> String {
     }
 }
 
-fn write_face(out: &mut String, face: &Face, sh: usize) {
+fn write_face(out: &mut String, face: &Face, coefficients: &[usize]) {
     let y = sh9(face.direction);
-    let terms: Vec<String> = (0..sh)
-        .filter(|&k| y[k] != 0.0)
-        .map(|k| format!("source[{k}] * {}", literal(y[k])))
+    let terms: Vec<String> = coefficients
+        .iter()
+        .filter(|&&k| y[k] != 0.0)
+        .map(|&k| format!("source[{k}] * {}", literal(y[k])))
         .collect();
     let intensity = if terms.is_empty() {
         "vec3<f32>(0.0)".to_string()
@@ -244,15 +347,62 @@ mod tests {
     #[test]
     fn every_face_is_written_once_with_its_own_literals() {
         let text = faces_wgsl();
-        let lpv = text.split("fn holpv_faces").next().unwrap();
+        let lpv = function_body(&text, "lpv_faces");
+        let holpv = function_body(&text, "holpv_faces");
+        let holpv_steps = function_body(&text, "holpv_step_faces");
         assert_eq!(lpv.matches("face_flux(").count(), math::faces6().len());
-        assert_eq!(text.matches("face_flux(").count(), 30 + 54);
         assert_eq!(lpv.matches("read_source(").count(), 6);
-        assert_eq!(text.matches("read_source(").count(), 6 + 26);
+        assert_eq!(holpv.matches("face_flux(").count(), math::faces26().len());
+        assert_eq!(holpv.matches("read_source(").count(), 26);
+        // The later steps' faces read the step layout and leave out the coefficients no step
+        // writes; LPV's steps write all of theirs, so LPV has one form.
+        assert_eq!(holpv_steps.matches("face_flux(").count(), 54);
+        assert_eq!(holpv_steps.matches("holpv_step_source(").count(), 26);
+        for k in [4, 5, 7] {
+            assert!(!holpv_steps.contains(&format!("source[{k}]")), "Y term {k}");
+            assert!(holpv.contains(&format!("source[{k}]")), "Y term {k}");
+        }
+        assert!(!text.contains("fn lpv_step_faces"));
         // A corner neighbour's midpoint is one GV corner, a face neighbour's the mean of four.
-        assert!(text.contains("blocker = (*c).corners[7];"));
+        assert!(holpv.contains("blocker = (*c).corners[7];"));
+        assert!(lpv.contains(
+            "blocker = ((*c).corners[1] + (*c).corners[3] + (*c).corners[5] + (*c).corners[7]) * 0.25;"
+        ));
         for face in math::faces26() {
-            assert!(text.contains(&literal(face.solid_angle)));
+            assert!(holpv.contains(&literal(face.solid_angle)));
+        }
+    }
+
+    /// The text of WGSL function `name` in `text`, from its signature to its closing brace.
+    fn function_body<'a>(text: &'a str, name: &str) -> &'a str {
+        let start = text
+            .find(&format!("fn {name}("))
+            .unwrap_or_else(|| panic!("no fn {name}"));
+        let end = text[start..].find("\n}\n").expect("closing brace") + start;
+        &text[start..end]
+    }
+
+    #[test]
+    fn steps_write_the_coefficients_the_axes_lobes_have_in_a_layout_read_back_whole() {
+        // Y2−2 ∝ xy, Y2−1 ∝ yz and Y21 ∝ xz vanish on every axis.
+        assert_eq!(step_coefficients(Order::Lpv), vec![0, 1, 2, 3]);
+        assert_eq!(step_coefficients(Order::HoLpv), vec![0, 1, 2, 3, 6, 8]);
+        assert_eq!(step_texels(Order::Lpv), crate::peers::lpv::cell_texels(4));
+        assert_eq!(step_texels(Order::HoLpv), 5);
+        for order in [Order::Lpv, Order::HoLpv] {
+            let written = step_coefficients(order);
+            let mut slots: Vec<(usize, usize)> = (0..3)
+                .flat_map(|ch| written.iter().map(move |&k| (ch, k)))
+                .map(|(ch, k)| step_slot(order, ch, k).unwrap())
+                .collect();
+            let count = slots.len();
+            slots.sort();
+            slots.dedup();
+            assert_eq!(slots.len(), count, "{order:?}: two floats in one slot");
+            assert!(slots.iter().all(|&(t, _)| t < step_texels(order) as usize));
+            for k in (0..order.sh_count()).filter(|k| !written.contains(k)) {
+                assert_eq!(step_slot(order, 0, k), None);
+            }
         }
     }
 
@@ -273,20 +423,16 @@ mod tests {
                 }
             }
             let name = if order == Order::Lpv {
-                "fn lpv_end"
+                "lpv_end"
             } else {
-                "fn holpv_end"
+                "holpv_end"
             };
-            let body = text
-                .split(name)
-                .nth(1)
-                .unwrap()
-                .split("\n}")
-                .next()
-                .unwrap();
+            let body = function_body(&text, name);
             assert_eq!(body.matches("accum[cell").count(), adds, "{order:?}");
-            let texels = crate::peers::lpv::cell_texels(sh) as usize;
-            assert_eq!(body.matches("textureStore(").count(), texels);
+            assert_eq!(
+                body.matches("textureStore(").count(),
+                step_texels(order) as usize
+            );
         }
     }
 

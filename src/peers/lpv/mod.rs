@@ -208,6 +208,10 @@ pub struct LpvMethod {
     geometry_camera: wgpu::ComputePipeline,
     geometry_layout: GroupLayout,
     propagate_pipeline: wgpu::ComputePipeline,
+    /// The steps after the first, where they read only the coefficients a step writes
+    /// (HO-LPV, `STEP_SOURCES`, [`face_code::steps_read_fewer_coefficients`]); else the first
+    /// step's pipeline serves them all.
+    propagate_step_pipeline: Option<wgpu::ComputePipeline>,
     /// even→odd without occlusion (step 1), odd→even, even→odd (with occlusion when on).
     propagate_groups: [wgpu::BindGroup; 3],
     lookup_pipeline: wgpu::ComputePipeline,
@@ -444,6 +448,17 @@ impl LpvMethod {
             sh,
             &[],
         );
+        let propagate_step_pipeline = face_code::steps_read_fewer_coefficients(order).then(|| {
+            pipeline(
+                ctx,
+                "lpv propagate steps",
+                "lpv_propagate.wgsl",
+                "cs_main",
+                &propagate_layout.layout,
+                sh,
+                &[("STEP_SOURCES", 1.0)],
+            )
+        });
         let pack_layout = GroupLayout::new(device, "lpv pack", cs, PACK_BINDINGS);
         let pack_groups = [
             pack_layout.bind(device, &[&params_off, &volumes[0], &step_views[0]]),
@@ -491,6 +506,7 @@ impl LpvMethod {
             geometry_camera,
             geometry_layout,
             propagate_pipeline,
+            propagate_step_pipeline,
             propagate_groups,
             lookup_pipeline,
             lookup_layout,
@@ -515,12 +531,43 @@ impl LpvMethod {
             VolumeId::Even | VolumeId::Odd => {
                 let texture = &self.step_volumes[usize::from(which == VolumeId::Odd)];
                 let texels = crate::gpu::read_texture_rgba32f(ctx, texture)?;
-                // Each cell's texels are its floats in order, the last one padded.
-                let per_cell = cell_texels(sh) as usize;
-                texels
-                    .chunks_exact(per_cell)
-                    .flat_map(|cell| cell.iter().flatten().take(3 * sh).copied())
-                    .collect()
+                // A row holds `cell_texels` texels a cell. The packed injection (`Even` until
+                // step 2 overwrites it) has every coefficient in order; a step's output the
+                // coefficients a step writes, [channel][one of them], in the first
+                // `step_texels` a cell of the row.
+                let order = self.settings.order;
+                let written_by_step = match which {
+                    VolumeId::Odd => true,
+                    _ => self.settings.steps >= 2,
+                };
+                let row = (self.grid.dims.x * cell_texels(sh)) as usize;
+                let (coefficients, per_cell): (Vec<usize>, u32) = if written_by_step {
+                    (
+                        face_code::step_coefficients(order),
+                        face_code::step_texels(order),
+                    )
+                } else {
+                    ((0..sh).collect(), cell_texels(sh))
+                };
+                let per_cell = per_cell as usize;
+                let mut data =
+                    Vec::with_capacity(texels.len() / row * self.grid.dims.x as usize * 3 * sh);
+                for row_texels in texels.chunks_exact(row) {
+                    for cell in row_texels
+                        .chunks_exact(per_cell)
+                        .take(self.grid.dims.x as usize)
+                    {
+                        let floats: Vec<f32> = cell.iter().flatten().copied().collect();
+                        let mut out = vec![0.0; 3 * sh];
+                        for ch in 0..3 {
+                            for (j, &k) in coefficients.iter().enumerate() {
+                                out[ch * sh + k] = floats[ch * coefficients.len() + j];
+                            }
+                        }
+                        data.extend(out);
+                    }
+                }
+                data
             }
         };
         Ok(Volume {
@@ -653,6 +700,11 @@ impl Method for LpvMethod {
             passes.compute("propagate", |pass| {
                 pass.set_pipeline(&self.propagate_pipeline);
                 for step in 0..self.settings.steps {
+                    if step == 1 {
+                        if let Some(steps) = &self.propagate_step_pipeline {
+                            pass.set_pipeline(steps);
+                        }
+                    }
                     let group = match step {
                         0 => &self.propagate_groups[0],
                         s if s % 2 == 1 => &self.propagate_groups[1],
