@@ -12,8 +12,9 @@
 // propagation. The light volumes being read and written are 3D textures of
 // `lpv_cell_texels()` rgba32float texels a cell along x (`lpv_pack.wgsl` packs the injected
 // volume): a CPU device fetches a texel at per-lane coordinates with one gathered load, where
-// it reads workgroup memory or a storage buffer as a loop over the lanes per float; HO-LPV
-// reads 26 × 27 floats a cell. The result is written to `dst` and added to `accum` (a buffer
+// it reads workgroup memory or a storage buffer as a loop over the lanes per float. A step
+// writes only the coefficients the axes' lobes have, so HO-LPV's first step reads 26 × 27
+// floats a cell and every later one 26 × 18 (`holpv_step_faces`). The result is written to `dst` and added to `accum` (a buffer
 // in the injected volume's layout, which the lookup reads).
 // CPU twin: math::propagate.
 #include "lpv_faces.wgsl"

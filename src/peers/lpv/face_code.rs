@@ -8,11 +8,12 @@
 //! float, and the table's reads were most of LPV's propagation; written out, the compiler also
 //! drops the per-axis selects, the zero corner weights and the SH terms that vanish. The end
 //! of a cell's step, the six per-axis fluxes re-emitted as clamped-cosine lobes and stored, is
-//! written out the same way (`write_end`).
+//! written out the same way (`write_end`), and a step volume keeps only the coefficients a
+//! step writes ([`step_layout`]), which HO-LPV's later steps read (`{order}_step_faces`).
 //!
 //! The file is checked in so that it can be read and validated like every other shader; a test
-//! (`lpv_faces_wgsl_matches_the_face_tables`) regenerates it from [`math::faces6`] and
-//! [`math::faces26`] and fails when it differs (`VALGI_UPDATE_REFERENCES=1` rewrites it).
+//! (`lpv_faces_wgsl_matches_the_face_tables`) regenerates it from [`super::math::faces6`] and
+//! [`super::math::faces26`] and fails when it differs (`VALGI_UPDATE_REFERENCES=1` rewrites it).
 
 use std::fmt::Write;
 
@@ -71,11 +72,7 @@ fn lobe_coefficient(axis: usize, k: usize) -> f32 {
 /// fifth of HO-LPV's propagation on llvmpipe.
 fn write_end(out: &mut String, order: Order) {
     let sh = order.sh_count();
-    let name = match order {
-        Order::Lpv => "lpv_end",
-        Order::HoLpv => "holpv_end",
-    };
-    let _ = writeln!(out, "fn {name}(c: Cell) {{");
+    let _ = writeln!(out, "fn {}_end(c: Cell) {{", order.name());
     let written = step_coefficients(order);
     for &k in &written {
         let terms: Vec<String> = (0..6)
@@ -105,17 +102,15 @@ fn write_end(out: &mut String, order: Order) {
             let _ = writeln!(out, "    accum[cell + {i}u] += {f};");
         }
     }
-    // The step volume keeps only the coefficients a step writes ([`step_coefficients`]).
+    // The step volume keeps only the coefficients a step writes ([`step_layout`]).
     let texels = step_texels(order) as usize;
+    let layout = step_layout(order);
     for t in 0..texels {
-        let texel: Vec<String> = (0..4)
+        let texel: Vec<String> = (4 * t..4 * t + 4)
             .map(|i| {
-                (0..3)
-                    .flat_map(|ch| (0..sh).map(move |k| (ch, k)))
-                    .find(|&(ch, k)| step_slot(order, ch, k) == Some((t, i)))
-                    .map_or("0.0".to_string(), |(ch, k)| {
-                        format!("l{k}.{}", ["x", "y", "z"][ch])
-                    })
+                layout.get(i).map_or("0.0".to_string(), |&(ch, k)| {
+                    format!("l{k}.{}", ["x", "y", "z"][ch])
+                })
             })
             .collect();
         let _ = writeln!(
@@ -140,10 +135,7 @@ enum SourceForm {
 fn write_order(out: &mut String, order: Order, form: SourceForm) {
     let faces = order.faces();
     let sh = order.sh_count();
-    let base = match order {
-        Order::Lpv => "lpv",
-        Order::HoLpv => "holpv",
-    };
+    let base = order.name();
     let (name, reader, coefficients) = match form {
         SourceForm::Full => (
             format!("{base}_faces"),
@@ -199,10 +191,10 @@ pub fn step_coefficients(order: Order) -> Vec<usize> {
         .collect()
 }
 
-/// rgba32float texels a cell takes in a step volume: the step's coefficients, [channel][one of
-/// [`step_coefficients`]], the last texel padded (3 for LPV, 5 for HO-LPV).
+/// rgba32float texels a cell takes in a step volume ([`step_layout`]), the last one padded (3
+/// for LPV, 5 for HO-LPV).
 pub fn step_texels(order: Order) -> u32 {
-    (3 * step_coefficients(order).len() as u32).div_ceil(4)
+    (step_layout(order).len() as u32).div_ceil(4)
 }
 
 /// True when a step writes fewer coefficients than the injected volume holds, so that later
@@ -211,22 +203,27 @@ pub fn steps_read_fewer_coefficients(order: Order) -> bool {
     step_coefficients(order).len() < order.sh_count()
 }
 
+/// A step volume's cell, float by float: (channel, coefficient), channel-major over the
+/// [`step_coefficients`], four floats a texel. The stores (`{order}_end`), the reads
+/// (`{order}_step_source`) and `LpvMethod::read_volume` all follow it.
+pub fn step_layout(order: Order) -> Vec<(usize, usize)> {
+    let coefficients = step_coefficients(order);
+    (0..3)
+        .flat_map(|ch| coefficients.iter().map(move |&k| (ch, k)))
+        .collect()
+}
+
 /// The float of channel `ch` and coefficient `k` in a cell of the step layout, as
 /// (texel, component).
 fn step_slot(order: Order, ch: usize, k: usize) -> Option<(usize, usize)> {
-    let coefficients = step_coefficients(order);
-    let j = coefficients.iter().position(|&c| c == k)?;
-    let i = ch * coefficients.len() + j;
+    let i = step_layout(order).iter().position(|&f| f == (ch, k))?;
     Some((i / 4, i % 4))
 }
 
 /// `{order}_step_source`: a source cell's coefficients read from a step volume (zero outside
 /// the grid and for the coefficients a step does not write).
 fn write_step_source(out: &mut String, order: Order) {
-    let base = match order {
-        Order::Lpv => "lpv",
-        Order::HoLpv => "holpv",
-    };
+    let base = order.name();
     let texels = step_texels(order);
     let _ = writeln!(
         out,

@@ -532,37 +532,35 @@ impl LpvMethod {
                 let texture = &self.step_volumes[usize::from(which == VolumeId::Odd)];
                 let texels = crate::gpu::read_texture_rgba32f(ctx, texture)?;
                 // A row holds `cell_texels` texels a cell. The packed injection (`Even` until
-                // step 2 overwrites it) has every coefficient in order; a step's output the
-                // coefficients a step writes, [channel][one of them], in the first
-                // `step_texels` a cell of the row.
+                // step 2 overwrites it) has every coefficient, [channel][coefficient]; a step's
+                // output the floats of `face_code::step_layout`, in the first `step_texels` a
+                // cell of the row.
                 let order = self.settings.order;
                 let written_by_step = match which {
                     VolumeId::Odd => true,
                     _ => self.settings.steps >= 2,
                 };
-                let row = (self.grid.dims.x * cell_texels(sh)) as usize;
-                let (coefficients, per_cell): (Vec<usize>, u32) = if written_by_step {
-                    (
-                        face_code::step_coefficients(order),
-                        face_code::step_texels(order),
-                    )
+                let (layout, per_cell): (Vec<(usize, usize)>, u32) = if written_by_step {
+                    (face_code::step_layout(order), face_code::step_texels(order))
                 } else {
-                    ((0..sh).collect(), cell_texels(sh))
+                    (
+                        (0..3)
+                            .flat_map(|ch| (0..sh).map(move |k| (ch, k)))
+                            .collect(),
+                        cell_texels(sh),
+                    )
                 };
-                let per_cell = per_cell as usize;
-                let mut data =
-                    Vec::with_capacity(texels.len() / row * self.grid.dims.x as usize * 3 * sh);
+                let row = (self.grid.dims.x * cell_texels(sh)) as usize;
+                let cells = (self.grid.dims.x * self.grid.dims.y * self.grid.dims.z) as usize;
+                let mut data = Vec::with_capacity(cells * 3 * sh);
                 for row_texels in texels.chunks_exact(row) {
                     for cell in row_texels
-                        .chunks_exact(per_cell)
+                        .chunks_exact(per_cell as usize)
                         .take(self.grid.dims.x as usize)
                     {
-                        let floats: Vec<f32> = cell.iter().flatten().copied().collect();
                         let mut out = vec![0.0; 3 * sh];
-                        for ch in 0..3 {
-                            for (j, &k) in coefficients.iter().enumerate() {
-                                out[ch * sh + k] = floats[ch * coefficients.len() + j];
-                            }
+                        for (&(ch, k), value) in layout.iter().zip(cell.iter().flatten()) {
+                            out[ch * sh + k] = *value;
                         }
                         data.extend(out);
                     }
