@@ -788,7 +788,61 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     let chosen = budget["sparse_points"]["value"].as_u64().unwrap() as f64;
     let placed = cornell["sparse_points"].as_u64().unwrap() as f64;
     assert!((placed / chosen - 1.0).abs() < 0.02, "{placed} vs {chosen}");
-    assert!(budget["predicted_flip"].as_f64().unwrap() <= 0.1);
+    // Pilot frames measured the candidates: the choice is the cheapest one they measured
+    // meeting the target, or the converged one.
+    let pilots = &budget["pilots"];
+    assert_eq!(pilots["size"], serde_json::json!([32, 32]), "{budget}");
+    assert_eq!(budget["met"], true, "{budget}");
+    let measured = pilots["measured"].as_array().expect("measured pilots");
+    let max_pilots = valgi::vals::budget::DEFAULT_PILOTS;
+    assert!(
+        !measured.is_empty() && measured.len() <= max_pilots,
+        "{pilots}"
+    );
+    let key = |c: &serde_json::Value| {
+        (
+            c["points"].as_u64(),
+            c["rsm"].as_u64(),
+            c["visibility"].as_str().map(str::to_owned),
+        )
+    };
+    let cheapest_met = measured
+        .iter()
+        .filter(|p| p["measured_flip"].as_f64().unwrap() <= 0.1)
+        .min_by(|a, b| {
+            a["predicted_ms"]
+                .as_f64()
+                .unwrap()
+                .total_cmp(&b["predicted_ms"].as_f64().unwrap())
+        })
+        .unwrap_or(&pilots["converged"]);
+    let chosen = (
+        budget["sparse_points"]["value"].as_u64(),
+        budget["rsm"]["value"].as_u64(),
+        Some(
+            match (
+                budget["occlusion"]["value"].as_str(),
+                budget["visibility_rays"]["value"].as_str(),
+            ) {
+                (Some("off"), _) => "off".to_owned(),
+                (_, Some("adaptive")) => "rays adaptive".to_owned(),
+                _ => "rays".to_owned(),
+            },
+        ),
+    );
+    assert_eq!(key(cheapest_met), chosen, "{budget}");
+    assert!(
+        pilots["chosen_measured_flip"].as_f64().unwrap() <= 0.1,
+        "{budget}"
+    );
+    // Without pilots the survey's prediction decides, and is what the report gives.
+    let unmeasured = budget_render("cornell", &["--target-flip", "0.1", "--budget-pilots", "0"]);
+    let unmeasured = &unmeasured["budget"];
+    assert!(unmeasured["pilots"].is_null(), "{unmeasured}");
+    assert!(
+        unmeasured["predicted_flip"].as_f64().unwrap() <= 0.1,
+        "{unmeasured}"
+    );
     // Its walls are Lambert: the gather is diffuse only and priced so; `glossy on` prices the
     // lobes.
     assert_eq!(cornell["glossy_gathered"], false);
@@ -843,6 +897,13 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
         vec!["--quality", "auto", "--budget-ms", "-3"],
     ] {
         assert_refused(&[tiny_render(out, &sparse), extra].concat(), &["--"]);
+    }
+    for pilots in ["-1", "many", "33"] {
+        let extra = vec!["--quality", "auto", "--budget-pilots", pilots];
+        assert_refused(
+            &[tiny_render(out, &sparse), extra].concat(),
+            &["budget-pilots", pilots],
+        );
     }
 }
 

@@ -983,6 +983,7 @@ fn budget_mode_tessellates_for_the_points_it_picks_with_the_command_line_light()
         target,
         None,
         &mut settings,
+        None,
     )
     .unwrap();
     let spacing = valgi::vals::points::point_spacing(&scene, settings.sparse_points).unwrap();

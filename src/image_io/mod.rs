@@ -6,6 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod compare;
+
 /// A linear RGBA float image, row-major from the top-left pixel. Alpha is 1 where a surface
 /// was rendered and 0 on the background.
 #[derive(Clone, Debug, PartialEq)]

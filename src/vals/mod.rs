@@ -17,6 +17,7 @@ use std::time::Instant;
 
 use crate::frame::{FrameInput, IndirectLayer, Method, View, ViewCache, ViewResult};
 use crate::gpu::{FrameTimings, GpuContext, Passes};
+use crate::image_io::Image;
 use crate::light::rsm::Rsm;
 use crate::light::val_windows::ValReads;
 use crate::light::GlossyGather;
@@ -400,6 +401,12 @@ pub const OPTIONS: &[OptionSpec] = &[
         default: "",
         help: "--quality auto: instead of a FLIP target, the most accurate setting whose predicted frame time fits this many ms (the constants fitted on lavapipe, scaled to this device by its measured FMA peak)",
     },
+    OptionSpec {
+        name: "budget-pilots",
+        kind: OptionKind::Int { min: 0, max: 32 },
+        default: "6",
+        help: "--quality auto with a FLIP target: most pilot frames (at most 256 pixels on the long side) that measure the survey's candidates against the converged one before choosing; 0: the survey's prediction alone",
+    },
 ];
 
 /// `--quality auto`'s target from the options, `None` for `--quality manual`.
@@ -442,6 +449,10 @@ pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
 /// an index; `None`: the scene's first) sees it at time 0, chooses, and sets every budget knob
 /// the options do not give explicitly. Returns the JSON `budget` report: per knob its value
 /// and why.
+///
+/// Under a FLIP target `pilot` renders a candidate's settings to its indirect image for the
+/// pilot search ([`budget::Survey::search`]); `None` (or `budget-pilots=0`) chooses by the
+/// survey's prediction alone.
 pub fn apply_budget(
     scene: &Scene,
     (camera, aspect): (Option<usize>, f32),
@@ -449,6 +460,7 @@ pub fn apply_budget(
     target: budget::BudgetTarget,
     device_fma_peak: Option<f64>,
     settings: &mut SparseSettings,
+    pilot: Option<PilotFrames<'_>>,
 ) -> Result<serde_json::Value, RenderError> {
     let world = scene.world_from_node_at(0.0);
     let selector = camera.map(|i| i.to_string());
@@ -461,7 +473,15 @@ pub fn apply_budget(
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
     }
     let given = |key: &str| options.given(key);
-    let choice = survey.choose(target);
+    let searched = match (target, pilot) {
+        (budget::BudgetTarget::Flip(flip), Some(pilot)) if pilot.count > 0 && !survey.is_dark() => {
+            search_with_pilots(&survey, options, settings, flip, pilot)?
+        }
+        _ => None,
+    };
+    let choice = searched
+        .as_ref()
+        .map_or_else(|| survey.choose(target), |(search, _)| search.choice);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
     if !given("sparse-points") {
         settings.sparse_points = choice.points;
@@ -490,16 +510,21 @@ pub fn apply_budget(
         (true, true) => budget::Visibility::AdaptiveRays,
     };
     let used = survey.predict(settings.sparse_points, settings.rsm, used_visibility);
-    let met = match target {
-        budget::BudgetTarget::Flip(f) => used.predicted_flip <= f,
-        budget::BudgetTarget::Ms(ms) => used.predicted_ms <= ms,
+    let met = match (target, &searched) {
+        (_, Some((search, _))) => search.choice.met,
+        (budget::BudgetTarget::Flip(f), None) => used.predicted_flip <= f,
+        (budget::BudgetTarget::Ms(ms), None) => used.predicted_ms <= ms,
     };
     let overridden = ["sparse-points", "rsm", "occlusion", "visibility-rays"]
         .iter()
         .any(|k| given(k));
-    let target_text = match target {
-        budget::BudgetTarget::Flip(f) => format!("predicted FLIP ≤ {f}"),
-        budget::BudgetTarget::Ms(ms) => format!("predicted frame ≤ {ms} ms"),
+    let target_text = match (target, &searched) {
+        (budget::BudgetTarget::Flip(f), Some((_, run))) => format!(
+            "measured FLIP ≤ {f} against the converged candidate, in pilot frames of {}×{}",
+            run.size.0, run.size.1
+        ),
+        (budget::BudgetTarget::Flip(f), None) => format!("predicted FLIP ≤ {f}"),
+        (budget::BudgetTarget::Ms(ms), _) => format!("predicted frame ≤ {ms} ms"),
     };
     let why = |key: &str, chosen: String| -> String {
         if given(key) {
@@ -508,8 +533,23 @@ pub fn apply_budget(
             chosen
         }
     };
+    let round3 = crate::gpu::timing::round3;
+    let pilot_report = searched.as_ref().map(|(search, run)| {
+        serde_json::json!({
+            "size": [run.size.0, run.size.1],
+            "ms": round3(run.ms),
+            "converged": candidate_json(&run.converged, None),
+            "measured": search
+                .pilots
+                .iter()
+                .map(|p| candidate_json(&p.choice, Some(p.measured_flip)))
+                .collect::<Vec<_>>(),
+            "chosen_measured_flip": round3(search.measured_flip),
+        })
+    });
     Ok(serde_json::json!({
         "target": target_text,
+        "pilots": pilot_report,
         "target_flip": match target {
             budget::BudgetTarget::Flip(f) => Some(f),
             budget::BudgetTarget::Ms(_) => None,
@@ -562,6 +602,8 @@ pub fn apply_budget(
         },
         "choice": match (overridden, choice.met) {
             _ if survey.is_dark() => "no light reaches a surface the camera sees: nothing to budget, the cheapest candidate",
+            (_, true) if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
+            (_, false) if searched.is_some() => "no pilot met the target: the converged candidate",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
             (false, true) => match target {
                 budget::BudgetTarget::Flip(_) => "the cheapest predicted setting meeting the target",
@@ -570,6 +612,155 @@ pub fn apply_budget(
             (false, false) => "no candidate meets the target: the closest one",
         },
     }))
+}
+
+/// The pilot frames of budget mode: how many, and how to render one.
+pub struct PilotFrames<'a> {
+    /// Most pilots after the converged one (`budget-pilots`).
+    pub count: usize,
+    /// Their size (width, height).
+    pub size: (u32, u32),
+    /// Renders these settings to the indirect image of one frame at `size`.
+    pub render: &'a mut dyn FnMut(&SparseSettings) -> Result<Image, RenderError>,
+}
+
+/// What the pilot frames cost, for the report.
+struct PilotRun {
+    size: (u32, u32),
+    ms: f64,
+    converged: budget::BudgetChoice,
+}
+
+/// Longest side of a pilot frame, pixels.
+pub const PILOT_MAX_SIDE: u32 = 256;
+
+/// The pilots' size for a `width`×`height` image: the same aspect, at most
+/// [`PILOT_MAX_SIDE`] on the long side (the gather and visibility, which the knobs price, do
+/// not depend on it; the per-pixel passes do).
+pub fn pilot_size(width: u32, height: u32) -> (u32, u32) {
+    let long = width.max(height).max(1);
+    if long <= PILOT_MAX_SIDE {
+        return (width.max(1), height.max(1));
+    }
+    let scale = PILOT_MAX_SIDE as f64 / long as f64;
+    let side = |v: u32| ((v as f64 * scale).round() as u32).max(1);
+    (side(width), side(height))
+}
+
+/// `settings` with a candidate's knobs.
+fn with_candidate(settings: &SparseSettings, choice: &budget::BudgetChoice) -> SparseSettings {
+    let mut out = *settings;
+    out.sparse_points = choice.points;
+    out.rsm = choice.rsm;
+    out.rsm_texels = None;
+    out.options.occlusion = if choice.visibility.rays() {
+        OcclusionMode::Rays
+    } else {
+        OcclusionMode::Off
+    };
+    out.options.adaptive_rays = choice.visibility == budget::Visibility::AdaptiveRays;
+    out
+}
+
+/// Runs the pilot search over the candidates the explicitly given knobs allow.
+fn search_with_pilots(
+    survey: &budget::Survey,
+    options: &MethodOptions,
+    settings: &SparseSettings,
+    target_flip: f64,
+    pilot: PilotFrames<'_>,
+) -> Result<Option<(budget::PilotSearch, PilotRun)>, RenderError> {
+    let started = Instant::now();
+    let given = |key: &str| options.given(key);
+    // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=sum`,
+    // which is no candidate.
+    let visibility_given = match (settings.options.occlusion, settings.options.adaptive_rays) {
+        (OcclusionMode::Rays, false) => Some(budget::Visibility::Rays),
+        (OcclusionMode::Rays, true) => Some(budget::Visibility::AdaptiveRays),
+        (OcclusionMode::Off, _) => Some(budget::Visibility::Off),
+        _ => None,
+    };
+    let pinned_visibility =
+        (given("occlusion") || given("visibility-rays")).then_some(visibility_given);
+    let candidates = survey.candidates(|points, rsm, visibility| {
+        (!given("sparse-points") || points == settings.sparse_points)
+            && (!given("rsm") || rsm == settings.rsm)
+            && pinned_visibility.is_none_or(|v| v == Some(visibility))
+    });
+    let rank = |c: &budget::BudgetChoice| {
+        let visibility = match c.visibility {
+            budget::Visibility::Off => 0,
+            budget::Visibility::AdaptiveRays => 1,
+            budget::Visibility::Rays => 2,
+        };
+        (c.points, c.rsm, visibility)
+    };
+    // A candidate that cannot be built here (beyond `--gpu-memory`, a mesh given more points
+    // than its links address) is one the render could not use either: it is passed over,
+    // with a warning. Cancelling stops the search.
+    let mut render = |choice: &budget::BudgetChoice| match (pilot.render)(&with_candidate(
+        settings, choice,
+    )) {
+        Ok(image) => Ok(Some(image)),
+        Err(RenderError::Cancelled(c)) => Err(RenderError::Cancelled(c)),
+        Err(e) => {
+            eprintln!(
+                "warning: budget mode: pilot frame of {} points, RSM {}, {:?} failed ({e}); passed over",
+                choice.points, choice.rsm, choice.visibility
+            );
+            Ok(None)
+        }
+    };
+    // The converged image: the richest candidate that renders. A knob given outside the
+    // candidates' range (or `occlusion=sum`) leaves nothing to measure, and then, as when
+    // nothing renders, the survey's prediction decides.
+    let mut by_rank = candidates.clone();
+    by_rank.sort_by_key(|c| std::cmp::Reverse(rank(c)));
+    let mut converged = None;
+    for choice in by_rank.iter().take(3) {
+        if let Some(image) = render(choice)? {
+            converged = Some((*choice, image));
+            break;
+        }
+    }
+    let Some((converged, reference)) = converged else {
+        return Ok(None);
+    };
+    let exposure = crate::image_io::compare::auto_exposure(&reference);
+    let search = budget::Survey::search(
+        &candidates,
+        &converged,
+        target_flip,
+        pilot.count,
+        |choice| {
+            Ok::<_, RenderError>(render(choice)?.map_or(f64::NAN, |image| {
+                crate::image_io::compare::flip(&image, &reference, exposure)
+            }))
+        },
+    )?;
+    let run = PilotRun {
+        size: pilot.size,
+        ms: started.elapsed().as_secs_f64() * 1000.0,
+        converged,
+    };
+    Ok(Some((search, run)))
+}
+
+/// A candidate for the JSON report.
+fn candidate_json(c: &budget::BudgetChoice, measured_flip: Option<f64>) -> serde_json::Value {
+    let round3 = crate::gpu::timing::round3;
+    serde_json::json!({
+        "points": c.points,
+        "rsm": c.rsm,
+        "visibility": match c.visibility {
+            budget::Visibility::Off => "off",
+            budget::Visibility::Rays => "rays",
+            budget::Visibility::AdaptiveRays => "rays adaptive",
+        },
+        "predicted_flip": round3(c.predicted_flip),
+        "predicted_ms": round3(c.predicted_ms),
+        "measured_flip": measured_flip.map(round3),
+    })
 }
 
 pub static ENTRY: Entry = Entry {
@@ -885,16 +1076,40 @@ impl SparseMethod {
                     budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::device_fma_peak(ctx)?),
                     budget::BudgetTarget::Flip(_) => None,
                 };
+                // Pilot frames: the sparse method itself, small, from the render's camera at
+                // time 0 (what the survey looks at).
+                let size = pilot_size(render.width, render.height);
+                let pilot_render = RenderSettings {
+                    width: size.0,
+                    height: size.1,
+                    ssaa: 1,
+                    ..render
+                };
+                let world = scene.world_from_node_at(0.0);
+                let aspect = render.width as f32 / render.height.max(1) as f32;
+                let selector = render.camera.map(|i| i.to_string());
+                let camera = scene
+                    .camera_view(selector.as_deref(), aspect, &world)
+                    .map_err(|e| RenderError::Settings(e.to_string()))?;
+                let mut render_pilot = |settings: &SparseSettings| -> Result<Image, RenderError> {
+                    let mut method = SparseMethod::new(ctx, scene, pilot_render, *settings)?;
+                    let mut indirect = method.render(ctx, scene, &world, &camera)?.indirect;
+                    indirect.sanitize();
+                    Ok(indirect)
+                };
+                let count: usize = options.get("budget-pilots", budget::DEFAULT_PILOTS)?;
                 Some(apply_budget(
                     scene,
-                    (
-                        render.camera,
-                        render.width as f32 / render.height.max(1) as f32,
-                    ),
+                    (render.camera, aspect),
                     options,
                     target,
                     peak,
                     &mut settings,
+                    Some(PilotFrames {
+                        count,
+                        size,
+                        render: &mut render_pilot,
+                    }),
                 )?)
             }
             None => None,
