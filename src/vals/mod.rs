@@ -533,6 +533,11 @@ pub fn apply_budget(
             chosen
         }
     };
+    // The search fell back on the converged candidate: no cheaper pilot met the target.
+    let converged_kept = searched.as_ref().is_some_and(|(search, run)| {
+        let key = |c: &budget::BudgetChoice| (c.points, c.rsm, c.visibility);
+        key(&search.choice) == key(&run.converged)
+    });
     let round3 = crate::gpu::timing::round3;
     let pilot_report = searched.as_ref().map(|(search, run)| {
         serde_json::json!({
@@ -602,8 +607,8 @@ pub fn apply_budget(
         },
         "choice": match (overridden, choice.met) {
             _ if survey.is_dark() => "no light reaches a surface the camera sees: nothing to budget, the cheapest candidate",
-            (_, true) if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
-            (_, false) if searched.is_some() => "no pilot met the target: the converged candidate",
+            _ if converged_kept => "no pilot met the target: the converged candidate (knobs given explicitly kept)",
+            _ if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
             (false, true) => match target {
                 budget::BudgetTarget::Flip(_) => "the cheapest predicted setting meeting the target",
