@@ -882,6 +882,16 @@ impl Visibility {
     pub fn rays(self) -> bool {
         self != Visibility::Off
     }
+
+    /// Order by how close to converged a candidate's visibility is: off, adaptive rays,
+    /// rays to every stratum.
+    pub fn richness(self) -> u32 {
+        match self {
+            Visibility::Off => 0,
+            Visibility::AdaptiveRays => 1,
+            Visibility::Rays => 2,
+        }
+    }
 }
 
 /// What budget mode aims at.

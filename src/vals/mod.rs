@@ -24,7 +24,8 @@ use crate::light::GlossyGather;
 use crate::light::ValSource;
 use crate::method::{Entry, MethodOptions, OptionKind, OptionSpec};
 use crate::raster::{Rasterizer, RenderError, RenderSettings};
-use crate::scene::Scene;
+use crate::scene::{CameraView, Scene};
+use glam::Mat4;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
 pub use sparse::Stage;
@@ -475,7 +476,7 @@ pub fn apply_budget(
     let given = |key: &str| options.given(key);
     let searched = match (target, pilot) {
         (budget::BudgetTarget::Flip(flip), Some(pilot)) if pilot.count > 0 && !survey.is_dark() => {
-            search_with_pilots(&survey, options, settings, flip, pilot)?
+            search_with_pilots(&survey, options, settings, flip, pilot, (&world, &camera))?
         }
         _ => None,
     };
@@ -483,32 +484,9 @@ pub fn apply_budget(
         .as_ref()
         .map_or_else(|| survey.choose(target), |(search, _)| search.choice);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
-    if !given("sparse-points") {
-        settings.sparse_points = choice.points;
-    }
-    if !given("rsm") {
-        // The side the model priced is every light's own.
-        settings.rsm = choice.rsm;
-        settings.rsm_texels = None;
-    }
-    if !given("occlusion") {
-        settings.options.occlusion = if choice.visibility.rays() {
-            OcclusionMode::Rays
-        } else {
-            OcclusionMode::Off
-        };
-    }
-    if !given("visibility-rays") {
-        settings.options.adaptive_rays = choice.visibility == budget::Visibility::AdaptiveRays;
-    }
-    let used_visibility = match (
-        settings.options.occlusion == OcclusionMode::Rays,
-        settings.options.adaptive_rays,
-    ) {
-        (false, _) => budget::Visibility::Off,
-        (true, false) => budget::Visibility::Rays,
-        (true, true) => budget::Visibility::AdaptiveRays,
-    };
+    *settings = with_candidate(settings, &choice, given);
+    // `sum` and `union` are priced as no occlusion (they shoot no rays).
+    let used_visibility = visibility_of(settings).unwrap_or(budget::Visibility::Off);
     let used = survey.predict(settings.sparse_points, settings.rsm, used_visibility);
     let met = match (target, &searched) {
         (_, Some((search, _))) => search.choice.met,
@@ -625,9 +603,13 @@ pub struct PilotFrames<'a> {
     pub count: usize,
     /// Their size (width, height).
     pub size: (u32, u32),
-    /// Renders these settings to the indirect image of one frame at `size`.
-    pub render: &'a mut dyn FnMut(&SparseSettings) -> Result<Image, RenderError>,
+    pub render: &'a mut RenderPilot<'a>,
 }
+
+/// Renders settings to the indirect image of one pilot frame, seen from the camera the
+/// survey looks from with the scene's nodes where they stand.
+pub type RenderPilot<'a> =
+    dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<Image, RenderError> + 'a;
 
 /// What the pilot frames cost, for the report.
 struct PilotRun {
@@ -652,19 +634,44 @@ pub fn pilot_size(width: u32, height: u32) -> (u32, u32) {
     (side(width), side(height))
 }
 
-/// `settings` with a candidate's knobs.
-fn with_candidate(settings: &SparseSettings, choice: &budget::BudgetChoice) -> SparseSettings {
+/// `settings` with a candidate's knobs, except those `given` names (the options given
+/// explicitly, which stay).
+fn with_candidate(
+    settings: &SparseSettings,
+    choice: &budget::BudgetChoice,
+    given: impl Fn(&str) -> bool,
+) -> SparseSettings {
     let mut out = *settings;
-    out.sparse_points = choice.points;
-    out.rsm = choice.rsm;
-    out.rsm_texels = None;
-    out.options.occlusion = if choice.visibility.rays() {
-        OcclusionMode::Rays
-    } else {
-        OcclusionMode::Off
-    };
-    out.options.adaptive_rays = choice.visibility == budget::Visibility::AdaptiveRays;
+    if !given("sparse-points") {
+        out.sparse_points = choice.points;
+    }
+    if !given("rsm") {
+        // The side the model priced is every light's own.
+        out.rsm = choice.rsm;
+        out.rsm_texels = None;
+    }
+    if !given("occlusion") {
+        out.options.occlusion = if choice.visibility.rays() {
+            OcclusionMode::Rays
+        } else {
+            OcclusionMode::Off
+        };
+    }
+    if !given("visibility-rays") {
+        out.options.adaptive_rays = choice.visibility == budget::Visibility::AdaptiveRays;
+    }
     out
+}
+
+/// The budget candidates' visibility these settings run; `None` for `sum` and `union`,
+/// which are no candidates.
+fn visibility_of(settings: &SparseSettings) -> Option<budget::Visibility> {
+    match (settings.options.occlusion, settings.options.adaptive_rays) {
+        (OcclusionMode::Off, _) => Some(budget::Visibility::Off),
+        (OcclusionMode::Rays, false) => Some(budget::Visibility::Rays),
+        (OcclusionMode::Rays, true) => Some(budget::Visibility::AdaptiveRays),
+        _ => None,
+    }
 }
 
 /// Runs the pilot search over the candidates the explicitly given knobs allow.
@@ -674,38 +681,27 @@ fn search_with_pilots(
     settings: &SparseSettings,
     target_flip: f64,
     pilot: PilotFrames<'_>,
+    (world_from_node, camera): (&[Mat4], &CameraView),
 ) -> Result<Option<(budget::PilotSearch, PilotRun)>, RenderError> {
     let started = Instant::now();
     let given = |key: &str| options.given(key);
     // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=sum`,
     // which is no candidate.
-    let visibility_given = match (settings.options.occlusion, settings.options.adaptive_rays) {
-        (OcclusionMode::Rays, false) => Some(budget::Visibility::Rays),
-        (OcclusionMode::Rays, true) => Some(budget::Visibility::AdaptiveRays),
-        (OcclusionMode::Off, _) => Some(budget::Visibility::Off),
-        _ => None,
-    };
     let pinned_visibility =
-        (given("occlusion") || given("visibility-rays")).then_some(visibility_given);
+        (given("occlusion") || given("visibility-rays")).then_some(visibility_of(settings));
     let candidates = survey.candidates(|points, rsm, visibility| {
         (!given("sparse-points") || points == settings.sparse_points)
             && (!given("rsm") || rsm == settings.rsm)
             && pinned_visibility.is_none_or(|v| v == Some(visibility))
     });
-    let rank = |c: &budget::BudgetChoice| {
-        let visibility = match c.visibility {
-            budget::Visibility::Off => 0,
-            budget::Visibility::AdaptiveRays => 1,
-            budget::Visibility::Rays => 2,
-        };
-        (c.points, c.rsm, visibility)
-    };
     // A candidate that cannot be built here (beyond `--gpu-memory`, a mesh given more points
     // than its links address) is one the render could not use either: it is passed over,
     // with a warning. Cancelling stops the search.
-    let mut render = |choice: &budget::BudgetChoice| match (pilot.render)(&with_candidate(
-        settings, choice,
-    )) {
+    let mut render = |choice: &budget::BudgetChoice| match (pilot.render)(
+        &with_candidate(settings, choice, |_| false),
+        world_from_node,
+        camera,
+    ) {
         Ok(image) => Ok(Some(image)),
         Err(RenderError::Cancelled(c)) => Err(RenderError::Cancelled(c)),
         Err(e) => {
@@ -720,7 +716,7 @@ fn search_with_pilots(
     // candidates' range (or `occlusion=sum`) leaves nothing to measure, and then, as when
     // nothing renders, the survey's prediction decides.
     let mut by_rank = candidates.clone();
-    by_rank.sort_by_key(|c| std::cmp::Reverse(rank(c)));
+    by_rank.sort_by_key(|c| std::cmp::Reverse((c.points, c.rsm, c.visibility.richness())));
     let mut converged = None;
     for choice in by_rank.iter().take(3) {
         if let Some(image) = render(choice)? {
@@ -1030,7 +1026,7 @@ impl Method for SparseMethod {
     fn debug_pick(
         &self,
         scene: &Scene,
-        world_from_node: &[glam::Mat4],
+        world_from_node: &[Mat4],
         pick: &crate::scene::pick::ScenePick,
         eye: glam::Vec3,
     ) -> Option<crate::frame::DebugPick> {
@@ -1081,8 +1077,7 @@ impl SparseMethod {
                     budget::BudgetTarget::Ms(_) => Some(crate::gpu::peak::device_fma_peak(ctx)?),
                     budget::BudgetTarget::Flip(_) => None,
                 };
-                // Pilot frames: the sparse method itself, small, from the render's camera at
-                // time 0 (what the survey looks at).
+                // Pilot frames: the sparse method itself, small.
                 let size = pilot_size(render.width, render.height);
                 let pilot_render = RenderSettings {
                     width: size.0,
@@ -1090,15 +1085,13 @@ impl SparseMethod {
                     ssaa: 1,
                     ..render
                 };
-                let world = scene.world_from_node_at(0.0);
                 let aspect = render.width as f32 / render.height.max(1) as f32;
-                let selector = render.camera.map(|i| i.to_string());
-                let camera = scene
-                    .camera_view(selector.as_deref(), aspect, &world)
-                    .map_err(|e| RenderError::Settings(e.to_string()))?;
-                let mut render_pilot = |settings: &SparseSettings| -> Result<Image, RenderError> {
+                let mut render_pilot = |settings: &SparseSettings,
+                                        world: &[Mat4],
+                                        camera: &CameraView|
+                 -> Result<Image, RenderError> {
                     let mut method = SparseMethod::new(ctx, scene, pilot_render, *settings)?;
-                    let mut indirect = method.render(ctx, scene, &world, &camera)?.indirect;
+                    let mut indirect = method.render(ctx, scene, world, camera)?.indirect;
                     indirect.sanitize();
                     Ok(indirect)
                 };
@@ -1122,5 +1115,54 @@ impl SparseMethod {
         let mut method = SparseMethod::new(ctx, scene, render, settings)?;
         method.budget = budget;
         Ok(method)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pilot_frames_keep_the_aspect_and_cap_the_long_side() {
+        assert_eq!(pilot_size(128, 128), (128, 128));
+        assert_eq!(pilot_size(1920, 1080), (PILOT_MAX_SIDE, 144));
+        assert_eq!(pilot_size(480, 3840), (32, PILOT_MAX_SIDE));
+        // A sliver keeps a pixel.
+        assert_eq!(pilot_size(10_000, 1), (PILOT_MAX_SIDE, 1));
+    }
+
+    #[test]
+    fn a_candidate_sets_every_knob_but_the_ones_given() {
+        let base = SparseSettings {
+            rsm_texels: Some(4096),
+            ..SparseSettings::default()
+        };
+        let choice = budget::BudgetChoice {
+            points: 2048,
+            rsm: 48,
+            visibility: budget::Visibility::AdaptiveRays,
+            predicted_flip: 0.05,
+            predicted_ms: 10.0,
+            variation: 0.0,
+            val_error: 0.0,
+            occluded_share: 0.0,
+            met: true,
+        };
+        let all = with_candidate(&base, &choice, |_| false);
+        assert_eq!(
+            (all.sparse_points, all.rsm, all.rsm_texels),
+            (2048, 48, None)
+        );
+        assert_eq!(visibility_of(&all), Some(budget::Visibility::AdaptiveRays));
+        let kept = with_candidate(&base, &choice, |key| key == "rsm" || key == "occlusion");
+        assert_eq!(
+            (kept.sparse_points, kept.rsm, kept.rsm_texels),
+            (2048, base.rsm, Some(4096))
+        );
+        assert_eq!(kept.options.occlusion, base.options.occlusion);
+        // `sum` is no candidate's visibility.
+        let mut sum = base;
+        sum.options.occlusion = OcclusionMode::Sum;
+        assert_eq!(visibility_of(&sum), None);
     }
 }
