@@ -734,9 +734,17 @@ fn search_with_pilots(
         target_flip,
         pilot.count,
         |choice| {
-            Ok::<_, RenderError>(render(choice)?.map_or(f64::NAN, |image| {
+            let measured = render(choice)?.map_or(f64::NAN, |image| {
                 crate::image_io::compare::flip(&image, &reference, exposure)
-            }))
+            });
+            log::info!(
+                "budget mode: pilot {} points, RSM {}, {:?}: FLIP {measured:.4} (predicted {:.4})",
+                choice.points,
+                choice.rsm,
+                choice.visibility,
+                choice.predicted_flip
+            );
+            Ok::<_, RenderError>(measured)
         },
     )?;
     let run = PilotRun {
