@@ -268,6 +268,8 @@ pub struct AutoCheck {
     pub predicted_flip: f64,
     /// The cheapest grid row meeting the target, if any: its setting and time.
     pub cheapest: Option<(GridSetting, f64, f64)>,
+    /// The grid row's time of the setting budget mode chose, when the grid has that setting.
+    pub chosen_grid_ms: Option<f64>,
 }
 
 impl AutoCheck {
@@ -275,9 +277,37 @@ impl AutoCheck {
     pub fn time_ratio(&self) -> Option<f64> {
         self.cheapest.map(|(_, ms, _)| self.total_ms / ms)
     }
+
+    /// The same ratio with both times from grid rows, when the choice is a grid setting: two
+    /// rows of one setting differ by the harness's timing noise (up to 1.3× at 128² on
+    /// lavapipe), which this ratio leaves out (1 when the choice is the cheapest setting).
+    pub fn grid_time_ratio(&self) -> Option<f64> {
+        Some(self.chosen_grid_ms? / self.cheapest?.1)
+    }
 }
 
-pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio";
+pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio";
+
+/// The grid setting budget mode's report (`budget` in the JSON line) says it chose; `None`
+/// when a knob is missing or unreadable.
+pub fn chosen_setting(budget: &serde_json::Value) -> Option<GridSetting> {
+    let value = |knob: &str| budget.get(knob)?.get("value").cloned();
+    let number = |knob: &str| u32::try_from(value(knob)?.as_u64()?).ok();
+    let visibility = match value("occlusion")?.as_str()? {
+        "off" => SweepVisibility::Off,
+        "sum" => SweepVisibility::Sum,
+        "rays" => match value("visibility_rays")?.as_str()? {
+            "adaptive" => SweepVisibility::RaysAdaptive,
+            _ => SweepVisibility::RaysAll,
+        },
+        _ => return None,
+    };
+    Some(GridSetting {
+        points: number("sparse_points")?,
+        rsm: number("rsm")?,
+        visibility,
+    })
+}
 
 /// Checks one budget-mode row (`budget` is its report) against the scene's grid.
 #[allow(clippy::too_many_arguments)]
@@ -332,6 +362,12 @@ pub fn check_auto(
             cheapest_meeting(grid_rows, t, TargetError::Converged)
                 .map(|r| (r.setting, r.total_ms, r.flip_indirect_converged))
         }),
+        chosen_grid_ms: chosen_setting(budget).and_then(|setting| {
+            grid_rows
+                .iter()
+                .find(|r| r.setting == setting)
+                .map(|r| r.total_ms)
+        }),
     }
 }
 
@@ -350,7 +386,7 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
         };
         let _ = writeln!(
             csv,
-            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{}",
+            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{}",
             c.scene,
             c.settings,
             c.chosen,
@@ -366,6 +402,12 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
             ms,
             flip,
             c.time_ratio()
+                .map(|r| format!("{r:.3}"))
+                .unwrap_or_default(),
+            c.chosen_grid_ms
+                .map(|ms| format!("{ms:.3}"))
+                .unwrap_or_default(),
+            c.grid_time_ratio()
                 .map(|r| format!("{r:.3}"))
                 .unwrap_or_default()
         );
@@ -422,6 +464,57 @@ mod tests {
             ..grid
         };
         assert!(bad.check().is_err());
+    }
+
+    #[test]
+    fn the_chosen_setting_is_read_from_the_budget_report_and_timed_by_its_grid_row() {
+        let report = |occlusion: &str, rays: &str| {
+            serde_json::json!({
+                "sparse_points": {"value": 2048, "why": ""},
+                "rsm": {"value": 48, "why": ""},
+                "occlusion": {"value": occlusion, "why": ""},
+                "visibility_rays": {"value": rays, "why": ""},
+            })
+        };
+        let setting = |visibility| GridSetting {
+            points: 2048,
+            rsm: 48,
+            visibility,
+        };
+        assert_eq!(
+            chosen_setting(&report("rays", "adaptive")),
+            Some(setting(SweepVisibility::RaysAdaptive))
+        );
+        assert_eq!(
+            chosen_setting(&report("rays", "all")),
+            Some(setting(SweepVisibility::RaysAll))
+        );
+        assert_eq!(
+            chosen_setting(&report("off", "all")),
+            Some(setting(SweepVisibility::Off))
+        );
+        assert_eq!(chosen_setting(&report("union", "all")), None);
+        assert_eq!(chosen_setting(&serde_json::json!({})), None);
+        // The same setting timed twice: the row ratio carries the noise, the grid ratio not.
+        let check = AutoCheck {
+            scene: "s".into(),
+            settings: String::new(),
+            chosen: String::new(),
+            target_flip: Some(0.05),
+            total_ms: 130.0,
+            flip_indirect: 0.1,
+            flip_indirect_converged: 0.04,
+            predicted_flip: 0.05,
+            cheapest: Some((setting(SweepVisibility::Off), 100.0, 0.04)),
+            chosen_grid_ms: Some(100.0),
+        };
+        assert_eq!(check.time_ratio(), Some(1.3));
+        assert_eq!(check.grid_time_ratio(), Some(1.0));
+        let off_grid = AutoCheck {
+            chosen_grid_ms: None,
+            ..check
+        };
+        assert_eq!(off_grid.grid_time_ratio(), None);
     }
 
     #[test]
