@@ -288,10 +288,15 @@ impl AutoCheck {
 
 pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio";
 
+/// A knob's value in budget mode's report: `budget.<knob>.value`.
+fn knob_value<'a>(budget: &'a serde_json::Value, knob: &str) -> Option<&'a serde_json::Value> {
+    budget.get(knob)?.get("value")
+}
+
 /// The grid setting budget mode's report (`budget` in the JSON line) says it chose; `None`
 /// when a knob is missing or unreadable.
 pub fn chosen_setting(budget: &serde_json::Value) -> Option<GridSetting> {
-    let value = |knob: &str| budget.get(knob)?.get("value").cloned();
+    let value = |knob: &str| knob_value(budget, knob);
     let number = |knob: &str| u32::try_from(value(knob)?.as_u64()?).ok();
     let visibility = match value("occlusion")?.as_str()? {
         "off" => SweepVisibility::Off,
@@ -329,9 +334,7 @@ pub fn check_auto(
         .unwrap_or(f64::NAN);
     let target_flip = budget.get("target_flip").and_then(|t| t.as_f64());
     let value = |knob: &str| {
-        budget
-            .get(knob)
-            .and_then(|k| k.get("value"))
+        knob_value(budget, knob)
             .map(|v| v.to_string().trim_matches('"').to_string())
             .unwrap_or_default()
     };

@@ -1106,13 +1106,11 @@ impl Survey {
             // Once a pilot has measured one occlusion, the other's most accurate candidate,
             // while it may still meet the target; then the cheapest predicted to meet it;
             // failing that, the most accurate while it may still meet it.
-            let measured = |c: &BudgetChoice| {
-                pilots.iter().any(|p| {
-                    p.choice.visibility.rays() == c.visibility.rays() && p.measured_flip.is_finite()
-                })
-            };
             let other_occlusion = if pilots.iter().any(|p| p.measured_flip.is_finite()) {
-                most_accurate(&|c| !measured(c), UNMEASURED_SPREAD)
+                most_accurate(
+                    &|c| !occlusion_measured(&pilots, c.visibility),
+                    UNMEASURED_SPREAD,
+                )
             } else {
                 None
             };
@@ -1156,16 +1154,22 @@ impl Survey {
 /// 2× pessimistic with rays and 1.0–1.35× optimistic without occlusion, the corridor's 0.43×
 /// and 2.6×, and one scale for both sent half their pilots to `off` settings that missed.
 pub fn pilot_scale(pilots: &[Pilot], visibility: Visibility) -> f64 {
-    let same_occlusion = |p: &&Pilot| p.choice.visibility.rays() == visibility.rays();
-    if pilots
-        .iter()
-        .filter(same_occlusion)
-        .any(|p| p.measured_flip.is_finite())
-    {
-        geometric_mean_error(pilots.iter().filter(same_occlusion))
+    if occlusion_measured(pilots, visibility) {
+        geometric_mean_error(
+            pilots
+                .iter()
+                .filter(|p| p.choice.visibility.rays() == visibility.rays()),
+        )
     } else {
         geometric_mean_error(pilots.iter())
     }
+}
+
+/// Whether a pilot with the occlusion of `visibility` (rays or not) has been measured.
+fn occlusion_measured(pilots: &[Pilot], visibility: Visibility) -> bool {
+    pilots
+        .iter()
+        .any(|p| p.choice.visibility.rays() == visibility.rays() && p.measured_flip.is_finite())
 }
 
 /// The geometric mean of the pilots' measured over predicted FLIP (1 without a measured one).
