@@ -270,6 +270,9 @@ pub struct AutoCheck {
     pub cheapest: Option<(GridSetting, f64, f64)>,
     /// The grid row's time of the setting budget mode chose, when the grid has that setting.
     pub chosen_grid_ms: Option<f64>,
+    /// Whether budget mode's report says the target is met (`budget.met`): its pilots'
+    /// measurement, which also asks its converged candidate to be predicted within the target.
+    pub budget_met: Option<bool>,
 }
 
 impl AutoCheck {
@@ -286,7 +289,7 @@ impl AutoCheck {
     }
 }
 
-pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio";
+pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio,budget_met";
 
 /// A knob's value in budget mode's report: `budget.<knob>.value`.
 fn knob_value<'a>(budget: &'a serde_json::Value, knob: &str) -> Option<&'a serde_json::Value> {
@@ -371,6 +374,7 @@ pub fn check_auto(
                 .find(|r| r.setting == setting)
                 .map(|r| r.total_ms)
         }),
+        budget_met: budget.get("met").and_then(|m| m.as_bool()),
     }
 }
 
@@ -389,7 +393,7 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
         };
         let _ = writeln!(
             csv,
-            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{}",
+            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{},{}",
             c.scene,
             c.settings,
             c.chosen,
@@ -412,7 +416,8 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
                 .unwrap_or_default(),
             c.grid_time_ratio()
                 .map(|r| format!("{r:.3}"))
-                .unwrap_or_default()
+                .unwrap_or_default(),
+            c.budget_met.map(|m| m.to_string()).unwrap_or_default()
         );
     }
     std::fs::write(path, csv).map_err(|e| EvalError::Output {
@@ -510,6 +515,7 @@ mod tests {
             predicted_flip: 0.05,
             cheapest: Some((setting(SweepVisibility::Off), 100.0, 0.04)),
             chosen_grid_ms: Some(100.0),
+            budget_met: Some(true),
         };
         assert_eq!(check.time_ratio(), Some(1.3));
         assert_eq!(check.grid_time_ratio(), Some(1.0));

@@ -516,12 +516,19 @@ pub fn apply_budget(
         let key = |c: &budget::BudgetChoice| (c.points, c.rsm, c.visibility);
         key(&search.choice) == key(&run.converged)
     });
+    // The converged candidate is itself predicted to miss the target: what the pilots
+    // measured against it cannot meet the target (`budget::PilotSearch::converged_flip`).
+    let converged_short = match (target, &searched) {
+        (budget::BudgetTarget::Flip(f), Some((search, _))) => search.converged_flip > f,
+        _ => false,
+    };
     let round3 = crate::gpu::timing::round3;
     let pilot_report = searched.as_ref().map(|(search, run)| {
         serde_json::json!({
             "size": [run.size.0, run.size.1],
             "ms": round3(run.ms),
             "converged": candidate_json(&run.converged, None),
+            "converged_predicted_flip": round3(search.converged_flip),
             "measured": search
                 .pilots
                 .iter()
@@ -585,6 +592,8 @@ pub fn apply_budget(
         },
         "choice": match (overridden, choice.met) {
             _ if survey.is_dark() => "no light reaches a surface the camera sees: nothing to budget, the cheapest candidate",
+            _ if converged_short && converged_kept => "the converged candidate, itself predicted to miss the target (pilots.converged_predicted_flip): no candidate reaches it in this scene (knobs given explicitly kept)",
+            _ if converged_short => "the cheapest candidate the pilot frames measured within the target of the converged one, which is itself predicted to miss it (pilots.converged_predicted_flip): no candidate reaches it in this scene (knobs given explicitly kept)",
             _ if converged_kept => "no pilot met the target: the converged candidate (knobs given explicitly kept)",
             _ if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
