@@ -49,10 +49,12 @@
 //! FLIP target the method renders a few small frames: the richest candidate as the converged
 //! image, then, cheapest first, the candidates the survey calibrated by what was measured so
 //! far predicts to meet the target. The pilots' measured convergence FLIP over their
-//! predictions (a geometric mean, kept apart for candidates with and without occlusion:
-//! [`pilot_scale`]) scales every prediction. Once a pilot has measured one occlusion (rays or
-//! `off`), the other's most accurate candidate is measured next if the widest gap seen between
-//! the two scales could let it meet the target ([`UNMEASURED_SPREAD`]). When no candidate
+//! predictions (a geometric mean, kept apart for each kind of occlusion, rays, none and summed
+//! discs: [`pilot_scale`]) scales every prediction. Once a pilot has measured one kind, the
+//! most accurate candidate of a kind not measured yet is measured next if the widest gap seen
+//! between two scales could let it meet the target ([`UNMEASURED_SPREAD`]). `sum`, which
+//! never converges and which the survey prices as no occlusion, is a candidate of the pilots
+//! only: the survey alone never chooses it. When no candidate
 //! cheaper than the best found is predicted to meet the target, the one predicted most
 //! accurate is still measured if its prediction lies within the scaled model's own spread of
 //! the target ([`PROBE_SPREAD`]). The choice is the cheapest candidate *measured* to meet the
@@ -855,6 +857,14 @@ pub mod model {
     /// 0.89–0.92 on the aligned occluders and the coarse wall (whose tiles are more often
     /// split).
     pub const ADAPTIVE_RAY_COST: f64 = 0.7;
+    /// The summed disc occlusion's cost over no occlusion, per pair of points and per
+    /// point, ms: each point walks the other points' discs, and the gather sums the spheres'
+    /// moments. Fitted to the median over nine built-in scenes of the `sum` row's frame less
+    /// the `off` row's of the same setting (`valgi eval --sweep --frames 3`, 128², the same
+    /// machine): 6–10 ms at 1024 points, 24, 78–79, 244–252 and 828–862 ms at 16384
+    /// (this gives 11, 28, 78, 243, 831).
+    pub const DISC_MS_PER_POINT_PAIR: f64 = 2.58e-6;
+    pub const DISC_MS_PER_POINT: f64 = 8.5e-3;
     /// The rest of a frame (shadow maps, RSM, G-buffer, direct, interpolation, apply) at
     /// 128², ms: the same for every choice, so it only shifts the budget. The fit's fixed
     /// part per scene ran from 14 ms (Cornell) to 195 ms (glossy-row), median 66.
@@ -883,24 +893,54 @@ pub enum Visibility {
     /// The 2×2 coarse strata first, the rest where they disagree (`--occlusion rays
     /// --visibility-rays adaptive`).
     AdaptiveRays,
+    /// The paper's disc occlusion, summed over the occluders (`--occlusion sum`). It never
+    /// converges (it occludes twice behind aligned occluders) and the survey has no term for
+    /// that, so only the pilots choose it ([`Survey::search`]), never the survey alone.
+    Sum,
 }
 
 impl Visibility {
-    pub const ALL: [Visibility; 3] = [Visibility::Off, Visibility::Rays, Visibility::AdaptiveRays];
+    pub const ALL: [Visibility; 4] = [
+        Visibility::Off,
+        Visibility::Rays,
+        Visibility::AdaptiveRays,
+        Visibility::Sum,
+    ];
 
+    /// Whether it shoots shadow rays.
     pub fn rays(self) -> bool {
-        self != Visibility::Off
+        matches!(self, Visibility::Rays | Visibility::AdaptiveRays)
     }
 
-    /// Order by how close to converged a candidate's visibility is: off, adaptive rays,
-    /// rays to every stratum.
+    /// Which occlusion it is, for the pilots' scales ([`pilot_scale`]): none, discs, rays
+    /// (to every stratum or adaptive).
+    pub fn occlusion(self) -> OcclusionKind {
+        match self {
+            Visibility::Off => OcclusionKind::None,
+            Visibility::Sum => OcclusionKind::Discs,
+            Visibility::Rays | Visibility::AdaptiveRays => OcclusionKind::Rays,
+        }
+    }
+
+    /// Order by how close to converged a candidate's visibility is: off, summed discs,
+    /// adaptive rays, rays to every stratum.
     pub fn richness(self) -> u32 {
         match self {
             Visibility::Off => 0,
-            Visibility::AdaptiveRays => 1,
-            Visibility::Rays => 2,
+            Visibility::Sum => 1,
+            Visibility::AdaptiveRays => 2,
+            Visibility::Rays => 3,
         }
     }
+}
+
+/// The kinds of occlusion whose errors the survey misjudges each in its own way, so that the
+/// pilots scale each kind apart ([`pilot_scale`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OcclusionKind {
+    None,
+    Discs,
+    Rays,
 }
 
 /// What budget mode aims at.
@@ -937,7 +977,9 @@ impl Survey {
         let variation = self.interpolation_error(h) + self.variation_error(h);
         let val_error = self.interpolation_error(self.val_spacing(rsm));
         let (visibility_error, ray_cost) = match visibility {
-            Visibility::Off => (model::C_OFF * self.occluded_share, 0.0),
+            // The survey has no term for the discs' double occlusion: `sum` is priced as
+            // none, and its own pilots' scale corrects that.
+            Visibility::Off | Visibility::Sum => (model::C_OFF * self.occluded_share, 0.0),
             Visibility::Rays => (0.0, 1.0),
             Visibility::AdaptiveRays => (
                 model::C_PARTIAL * self.partial_share,
@@ -961,6 +1003,12 @@ impl Survey {
                             * self.clusters as f64
                 } else {
                     0.0
+                }
+                + if visibility == Visibility::Sum {
+                    model::DISC_MS_PER_POINT_PAIR * (points as f64).powi(2)
+                        + model::DISC_MS_PER_POINT * points as f64
+                } else {
+                    0.0
                 });
         BudgetChoice {
             points,
@@ -977,7 +1025,8 @@ impl Survey {
 
     /// The setting budget mode picks for `target` among the candidates (module docs).
     pub fn choose(&self, target: BudgetTarget) -> BudgetChoice {
-        let all = self.candidates(|_, _, _| true);
+        // `sum`'s prediction is a placeholder that only pilots correct.
+        let all = self.candidates(|_, _, visibility| visibility != Visibility::Sum);
         let by_ms =
             |a: &&BudgetChoice, b: &&BudgetChoice| a.predicted_ms.total_cmp(&b.predicted_ms);
         let by_flip =
@@ -1011,14 +1060,14 @@ impl Survey {
 
 /// Most pilot frames [`Survey::search`] renders after the converged one (`budget-pilots`'s
 /// default). Replaying the search on seven `valgi eval --sweep` grids (nine scenes, two
-/// targets each, the candidates restricted to the grid) it rendered 3.5 on average, and the
-/// choice came within 1.25× of the cheapest grid setting meeting the target in 14–17 of 18
-/// cases (11–15 with at most 4 pilots, the same with 8, one more on three grids with 10),
-/// where the survey's prediction alone managed 5–6; in the harness itself, over all
-/// candidates: 15 (`src/vals/README.md`, "Budget mode"). Weighting each pilot's correction by
-/// its closeness to the candidate (in log₂ points, log₂ RSM side and visibility) did no
-/// better.
-pub const DEFAULT_PILOTS: usize = 6;
+/// targets each, the candidates restricted to the grid) with `sum` among the candidates, it
+/// rendered 4.3 on average, and the choice came within 1.25× of the cheapest grid setting
+/// meeting the target in 15–18 of 18 cases; with at most 6 pilots 13–16, since trying `sum`
+/// takes one; without `sum`, 14–17 with 6 or 8. The survey's prediction alone managed 5–6.
+/// In the harness itself, over all candidates: `src/vals/README.md`, "Budget mode".
+/// Weighting each pilot's correction by its closeness to the candidate (in log₂ points, log₂
+/// RSM side and visibility) did no better.
+pub const DEFAULT_PILOTS: usize = 8;
 
 /// How far above the target a candidate's scaled prediction may lie and still be measured
 /// when none is predicted to meet it ([`Survey::search`]): e^0.35, the spread left in the
@@ -1030,9 +1079,9 @@ pub const DEFAULT_PILOTS: usize = 6;
 /// (0.040, 0.046) were predicted at 0.051 and 0.055.
 pub const PROBE_SPREAD: f64 = 1.42;
 
-/// How far above the target the scaled prediction of a candidate whose occlusion (rays or
-/// `off`) no pilot has measured yet may lie and still be measured, once a pilot has measured
-/// the other ([`Survey::search`]). Its prediction is scaled by the other occlusion's pilots,
+/// How far above the target the scaled prediction of a candidate whose kind of occlusion (rays,
+/// `off`, `sum`) no pilot has measured yet may lie and still be measured, once a pilot has
+/// measured another ([`Survey::search`]). Its prediction is scaled by all pilots so far,
 /// and the two scales can be far apart: over the nine built-in scenes of a `valgi eval
 /// --sweep` grid the median of measured over predicted FLIP without occlusion was 0.31× (the
 /// bunny box, whose floating bunny blocks less than the survey's occluded share says) to
@@ -1111,8 +1160,9 @@ impl Survey {
                     .min_by(|a, b| scaled(a).total_cmp(&scaled(b)))
                     .filter(|c| scaled(c) <= target_flip * spread)
             };
-            // Once a pilot has measured one occlusion, the other's most accurate candidate,
-            // while it may still meet the target; then the cheapest predicted to meet it;
+            // Once a pilot has measured one kind of occlusion, the most accurate candidate of a
+            // kind not measured yet, while it may still meet the target; then the cheapest
+            // predicted to meet it;
             // failing that, the most accurate while it may still meet it.
             let other_occlusion = if pilots.iter().any(|p| p.measured_flip.is_finite()) {
                 most_accurate(
@@ -1158,30 +1208,32 @@ impl Survey {
 
 /// How far the survey's predictions are off in this scene for a candidate with `visibility`,
 /// by the pilots: the geometric mean of measured over predicted FLIP over the pilots of the
-/// same occlusion (rays, all strata or adaptive, against `off`), over all pilots while none of
-/// it has been measured, and 1 without a measured pilot. The survey's error is mostly a scale
+/// same kind of occlusion ([`Visibility::occlusion`]: rays, all strata or adaptive; `off`;
+/// summed discs), over all pilots while none of that kind has been measured, and 1 without a
+/// measured pilot. The survey's error is mostly a scale
 /// per scene (its median prediction over the measurement ran from 0.64 to 1.78 by scene),
 /// which one pilot already corrects; but an `off` candidate's prediction carries the
 /// survey's occluded share, whose error is its own: the door room's pilots measured the survey
 /// 2× pessimistic with rays and 1.0–1.35× optimistic without occlusion, the corridor's 0.43×
 /// and 2.6×, and one scale for both sent half their pilots to `off` settings that missed.
+/// `sum`'s prediction is `off`'s, which its own scale turns into its double occlusion.
 pub fn pilot_scale(pilots: &[Pilot], visibility: Visibility) -> f64 {
     if occlusion_measured(pilots, visibility) {
         geometric_mean_error(
             pilots
                 .iter()
-                .filter(|p| p.choice.visibility.rays() == visibility.rays()),
+                .filter(|p| p.choice.visibility.occlusion() == visibility.occlusion()),
         )
     } else {
         geometric_mean_error(pilots.iter())
     }
 }
 
-/// Whether a pilot with the occlusion of `visibility` (rays or not) has been measured.
+/// Whether a pilot with the kind of occlusion of `visibility` has been measured.
 fn occlusion_measured(pilots: &[Pilot], visibility: Visibility) -> bool {
-    pilots
-        .iter()
-        .any(|p| p.choice.visibility.rays() == visibility.rays() && p.measured_flip.is_finite())
+    pilots.iter().any(|p| {
+        p.choice.visibility.occlusion() == visibility.occlusion() && p.measured_flip.is_finite()
+    })
 }
 
 /// The geometric mean of the pilots' measured over predicted FLIP (1 without a measured one).
@@ -1527,6 +1579,33 @@ mod tests {
         assert!(search.pilots.iter().all(|p| p.measured_flip > 0.05));
     }
 
+    /// `sum` is priced as no occlusion, and its pilots scale it apart from `off`'s: where the
+    /// discs remove what occlusion blocks (the corridor, where `sum` at 1024 points was the
+    /// cheapest setting meeting 0.10) and leaving occlusion out does not, the search finds it.
+    #[test]
+    fn summed_discs_are_measured_with_a_scale_of_their_own() {
+        let converged = synthetic(16384, Visibility::Rays, 0.01, 1000.0);
+        let rays = synthetic(1024, Visibility::Rays, 0.09, 300.0);
+        let off = synthetic(1024, Visibility::Off, 0.12, 100.0);
+        let sum = synthetic(1024, Visibility::Sum, 0.12, 120.0);
+        let truth = |c: &BudgetChoice| {
+            c.predicted_flip
+                * match c.visibility {
+                    Visibility::Off => 2.0,
+                    Visibility::Sum => 0.6,
+                    _ => 1.0,
+                }
+        };
+        let search = Survey::search(&[rays, off, sum, converged], &converged, 0.1, 6, |c| {
+            Ok::<_, ()>(truth(c))
+        })
+        .unwrap();
+        assert_eq!(search.choice.visibility, Visibility::Sum, "{search:?}");
+        assert!(search.choice.met && (search.measured_flip - 0.072).abs() < 1e-9);
+        let order: Vec<Visibility> = search.pilots.iter().map(|p| p.choice.visibility).collect();
+        assert_eq!(order, [Visibility::Rays, Visibility::Off, Visibility::Sum]);
+    }
+
     /// The pilots measure against the converged candidate; where that candidate is itself
     /// predicted (scaled by the pilots) to miss the target, as on Sponza, a pilot within the
     /// target of it has not met the target.
@@ -1607,6 +1686,11 @@ mod tests {
         assert!((pilot_scale(&failed, Visibility::Rays) - 3.0).abs() < 1e-9);
         let failed_off = [one[0], pilot(4096, 64, Visibility::Off, f64::NAN)];
         assert!((pilot_scale(&failed_off, Visibility::Off) - 3.0).abs() < 1e-9);
+        // Summed discs have a scale of their own, borrowed from all pilots until measured.
+        assert!((pilot_scale(&two, Visibility::Sum) - 0.5).abs() < 1e-9);
+        let four = [two[0], two[1], pilot(2048, 64, Visibility::Sum, 2.0)];
+        assert!((pilot_scale(&four, Visibility::Sum) - 2.0).abs() < 1e-9);
+        assert!((pilot_scale(&four, Visibility::Off) - 1.0 / 12.0).abs() < 1e-9);
     }
 
     #[test]

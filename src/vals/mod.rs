@@ -405,7 +405,8 @@ pub const OPTIONS: &[OptionSpec] = &[
     OptionSpec {
         name: "budget-pilots",
         kind: OptionKind::Int { min: 0, max: 32 },
-        default: "6",
+        // `budget::DEFAULT_PILOTS` (a test keeps them equal).
+        default: "8",
         help: "--quality auto with a FLIP target: most pilot frames (at most 256 pixels on the long side) that measure the survey's candidates against the converged one before choosing; 0: the survey's prediction alone",
     },
 ];
@@ -485,7 +486,7 @@ pub fn apply_budget(
         .map_or_else(|| survey.choose(target), |(search, _)| search.choice);
     // Knobs given explicitly stay; the prediction is for the setting actually used.
     *settings = with_candidate(settings, &choice, given);
-    // `sum` and `union` are priced as no occlusion (they shoot no rays).
+    // `union` is priced as no occlusion (it shoots no rays).
     let used_visibility = visibility_of(settings).unwrap_or(budget::Visibility::Off);
     let used = survey.predict(settings.sparse_points, settings.rsm, used_visibility);
     let met = match (target, &searched) {
@@ -573,6 +574,9 @@ pub fn apply_budget(
             "why": why("occlusion", if settings.options.occlusion == OcclusionMode::Rays {
                 format!("geometry blocks {:.3} of the one-bounce light the camera sees: rays to {} clusters per point",
                     survey.occluded_share, survey.clusters)
+            } else if settings.options.occlusion == OcclusionMode::Sum {
+                format!("geometry blocks {:.3} of the one-bounce light the camera sees: the points' discs, summed, measured close enough by the pilots",
+                    survey.occluded_share)
             } else {
                 format!("geometry blocks only {:.3} of the one-bounce light the camera sees: no occlusion",
                     survey.occluded_share)
@@ -581,7 +585,7 @@ pub fn apply_budget(
         "visibility_rays": {
             "value": if settings.options.adaptive_rays { "adaptive" } else { "all" },
             "why": why("visibility-rays", match used.visibility {
-                budget::Visibility::Off => "no rays".to_string(),
+                budget::Visibility::Off | budget::Visibility::Sum => "no rays".to_string(),
                 budget::Visibility::Rays => format!(
                     "every stratum: settling a cluster tile by its coarse strata would get {:.3} of the light wrong",
                     survey.partial_share),
@@ -660,10 +664,10 @@ fn with_candidate(
         out.rsm_texels = None;
     }
     if !given("occlusion") {
-        out.options.occlusion = if choice.visibility.rays() {
-            OcclusionMode::Rays
-        } else {
-            OcclusionMode::Off
+        out.options.occlusion = match choice.visibility {
+            budget::Visibility::Off => OcclusionMode::Off,
+            budget::Visibility::Sum => OcclusionMode::Sum,
+            budget::Visibility::Rays | budget::Visibility::AdaptiveRays => OcclusionMode::Rays,
         };
     }
     if !given("visibility-rays") {
@@ -672,14 +676,15 @@ fn with_candidate(
     out
 }
 
-/// The budget candidates' visibility these settings run; `None` for `sum` and `union`,
-/// which are no candidates.
+/// The budget candidates' visibility these settings run; `None` for `union`, which is no
+/// candidate.
 fn visibility_of(settings: &SparseSettings) -> Option<budget::Visibility> {
     match (settings.options.occlusion, settings.options.adaptive_rays) {
         (OcclusionMode::Off, _) => Some(budget::Visibility::Off),
+        (OcclusionMode::Sum, _) => Some(budget::Visibility::Sum),
         (OcclusionMode::Rays, false) => Some(budget::Visibility::Rays),
         (OcclusionMode::Rays, true) => Some(budget::Visibility::AdaptiveRays),
-        _ => None,
+        (OcclusionMode::Union, _) => None,
     }
 }
 
@@ -694,7 +699,7 @@ fn search_with_pilots(
 ) -> Result<Option<(budget::PilotSearch, PilotRun)>, RenderError> {
     let started = Instant::now();
     let given = |key: &str| options.given(key);
-    // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=sum`,
+    // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=union`,
     // which is no candidate.
     let pinned_visibility =
         (given("occlusion") || given("visibility-rays")).then_some(visibility_of(settings));
@@ -774,6 +779,7 @@ fn candidate_json(c: &budget::BudgetChoice, measured_flip: Option<f64>) -> serde
             budget::Visibility::Off => "off",
             budget::Visibility::Rays => "rays",
             budget::Visibility::AdaptiveRays => "rays adaptive",
+            budget::Visibility::Sum => "sum",
         },
         "predicted_flip": round3(c.predicted_flip),
         "predicted_ms": round3(c.predicted_ms),
@@ -1149,6 +1155,15 @@ mod tests {
     }
 
     #[test]
+    fn the_pilot_count_the_options_list_is_the_one_used() {
+        let spec = OPTIONS
+            .iter()
+            .find(|o| o.name == "budget-pilots")
+            .expect("budget-pilots is an option");
+        assert_eq!(spec.default, budget::DEFAULT_PILOTS.to_string());
+    }
+
+    #[test]
     fn a_candidate_sets_every_knob_but_the_ones_given() {
         let base = SparseSettings {
             rsm_texels: Some(4096),
@@ -1177,9 +1192,16 @@ mod tests {
             (2048, base.rsm, Some(4096))
         );
         assert_eq!(kept.options.occlusion, base.options.occlusion);
-        // `sum` is no candidate's visibility.
-        let mut sum = base;
-        sum.options.occlusion = OcclusionMode::Sum;
-        assert_eq!(visibility_of(&sum), None);
+        // `sum` is a candidate's visibility (measured by the pilots), `union` none's.
+        let sum_choice = budget::BudgetChoice {
+            visibility: budget::Visibility::Sum,
+            ..choice
+        };
+        let sum = with_candidate(&base, &sum_choice, |_| false);
+        assert_eq!(sum.options.occlusion, OcclusionMode::Sum);
+        assert_eq!(visibility_of(&sum), Some(budget::Visibility::Sum));
+        let mut union = base;
+        union.options.occlusion = OcclusionMode::Union;
+        assert_eq!(visibility_of(&union), None);
     }
 }
