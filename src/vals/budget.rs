@@ -970,6 +970,14 @@ pub struct BudgetChoice {
     pub met: bool,
 }
 
+impl BudgetChoice {
+    /// Whether `other` is the same setting (points, RSM side, visibility), whatever its
+    /// predictions.
+    pub fn same_setting(&self, other: &BudgetChoice) -> bool {
+        (self.points, self.rsm, self.visibility) == (other.points, other.rsm, other.visibility)
+    }
+}
+
 impl Survey {
     /// Predicts a candidate's convergence FLIP and frame time.
     pub fn predict(&self, points: usize, rsm: u32, visibility: Visibility) -> BudgetChoice {
@@ -1100,9 +1108,9 @@ pub struct Pilot {
 /// What [`Survey::search`] chose and the pilots it measured on the way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PilotSearch {
-    /// The cheapest candidate measured to meet the target, or the converged one; `met`
-    /// says whether its measured FLIP meets the target and the converged candidate is itself
-    /// predicted to (`converged_flip`).
+    /// The cheapest candidate measured within the target of the converged one, or the
+    /// converged one; `met` says whether the converged candidate is itself predicted within
+    /// the target (`converged_flip`), without which no measurement against it meets it.
     pub choice: BudgetChoice,
     /// Its measured FLIP against the converged candidate (0 for that candidate itself).
     pub measured_flip: f64,
@@ -1140,9 +1148,7 @@ impl Survey {
         max_pilots: usize,
         mut measure: impl FnMut(&BudgetChoice) -> Result<f64, E>,
     ) -> Result<PilotSearch, E> {
-        let same = |a: &BudgetChoice, b: &BudgetChoice| {
-            (a.points, a.rsm, a.visibility) == (b.points, b.rsm, b.visibility)
-        };
+        let same = BudgetChoice::same_setting;
         let mut pilots: Vec<Pilot> = vec![];
         let mut best = (*converged, 0.0);
         for _ in 0..max_pilots {
@@ -1196,7 +1202,9 @@ impl Survey {
         let converged_flip = converged.predicted_flip * pilot_scale(&pilots, converged.visibility);
         Ok(PilotSearch {
             choice: BudgetChoice {
-                met: best.1 <= target_flip && converged_flip <= target_flip,
+                // `best` is the converged candidate (0 against itself) or a pilot measured
+                // within the target: whether the converged candidate is decides.
+                met: converged_flip <= target_flip,
                 ..best.0
             },
             measured_flip: best.1,
@@ -1419,9 +1427,7 @@ mod tests {
         for scale in [0.5, 2.0] {
             let truth = |c: &BudgetChoice| scale * c.predicted_flip;
             let (search, candidates, converged) = search_against(&survey, 0.05, truth);
-            let same = |a: &BudgetChoice, b: &BudgetChoice| {
-                (a.points, a.rsm, a.visibility) == (b.points, b.rsm, b.visibility)
-            };
+            let same = BudgetChoice::same_setting;
             // The cheapest candidate that truly meets the target.
             let cheapest = candidates
                 .iter()
@@ -1456,9 +1462,7 @@ mod tests {
                     c.predicted_flip * if c.visibility.rays() { rays } else { off }
                 };
                 let (search, candidates, converged) = search_against(&survey, target, truth);
-                let same = |a: &BudgetChoice, b: &BudgetChoice| {
-                    (a.points, a.rsm, a.visibility) == (b.points, b.rsm, b.visibility)
-                };
+                let same = BudgetChoice::same_setting;
                 let cheapest = candidates
                     .iter()
                     .filter(|c| !same(c, &converged) && truth(c) <= target)
@@ -1497,11 +1501,14 @@ mod tests {
     /// When the scaled predictions leave no candidate meeting the target, the most accurate
     /// one is measured while its prediction is within [`PROBE_SPREAD`] of the target, and
     /// not beyond.
+    /// [`synthetic`] with rays to every stratum.
+    fn with_rays(points: usize, predicted_flip: f64, predicted_ms: f64) -> BudgetChoice {
+        synthetic(points, Visibility::Rays, predicted_flip, predicted_ms)
+    }
+
     #[test]
     fn a_candidate_predicted_just_short_of_the_target_is_still_measured() {
-        let candidate = |points, predicted_flip, predicted_ms| {
-            synthetic(points, Visibility::Rays, predicted_flip, predicted_ms)
-        };
+        let candidate = with_rays;
         let converged = candidate(16384, 0.01, 1000.0);
         let cheap = candidate(1024, 0.05, 100.0);
         let near = candidate(4096, 0.034, 300.0);
@@ -1611,9 +1618,7 @@ mod tests {
     /// target of it has not met the target.
     #[test]
     fn the_target_is_met_only_where_the_converged_candidate_is_predicted_to_meet_it() {
-        let candidate = |points, predicted_flip, predicted_ms| {
-            synthetic(points, Visibility::Rays, predicted_flip, predicted_ms)
-        };
+        let candidate = with_rays;
         let converged = candidate(16384, 0.18, 1000.0);
         let cheap = candidate(1024, 0.12, 100.0);
         let mid = candidate(4096, 0.09, 300.0);

@@ -513,16 +513,15 @@ pub fn apply_budget(
         }
     };
     // The search fell back on the converged candidate: no cheaper pilot met the target.
-    let converged_kept = searched.as_ref().is_some_and(|(search, run)| {
-        let key = |c: &budget::BudgetChoice| (c.points, c.rsm, c.visibility);
-        key(&search.choice) == key(&run.converged)
-    });
-    // The converged candidate is itself predicted to miss the target: what the pilots
-    // measured against it cannot meet the target (`budget::PilotSearch::converged_flip`).
-    let converged_short = match (target, &searched) {
-        (budget::BudgetTarget::Flip(f), Some((search, _))) => search.converged_flip > f,
-        _ => false,
-    };
+    let converged_kept = searched
+        .as_ref()
+        .is_some_and(|(search, run)| search.choice.same_setting(&run.converged));
+    // The converged candidate is itself predicted to miss the target, the one way a search
+    // misses it (`budget::PilotSearch::converged_flip`): what the pilots measured against it
+    // cannot meet the target.
+    let converged_short = searched
+        .as_ref()
+        .is_some_and(|(search, _)| !search.choice.met);
     let round3 = crate::gpu::timing::round3;
     let pilot_report = searched.as_ref().map(|(search, run)| {
         serde_json::json!({
@@ -727,7 +726,7 @@ fn search_with_pilots(
         }
     };
     // The converged image: the richest candidate that renders. A knob given outside the
-    // candidates' range (or `occlusion=sum`) leaves nothing to measure, and then, as when
+    // candidates' range (or `occlusion=union`) leaves nothing to measure, and then, as when
     // nothing renders, the survey's prediction decides.
     let mut by_rank = candidates.clone();
     by_rank.sort_by_key(|c| std::cmp::Reverse((c.points, c.rsm, c.visibility.richness())));
