@@ -43,6 +43,12 @@
 //! predicted FLIP meets `--target-flip`, or with `--budget-ms` the most accurate one whose
 //! predicted time fits.
 //!
+//! **Timing pilots** ([`timed`]). Under `--budget-ms` the candidates are timed: a few frames
+//! of each at the render's own size on the render's device, the measured times refitting the
+//! predicted ones (their fixed part, which the survey prices at one figure whatever the image
+//! size, most of all), until the most accurate candidate within the budget is one measured
+//! within it.
+//!
 //! **Pilot frames** ([`Survey::search`]). The survey ranks the candidates well within a scene
 //! but misjudges how its relative errors become FLIP in a given scene (a factor 1.6 rms, from
 //! 0.6× to 1.8× by scene), and no cheap scene measurement tried closed that gap. So under a
@@ -71,6 +77,8 @@ use crate::sampling::{basis, Rng};
 use crate::scene::{CameraView, LightKind, Scene};
 use crate::shading::{spot_attenuation, WorldLight};
 use crate::trace::Tracer;
+
+pub mod timed;
 
 /// Photons shot from all lights together.
 pub const SURVEY_PHOTONS: usize = 4096;
@@ -979,6 +987,12 @@ impl BudgetChoice {
 }
 
 impl Survey {
+    /// The part of every candidate's predicted frame time that no knob changes
+    /// ([`model::FRAME_MS_FIXED`] on this device).
+    pub fn predicted_fixed_ms(&self) -> f64 {
+        self.time_scale * model::FRAME_MS_FIXED
+    }
+
     /// Predicts a candidate's convergence FLIP and frame time.
     pub fn predict(&self, points: usize, rsm: u32, visibility: Visibility) -> BudgetChoice {
         let h = self.point_spacing(points);
@@ -998,26 +1012,26 @@ impl Survey {
         let error = variation + model::C_VALS * val_error + visibility_error;
         let predicted_flip = model::A * error.max(0.0).powf(model::B);
         let pairs = points as f64 * self.val_count(rsm);
-        let predicted_ms = self.time_scale
-            * (model::FRAME_MS_FIXED
-                + model::GATHER_MS_PER_PAIR
+        let predicted_ms = self.predicted_fixed_ms()
+            + self.time_scale
+                * (model::GATHER_MS_PER_PAIR
                     * model::gather_cost(self.gathers_glossy, rays)
                     * pairs
-                + if rays {
-                    model::VISIBILITY_MS_FIXED
-                        + model::VISIBILITY_MS_PER_POINT_CLUSTER
-                            * ray_cost
-                            * points as f64
-                            * self.clusters as f64
-                } else {
-                    0.0
-                }
-                + if visibility == Visibility::Sum {
-                    model::DISC_MS_PER_POINT_PAIR * (points as f64).powi(2)
-                        + model::DISC_MS_PER_POINT * points as f64
-                } else {
-                    0.0
-                });
+                    + if rays {
+                        model::VISIBILITY_MS_FIXED
+                            + model::VISIBILITY_MS_PER_POINT_CLUSTER
+                                * ray_cost
+                                * points as f64
+                                * self.clusters as f64
+                    } else {
+                        0.0
+                    }
+                    + if visibility == Visibility::Sum {
+                        model::DISC_MS_PER_POINT_PAIR * (points as f64).powi(2)
+                            + model::DISC_MS_PER_POINT * points as f64
+                    } else {
+                        0.0
+                    });
         BudgetChoice {
             points,
             rsm,

@@ -400,14 +400,14 @@ pub const OPTIONS: &[OptionSpec] = &[
         name: "budget-ms",
         kind: OptionKind::Text,
         default: "",
-        help: "--quality auto: instead of a FLIP target, the most accurate setting whose predicted frame time fits this many ms (the constants fitted on lavapipe, scaled to this device by its measured FMA peak)",
+        help: "--quality auto: instead of a FLIP target, the most accurate setting whose frame fits this many ms at the render's size on this device, measured by timing pilots (the survey's times, fitted on lavapipe and scaled by this device's FMA peak, say which to time first)",
     },
     OptionSpec {
         name: "budget-pilots",
         kind: OptionKind::Int { min: 0, max: 32 },
         // `budget::DEFAULT_PILOTS` (a test keeps them equal).
         default: "8",
-        help: "--quality auto with a FLIP target: most pilot frames (at most 256 pixels on the long side) that measure the survey's candidates against the converged one before choosing; 0: the survey's prediction alone",
+        help: "--quality auto: most pilots before choosing; with a FLIP target small frames (at most 256 pixels on the long side) that measure the survey's candidates against the converged one, with --budget-ms candidates timed at the render's size; 0: the survey's prediction alone",
     },
 ];
 
@@ -452,9 +452,11 @@ pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
 /// the options do not give explicitly. Returns the JSON `budget` report: per knob its value
 /// and why.
 ///
-/// Under a FLIP target `pilot` renders a candidate's settings to its indirect image for the
-/// pilot search ([`budget::Survey::search`]); `None` (or `budget-pilots=0`) chooses by the
-/// survey's prediction alone.
+/// `pilots` measure candidates: under a FLIP target [`Pilots::Flip`] renders a candidate's
+/// settings to its indirect image for the pilot search ([`budget::Survey::search`]), under a
+/// time budget [`Pilots::Time`] times its frames ([`budget::timed::search`]); `None`, a kind
+/// that does not match the target, or `budget-pilots=0` chooses by the survey's prediction
+/// alone.
 pub fn apply_budget(
     scene: &Scene,
     (camera, aspect): (Option<usize>, f32),
@@ -462,7 +464,7 @@ pub fn apply_budget(
     target: budget::BudgetTarget,
     device_fma_peak: Option<f64>,
     settings: &mut SparseSettings,
-    pilot: Option<PilotFrames<'_>>,
+    pilots: Option<Pilots<'_>>,
 ) -> Result<serde_json::Value, RenderError> {
     let world = scene.world_from_node_at(0.0);
     let selector = camera.map(|i| i.to_string());
@@ -475,24 +477,46 @@ pub fn apply_budget(
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
     }
     let given = |key: &str| options.given(key);
-    let searched = match (target, pilot) {
-        (budget::BudgetTarget::Flip(flip), Some(pilot)) if pilot.count > 0 && !survey.is_dark() => {
-            search_with_pilots(&survey, options, settings, flip, pilot, (&world, &camera))?
+    let (searched, timed) = match (target, pilots) {
+        (budget::BudgetTarget::Flip(flip), Some(Pilots::Flip(pilot)))
+            if pilot.count > 0 && !survey.is_dark() =>
+        {
+            let searched =
+                search_with_pilots(&survey, options, settings, flip, pilot, (&world, &camera))?;
+            (searched, None)
         }
-        _ => None,
+        (budget::BudgetTarget::Ms(ms), Some(Pilots::Time(pilot)))
+            if pilot.count > 0 && !survey.is_dark() =>
+        {
+            let timed = time_with_pilots(&survey, options, settings, ms, pilot, (&world, &camera))?;
+            (None, timed)
+        }
+        _ => (None, None),
     };
-    let choice = searched
-        .as_ref()
-        .map_or_else(|| survey.choose(target), |(search, _)| search.choice);
+    let choice = match (&searched, &timed) {
+        (Some((search, _)), _) => search.choice,
+        (None, Some((search, _))) => search.choice,
+        (None, None) => survey.choose(target),
+    };
     // Knobs given explicitly stay; the prediction is for the setting actually used.
     *settings = with_candidate(settings, &choice, given);
     // `union` is priced as no occlusion (it shoots no rays).
     let used_visibility = visibility_of(settings).unwrap_or(budget::Visibility::Off);
     let used = survey.predict(settings.sparse_points, settings.rsm, used_visibility);
-    let met = match (target, &searched) {
-        (_, Some((search, _))) => search.choice.met,
-        (budget::BudgetTarget::Flip(f), None) => used.predicted_flip <= f,
-        (budget::BudgetTarget::Ms(ms), None) => used.predicted_ms <= ms,
+    // The setting used, by the timing pilots' fit (a knob given explicitly may have moved it
+    // off every pilot).
+    let fitted_ms = timed.as_ref().map(|(search, _)| {
+        search
+            .fit
+            .time_ms(used.predicted_ms - survey.predicted_fixed_ms())
+    });
+    let met = match (target, &searched, &timed) {
+        (_, Some((search, _)), _) => search.choice.met,
+        // The setting used: a knob given explicitly may have moved it off the candidate.
+        (_, None, Some((search, _))) if search.choice.same_setting(&used) => search.choice.met,
+        (budget::BudgetTarget::Ms(ms), None, Some(_)) => fitted_ms.is_some_and(|t| t <= ms),
+        (budget::BudgetTarget::Flip(f), None, _) => used.predicted_flip <= f,
+        (budget::BudgetTarget::Ms(ms), None, None) => used.predicted_ms <= ms,
     };
     let overridden = ["sparse-points", "rsm", "occlusion", "visibility-rays"]
         .iter()
@@ -503,7 +527,13 @@ pub fn apply_budget(
             run.size.0, run.size.1
         ),
         (budget::BudgetTarget::Flip(f), None) => format!("predicted FLIP ≤ {f}"),
-        (budget::BudgetTarget::Ms(ms), _) => format!("predicted frame ≤ {ms} ms"),
+        (budget::BudgetTarget::Ms(ms), _) => match &timed {
+            Some((_, run)) => format!(
+                "frame ≤ {ms} ms at {}×{} on this device, timed by pilots",
+                run.size.0, run.size.1
+            ),
+            None => format!("predicted frame ≤ {ms} ms"),
+        },
     };
     let why = |key: &str, chosen: String| -> String {
         if given(key) {
@@ -537,9 +567,36 @@ pub fn apply_budget(
             "chosen_measured_flip": round3(search.measured_flip),
         })
     });
+    let timing_report = timed.as_ref().map(|(search, run)| {
+        serde_json::json!({
+            "size": [run.size.0, run.size.1],
+            "frames": budget::timed::TIMING_FRAMES,
+            "ms": round3(run.ms),
+            "fit": {
+                "fixed_ms": round3(search.fit.fixed_ms),
+                "work_scale": round3(search.fit.work_scale),
+                "predicted_fixed_ms": round3(survey.predicted_fixed_ms()),
+            },
+            "measured": search
+                .pilots
+                .iter()
+                .map(|p| {
+                    let mut c = candidate_json(&p.choice, None);
+                    if let Some(fields) = c.as_object_mut() {
+                        fields.remove("measured_flip");
+                        fields.insert("measured_ms".into(), serde_json::json!(round3(p.measured_ms)));
+                    }
+                    c
+                })
+                .collect::<Vec<_>>(),
+            "chosen_measured_ms": search.measured_ms.map(round3),
+            "fitted_ms": fitted_ms.map(round3),
+        })
+    });
     Ok(serde_json::json!({
         "target": target_text,
         "pilots": pilot_report,
+        "timing_pilots": timing_report,
         "target_flip": match target {
             budget::BudgetTarget::Flip(f) => Some(f),
             budget::BudgetTarget::Ms(_) => None,
@@ -599,6 +656,9 @@ pub fn apply_budget(
             _ if converged_short => "the cheapest candidate the pilot frames measured within the target of the converged one, which is itself predicted to miss it (pilots.converged_predicted_flip): no candidate reaches it in this scene (knobs given explicitly kept)",
             _ if converged_kept => "no pilot met the target: the converged candidate (knobs given explicitly kept)",
             _ if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
+            _ if timed.as_ref().is_some_and(|(s, _)| !s.choice.met) => "no candidate fits the budget, by the timing pilots: the cheapest (knobs given explicitly kept)",
+            _ if timed.as_ref().is_some_and(|(s, _)| s.measured_ms.is_some()) => "the most accurate candidate a timing pilot measured within the budget (knobs given explicitly kept)",
+            _ if timed.is_some() => "the most accurate candidate the timing pilots' fit puts within the budget, not itself timed (knobs given explicitly kept)",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
             (false, true) => match target {
                 budget::BudgetTarget::Flip(_) => "the cheapest predicted setting meeting the target",
@@ -622,6 +682,26 @@ pub struct PilotFrames<'a> {
 /// survey looks from with the scene's nodes where they stand.
 pub type RenderPilot<'a> =
     dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<Image, RenderError> + 'a;
+
+/// The timing pilots of budget mode under `--budget-ms`: how many, and how to time one.
+pub struct TimingPilots<'a> {
+    /// Most candidates timed (`budget-pilots`).
+    pub count: usize,
+    /// The render's size (width, height), which they run at.
+    pub size: (u32, u32),
+    pub time: &'a mut TimePilot<'a>,
+}
+
+/// Renders settings for [`budget::timed::TIMING_FRAMES`] frames at the render's size, seen
+/// from the survey's camera, and returns the longest frame time after the first, ms.
+pub type TimePilot<'a> =
+    dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<f64, RenderError> + 'a;
+
+/// What measures budget mode's candidates, by its target.
+pub enum Pilots<'a> {
+    Flip(PilotFrames<'a>),
+    Time(TimingPilots<'a>),
+}
 
 /// What the pilot frames cost, for the report.
 struct PilotRun {
@@ -687,6 +767,93 @@ fn visibility_of(settings: &SparseSettings) -> Option<budget::Visibility> {
     }
 }
 
+/// The survey's candidates the knobs given explicitly allow.
+fn allowed_candidates(
+    survey: &budget::Survey,
+    options: &MethodOptions,
+    settings: &SparseSettings,
+) -> Vec<budget::BudgetChoice> {
+    let given = |key: &str| options.given(key);
+    // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=union`,
+    // which is no candidate.
+    let pinned_visibility =
+        (given("occlusion") || given("visibility-rays")).then_some(visibility_of(settings));
+    survey.candidates(|points, rsm, visibility| {
+        (!given("sparse-points") || points == settings.sparse_points)
+            && (!given("rsm") || rsm == settings.rsm)
+            && pinned_visibility.is_none_or(|v| v == Some(visibility))
+    })
+}
+
+/// A pilot's failure that passes its candidate over (beyond `--gpu-memory`, a mesh given
+/// more points than its links address: a candidate the render could not use either), with a
+/// warning; cancelling stops the search.
+fn passed_over<T>(
+    result: Result<T, RenderError>,
+    choice: &budget::BudgetChoice,
+) -> Result<Option<T>, RenderError> {
+    match result {
+        Ok(value) => Ok(Some(value)),
+        Err(RenderError::Cancelled(c)) => Err(RenderError::Cancelled(c)),
+        Err(e) => {
+            eprintln!(
+                "warning: budget mode: pilot of {} points, RSM {}, {:?} failed ({e}); passed over",
+                choice.points, choice.rsm, choice.visibility
+            );
+            Ok(None)
+        }
+    }
+}
+
+/// Runs the timing search over the candidates the explicitly given knobs allow; `None` when
+/// they allow none (a knob given outside the candidates' range, `occlusion=union`).
+fn time_with_pilots(
+    survey: &budget::Survey,
+    options: &MethodOptions,
+    settings: &SparseSettings,
+    budget_ms: f64,
+    pilot: TimingPilots<'_>,
+    (world_from_node, camera): (&[Mat4], &CameraView),
+) -> Result<Option<(budget::timed::TimeSearch, TimingRun)>, RenderError> {
+    let started = Instant::now();
+    let candidates = allowed_candidates(survey, options, settings);
+    let search = budget::timed::search(
+        &candidates,
+        budget_ms,
+        survey.predicted_fixed_ms(),
+        pilot.count,
+        |choice| {
+            let measured = (pilot.time)(
+                &with_candidate(settings, choice, |_| false),
+                world_from_node,
+                camera,
+            );
+            let ms = passed_over(measured, choice)?.unwrap_or(f64::NAN);
+            log::info!(
+                "budget mode: timing pilot {} points, RSM {}, {:?}: {ms:.1} ms (predicted {:.1})",
+                choice.points,
+                choice.rsm,
+                choice.visibility,
+                choice.predicted_ms
+            );
+            Ok::<_, RenderError>(ms)
+        },
+    )?;
+    Ok(search.map(|search| {
+        let run = TimingRun {
+            size: pilot.size,
+            ms: started.elapsed().as_secs_f64() * 1000.0,
+        };
+        (search, run)
+    }))
+}
+
+/// What the timing pilots cost, for the report.
+struct TimingRun {
+    size: (u32, u32),
+    ms: f64,
+}
+
 /// Runs the pilot search over the candidates the explicitly given knobs allow.
 fn search_with_pilots(
     survey: &budget::Survey,
@@ -697,33 +864,14 @@ fn search_with_pilots(
     (world_from_node, camera): (&[Mat4], &CameraView),
 ) -> Result<Option<(budget::PilotSearch, PilotRun)>, RenderError> {
     let started = Instant::now();
-    let given = |key: &str| options.given(key);
-    // The visibility the options pin, if they pin one; `Some(None)` for `occlusion=union`,
-    // which is no candidate.
-    let pinned_visibility =
-        (given("occlusion") || given("visibility-rays")).then_some(visibility_of(settings));
-    let candidates = survey.candidates(|points, rsm, visibility| {
-        (!given("sparse-points") || points == settings.sparse_points)
-            && (!given("rsm") || rsm == settings.rsm)
-            && pinned_visibility.is_none_or(|v| v == Some(visibility))
-    });
-    // A candidate that cannot be built here (beyond `--gpu-memory`, a mesh given more points
-    // than its links address) is one the render could not use either: it is passed over,
-    // with a warning. Cancelling stops the search.
-    let mut render = |choice: &budget::BudgetChoice| match (pilot.render)(
-        &with_candidate(settings, choice, |_| false),
-        world_from_node,
-        camera,
-    ) {
-        Ok(image) => Ok(Some(image)),
-        Err(RenderError::Cancelled(c)) => Err(RenderError::Cancelled(c)),
-        Err(e) => {
-            eprintln!(
-                "warning: budget mode: pilot frame of {} points, RSM {}, {:?} failed ({e}); passed over",
-                choice.points, choice.rsm, choice.visibility
-            );
-            Ok(None)
-        }
+    let candidates = allowed_candidates(survey, options, settings);
+    let mut render = |choice: &budget::BudgetChoice| {
+        let image = (pilot.render)(
+            &with_candidate(settings, choice, |_| false),
+            world_from_node,
+            camera,
+        );
+        passed_over(image, choice)
     };
     // The converged image: the richest candidate that renders. A knob given outside the
     // candidates' range (or `occlusion=union`) leaves nothing to measure, and then, as when
@@ -1117,7 +1265,26 @@ impl SparseMethod {
                     indirect.sanitize();
                     Ok(indirect)
                 };
+                // Timing pilots: the sparse method at the render's own size, one view.
+                let mut time_pilot = |settings: &SparseSettings,
+                                      world: &[Mat4],
+                                      camera: &CameraView|
+                 -> Result<f64, RenderError> {
+                    time_frames(ctx, scene, render, *settings, world, camera)
+                };
                 let count: usize = options.get("budget-pilots", budget::DEFAULT_PILOTS)?;
+                let pilots = match target {
+                    budget::BudgetTarget::Flip(_) => Pilots::Flip(PilotFrames {
+                        count,
+                        size,
+                        render: &mut render_pilot,
+                    }),
+                    budget::BudgetTarget::Ms(_) => Pilots::Time(TimingPilots {
+                        count,
+                        size: (render.width, render.height),
+                        time: &mut time_pilot,
+                    }),
+                };
                 Some(apply_budget(
                     scene,
                     (render.camera, aspect),
@@ -1125,11 +1292,7 @@ impl SparseMethod {
                     target,
                     peak,
                     &mut settings,
-                    Some(PilotFrames {
-                        count,
-                        size,
-                        render: &mut render_pilot,
-                    }),
+                    Some(pilots),
                 )?)
             }
             None => None,
@@ -1138,6 +1301,42 @@ impl SparseMethod {
         method.budget = budget;
         Ok(method)
     }
+}
+
+/// One timing pilot: the sparse method with `settings` at `render`'s size, through one view,
+/// for [`budget::timed::TIMING_FRAMES`] frames; the longest frame time (the passes' total, as
+/// `valgi render` reports it) after the first, ms: a budget holds for every frame.
+fn time_frames(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    settings: SparseSettings,
+    world_from_node: &[Mat4],
+    camera: &CameraView,
+) -> Result<f64, RenderError> {
+    let mut method = SparseMethod::new(ctx, scene, render, settings)?;
+    let view = View::new(
+        ctx,
+        "timing pilot",
+        *camera,
+        (render.width, render.height),
+        render.ssaa,
+    )?;
+    let mut longest: f64 = 0.0;
+    for frame in 0..budget::timed::TIMING_FRAMES {
+        crate::progress::check()?;
+        let recorded = crate::frame::record_frame(
+            &mut method,
+            ctx,
+            scene,
+            world_from_node,
+            std::slice::from_ref(&view),
+        )?;
+        if frame > 0 {
+            longest = longest.max(recorded.timings.merged().total_ms());
+        }
+    }
+    Ok(longest)
 }
 
 #[cfg(test)]
