@@ -240,6 +240,18 @@ pub fn cheapest_meeting(rows: &[SweepRow], target: f64, error: TargetError) -> O
         .min_by(|a, b| a.total_ms.total_cmp(&b.total_ms))
 }
 
+/// The grid row of one scene with the lowest convergence error among those whose frame took at
+/// most `budget_ms`; `None` when none did.
+pub fn most_accurate_within(rows: &[SweepRow], budget_ms: f64) -> Option<&SweepRow> {
+    rows.iter()
+        .filter(|r| r.total_ms <= budget_ms && r.flip_indirect_converged.is_finite())
+        .min_by(|a, b| {
+            a.flip_indirect_converged
+                .total_cmp(&b.flip_indirect_converged)
+                .then(a.total_ms.total_cmp(&b.total_ms))
+        })
+}
+
 /// Writes `sweep.csv`.
 pub fn write_csv(path: &Path, rows: &[SweepRow]) -> Result<(), EvalError> {
     let mut csv = String::new();
@@ -254,7 +266,8 @@ pub fn write_csv(path: &Path, rows: &[SweepRow]) -> Result<(), EvalError> {
 }
 
 /// A budget-mode row against the grid: its time and convergence error beside the cheapest
-/// grid setting that reaches the same convergence error target.
+/// grid setting that reaches the same convergence error target, or under a time budget the
+/// most accurate grid setting whose frame fits it.
 #[derive(Clone, Debug)]
 pub struct AutoCheck {
     pub scene: String,
@@ -273,6 +286,11 @@ pub struct AutoCheck {
     /// Whether budget mode's report says the target is met (`budget.met`): its pilots'
     /// measurement, which also asks its converged candidate to be predicted within the target.
     pub budget_met: Option<bool>,
+    /// `--budget-ms`, under a time budget.
+    pub budget_ms: Option<f64>,
+    /// The most accurate grid row whose frame fits the time budget, if any: its setting, time
+    /// and convergence error.
+    pub most_accurate_within: Option<(GridSetting, f64, f64)>,
 }
 
 impl AutoCheck {
@@ -287,9 +305,20 @@ impl AutoCheck {
     pub fn grid_time_ratio(&self) -> Option<f64> {
         Some(self.chosen_grid_ms? / self.cheapest?.1)
     }
+
+    /// Under a time budget, budget mode's frame over the budget (≤ 1 is the goal).
+    pub fn budget_ratio(&self) -> Option<f64> {
+        Some(self.total_ms / self.budget_ms?)
+    }
+
+    /// Under a time budget, budget mode's convergence error less that of the most accurate
+    /// grid setting within the budget (≤ 0: at least as accurate).
+    pub fn flip_excess(&self) -> Option<f64> {
+        Some(self.flip_indirect_converged - self.most_accurate_within?.2)
+    }
 }
 
-pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio,budget_met";
+pub const CHECK_CSV_HEADER: &str = "scene,settings,chosen,target_flip,predicted_flip,total_ms,flip_indirect,flip_indirect_converged,meets_target,cheapest_grid,cheapest_ms,cheapest_flip_converged,time_ratio,chosen_grid_ms,grid_time_ratio,budget_met,budget_ms,budget_ratio,best_grid_within,best_grid_ms,best_grid_flip_converged,flip_excess";
 
 /// A knob's value in budget mode's report: `budget.<knob>.value`.
 fn knob_value<'a>(budget: &'a serde_json::Value, knob: &str) -> Option<&'a serde_json::Value> {
@@ -336,6 +365,7 @@ pub fn check_auto(
         .map(|i| metrics::flip(indirect, &grid_indirect[i], exposure))
         .unwrap_or(f64::NAN);
     let target_flip = budget.get("target_flip").and_then(|t| t.as_f64());
+    let budget_ms = budget.get("budget_ms").and_then(|t| t.as_f64());
     let value = |knob: &str| {
         knob_value(budget, knob)
             .map(|v| v.to_string().trim_matches('"').to_string())
@@ -375,6 +405,11 @@ pub fn check_auto(
                 .map(|r| r.total_ms)
         }),
         budget_met: budget.get("met").and_then(|m| m.as_bool()),
+        budget_ms,
+        most_accurate_within: budget_ms.and_then(|ms| {
+            most_accurate_within(grid_rows, ms)
+                .map(|r| (r.setting, r.total_ms, r.flip_indirect_converged))
+        }),
     }
 }
 
@@ -389,11 +424,21 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
                 format!("{ms:.3}"),
                 format!("{flip:.6}"),
             ),
-            None => ("none".into(), String::new(), String::new()),
+            None if c.target_flip.is_some() => ("none".into(), String::new(), String::new()),
+            None => Default::default(),
+        };
+        let (best, best_ms, best_flip) = match c.most_accurate_within {
+            Some((s, ms, flip)) => (
+                format!("{} {} {}", s.points, s.rsm, s.visibility.name()),
+                format!("{ms:.3}"),
+                format!("{flip:.6}"),
+            ),
+            None if c.budget_ms.is_some() => ("none".into(), String::new(), String::new()),
+            None => Default::default(),
         };
         let _ = writeln!(
             csv,
-            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{},{}",
+            "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             c.scene,
             c.settings,
             c.chosen,
@@ -417,7 +462,17 @@ pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> 
             c.grid_time_ratio()
                 .map(|r| format!("{r:.3}"))
                 .unwrap_or_default(),
-            c.budget_met.map(|m| m.to_string()).unwrap_or_default()
+            c.budget_met.map(|m| m.to_string()).unwrap_or_default(),
+            c.budget_ms.map(|ms| ms.to_string()).unwrap_or_default(),
+            c.budget_ratio()
+                .map(|r| format!("{r:.3}"))
+                .unwrap_or_default(),
+            best,
+            best_ms,
+            best_flip,
+            c.flip_excess()
+                .map(|e| format!("{e:.6}"))
+                .unwrap_or_default()
         );
     }
     std::fs::write(path, csv).map_err(|e| EvalError::Output {
@@ -516,14 +571,46 @@ mod tests {
             cheapest: Some((setting(SweepVisibility::Off), 100.0, 0.04)),
             chosen_grid_ms: Some(100.0),
             budget_met: Some(true),
+            budget_ms: None,
+            most_accurate_within: None,
         };
         assert_eq!(check.time_ratio(), Some(1.3));
         assert_eq!(check.grid_time_ratio(), Some(1.0));
         let off_grid = AutoCheck {
             chosen_grid_ms: None,
-            ..check
+            ..check.clone()
         };
         assert_eq!(off_grid.grid_time_ratio(), None);
+        assert_eq!((check.budget_ratio(), check.flip_excess()), (None, None));
+        // Under a time budget: the frame over the budget, the error over the grid's best.
+        let timed = AutoCheck {
+            target_flip: None,
+            cheapest: None,
+            budget_ms: Some(200.0),
+            most_accurate_within: Some((setting(SweepVisibility::RaysAll), 190.0, 0.03)),
+            ..check
+        };
+        assert_eq!(timed.budget_ratio(), Some(0.65));
+        assert!((timed.flip_excess().unwrap() - 0.01).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_most_accurate_setting_within_a_time_budget_is_found() {
+        let rows = [
+            row(1024, 50.0, 0.2, 0.08),
+            row(2048, 120.0, 0.15, 0.04),
+            row(4096, 260.0, 0.12, 0.02),
+            row(8192, 250.0, 0.12, f64::NAN),
+        ];
+        let best = |ms| most_accurate_within(&rows, ms).map(|r| r.setting.points);
+        assert_eq!(best(40.0), None);
+        assert_eq!(best(100.0), Some(1024));
+        assert_eq!(
+            best(255.0),
+            Some(2048),
+            "a row without a converged error is skipped"
+        );
+        assert_eq!(best(1000.0), Some(4096));
     }
 
     #[test]

@@ -601,6 +601,10 @@ pub fn apply_budget(
             budget::BudgetTarget::Flip(f) => Some(f),
             budget::BudgetTarget::Ms(_) => None,
         },
+        "budget_ms": match target {
+            budget::BudgetTarget::Flip(_) => None,
+            budget::BudgetTarget::Ms(ms) => Some(ms),
+        },
         "met": met,
         "predicted_flip": crate::gpu::timing::round3(used.predicted_flip),
         "predicted_ms": crate::gpu::timing::round3(used.predicted_ms),
