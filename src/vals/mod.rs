@@ -591,6 +591,18 @@ pub fn apply_budget(
                 .collect::<Vec<_>>(),
             "chosen_measured_ms": search.measured_ms.map(round3),
             "fitted_ms": fitted_ms.map(round3),
+            "accuracy": run.accuracy.as_ref().map(|a| serde_json::json!({
+                "size": [a.size.0, a.size.1],
+                "converged": candidate_json(&a.converged, None),
+                "measured": a
+                    .search
+                    .pilots
+                    .iter()
+                    .map(|p| candidate_json(&p.choice, Some(p.measured_flip)))
+                    .collect::<Vec<_>>(),
+                "chosen_measured_flip": a.search.choice.filter(|p| p.choice.same_setting(&search.choice)).map(|p| round3(p.measured_flip)),
+                "changed_choice": a.changed,
+            })),
         })
     });
     Ok(serde_json::json!({
@@ -661,6 +673,7 @@ pub fn apply_budget(
             _ if converged_kept => "no pilot met the target: the converged candidate (knobs given explicitly kept)",
             _ if searched.is_some() => "the cheapest candidate the pilot frames measured meeting the target (knobs given explicitly kept)",
             _ if timed.as_ref().is_some_and(|(s, _)| !s.choice.met) => "no candidate fits the budget, by the timing pilots: the cheapest (knobs given explicitly kept)",
+            _ if timed.as_ref().is_some_and(|(_, run)| run.accuracy.as_ref().is_some_and(|a| a.changed)) => "the most accurate candidate the pilot frames measured among those the timing pilots put within the budget, timed within it (knobs given explicitly kept)",
             _ if timed.as_ref().is_some_and(|(s, _)| s.measured_ms.is_some()) => "the most accurate candidate a timing pilot measured within the budget (knobs given explicitly kept)",
             _ if timed.is_some() => "the most accurate candidate the timing pilots' fit puts within the budget, not itself timed (knobs given explicitly kept)",
             (true, _) => "the best choice for the knobs not given; the prediction is for the setting used",
@@ -687,13 +700,15 @@ pub struct PilotFrames<'a> {
 pub type RenderPilot<'a> =
     dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<Image, RenderError> + 'a;
 
-/// The timing pilots of budget mode under `--budget-ms`: how many, and how to time one.
+/// The pilots of budget mode under `--budget-ms`: how many candidates to time and how, and
+/// the small frames that then rank the candidates within the budget by accuracy.
 pub struct TimingPilots<'a> {
     /// Most candidates timed (`budget-pilots`).
     pub count: usize,
     /// The render's size (width, height), which they run at.
     pub size: (u32, u32),
     pub time: &'a mut TimePilot<'a>,
+    pub frames: PilotFrames<'a>,
 }
 
 /// Renders settings for [`budget::timed::TIMING_FRAMES`] frames at the render's size, seen
@@ -821,34 +836,150 @@ fn time_with_pilots(
 ) -> Result<Option<(budget::timed::TimeSearch, TimingRun)>, RenderError> {
     let started = Instant::now();
     let candidates = allowed_candidates(survey, options, settings);
-    let search = budget::timed::search(
+    let fixed = survey.predicted_fixed_ms();
+    let time = pilot.time;
+    let mut time_one = |choice: &budget::BudgetChoice| {
+        let measured = time(
+            &with_candidate(settings, choice, |_| false),
+            world_from_node,
+            camera,
+        );
+        let ms = passed_over(measured, choice)?.unwrap_or(f64::NAN);
+        log::info!(
+            "budget mode: timing pilot {} points, RSM {}, {:?}: {ms:.1} ms (predicted {:.1})",
+            choice.points,
+            choice.rsm,
+            choice.visibility,
+            choice.predicted_ms
+        );
+        Ok::<_, RenderError>(ms)
+    };
+    let Some(mut search) =
+        budget::timed::search(&candidates, budget_ms, fixed, pilot.count, &mut time_one)?
+    else {
+        return Ok(None);
+    };
+    let accuracy = rank_within_budget(
         &candidates,
+        &mut search,
         budget_ms,
-        survey.predicted_fixed_ms(),
-        pilot.count,
-        |choice| {
-            let measured = (pilot.time)(
-                &with_candidate(settings, choice, |_| false),
-                world_from_node,
-                camera,
-            );
-            let ms = passed_over(measured, choice)?.unwrap_or(f64::NAN);
-            log::info!(
-                "budget mode: timing pilot {} points, RSM {}, {:?}: {ms:.1} ms (predicted {:.1})",
-                choice.points,
-                choice.rsm,
-                choice.visibility,
-                choice.predicted_ms
-            );
-            Ok::<_, RenderError>(ms)
-        },
+        fixed,
+        pilot.frames,
+        &mut time_one,
+        (settings, world_from_node, camera),
     )?;
-    Ok(search.map(|search| {
-        let run = TimingRun {
-            size: pilot.size,
-            ms: started.elapsed().as_secs_f64() * 1000.0,
-        };
-        (search, run)
+    let run = TimingRun {
+        size: pilot.size,
+        ms: started.elapsed().as_secs_f64() * 1000.0,
+        accuracy,
+    };
+    Ok(Some((search, run)))
+}
+
+/// The accuracy pilots under a time budget, for the report.
+struct AccuracyRun {
+    converged: budget::BudgetChoice,
+    size: (u32, u32),
+    search: budget::WithinSearch,
+    /// Whether their choice replaced the timing search's.
+    changed: bool,
+}
+
+/// Ranks the candidates the timing search puts within the budget by measured accuracy
+/// ([`budget::Survey::search_within`], small frames against the richest candidate), and
+/// takes the most accurate once a timing pilot has measured it within the budget (timing it
+/// if none has). Nothing to rank when the timing search kept the richest candidate, missed the
+/// budget, or left one candidate within it; `None` then, or when the richest candidate does
+/// not render.
+fn rank_within_budget(
+    candidates: &[budget::BudgetChoice],
+    search: &mut budget::timed::TimeSearch,
+    budget_ms: f64,
+    fixed_predicted_ms: f64,
+    frames: PilotFrames<'_>,
+    time_one: &mut dyn FnMut(&budget::BudgetChoice) -> Result<f64, RenderError>,
+    (settings, world_from_node, camera): (&SparseSettings, &[Mat4], &CameraView),
+) -> Result<Option<AccuracyRun>, RenderError> {
+    let eligible: Vec<&budget::BudgetChoice> = candidates
+        .iter()
+        .filter(|c| c.visibility != budget::Visibility::Sum)
+        .collect();
+    let Some(converged) = eligible
+        .iter()
+        .max_by_key(|c| (c.points, c.rsm, c.visibility.richness()))
+        .copied()
+    else {
+        return Ok(None);
+    };
+    let within: Vec<budget::BudgetChoice> = eligible
+        .iter()
+        .filter(|c| search.time_of(c, fixed_predicted_ms) <= budget_ms)
+        .map(|c| **c)
+        .collect();
+    if frames.count == 0
+        || !search.choice.met
+        || search.choice.same_setting(converged)
+        || within.len() < 2
+    {
+        return Ok(None);
+    }
+    let mut render = |choice: &budget::BudgetChoice| {
+        let image = (frames.render)(
+            &with_candidate(settings, choice, |_| false),
+            world_from_node,
+            camera,
+        );
+        passed_over(image, choice)
+    };
+    let Some(reference) = render(converged)? else {
+        return Ok(None);
+    };
+    let exposure = crate::image_io::compare::auto_exposure(&reference);
+    let ranked = budget::Survey::search_within(&within, converged, frames.count, |choice| {
+        let measured = render(choice)?.map_or(f64::NAN, |image| {
+            crate::image_io::compare::flip(&image, &reference, exposure)
+        });
+        log::info!(
+            "budget mode: accuracy pilot {} points, RSM {}, {:?}: FLIP {measured:.4} (predicted {:.4})",
+            choice.points,
+            choice.rsm,
+            choice.visibility,
+            choice.predicted_flip
+        );
+        Ok::<_, RenderError>(measured)
+    })?;
+    let mut changed = false;
+    if let Some(best) = ranked
+        .choice
+        .filter(|b| !b.choice.same_setting(&search.choice))
+    {
+        // The fit put it within the budget; a measurement decides.
+        let known = search
+            .pilots
+            .iter()
+            .any(|p| p.choice.same_setting(&best.choice));
+        if !known {
+            let measured_ms = time_one(&best.choice)?;
+            search.pilots.push(budget::timed::TimedPilot {
+                choice: best.choice,
+                measured_ms,
+            });
+        }
+        let measured_ms = search.time_of(&best.choice, fixed_predicted_ms);
+        if measured_ms <= budget_ms {
+            search.choice = budget::BudgetChoice {
+                met: true,
+                ..best.choice
+            };
+            search.measured_ms = Some(measured_ms);
+            changed = true;
+        }
+    }
+    Ok(Some(AccuracyRun {
+        converged: *converged,
+        size: frames.size,
+        search: ranked,
+        changed,
     }))
 }
 
@@ -856,6 +987,7 @@ fn time_with_pilots(
 struct TimingRun {
     size: (u32, u32),
     ms: f64,
+    accuracy: Option<AccuracyRun>,
 }
 
 /// Runs the pilot search over the candidates the explicitly given knobs allow.
@@ -1287,6 +1419,11 @@ impl SparseMethod {
                         count,
                         size: (render.width, render.height),
                         time: &mut time_pilot,
+                        frames: PilotFrames {
+                            count,
+                            size,
+                            render: &mut render_pilot,
+                        },
                     }),
                 };
                 Some(apply_budget(

@@ -136,6 +136,21 @@ pub struct TimeSearch {
     pub pilots: Vec<TimedPilot>,
 }
 
+impl TimeSearch {
+    /// A candidate's frame time by what the search knows: a pilot's measurement (NaN for one
+    /// that failed), else the fit. `fixed_predicted_ms` as given to [`search`].
+    pub fn time_of(&self, c: &BudgetChoice, fixed_predicted_ms: f64) -> f64 {
+        self.pilots
+            .iter()
+            .find(|p| p.choice.same_setting(c))
+            .map(|p| p.measured_ms)
+            .unwrap_or_else(|| {
+                self.fit
+                    .time_ms((c.predicted_ms - fixed_predicted_ms).max(0.0))
+            })
+    }
+}
+
 /// Chooses among `candidates` for a frame time of `budget_ms` (module docs), timing at most
 /// `max_pilots` of them with `measure` (a frame time in ms; NaN for one that failed).
 /// `fixed_predicted_ms` is the survey's predicted fixed part, which every candidate's
