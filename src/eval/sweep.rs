@@ -413,29 +413,28 @@ pub fn check_auto(
     }
 }
 
+/// A grid row's setting, time and convergence error as `sweep_check.csv` cells: "none" where
+/// the check `applies` and found no row, empty where it does not apply.
+fn grid_row_cells(row: Option<(GridSetting, f64, f64)>, applies: bool) -> (String, String, String) {
+    match row {
+        Some((s, ms, flip)) => (
+            format!("{} {} {}", s.points, s.rsm, s.visibility.name()),
+            format!("{ms:.3}"),
+            format!("{flip:.6}"),
+        ),
+        None if applies => ("none".into(), String::new(), String::new()),
+        None => Default::default(),
+    }
+}
+
 /// Writes `sweep_check.csv`.
 pub fn write_checks(path: &Path, checks: &[AutoCheck]) -> Result<(), EvalError> {
     let mut csv = String::new();
     let _ = writeln!(csv, "{CHECK_CSV_HEADER}");
     for c in checks {
-        let (grid, ms, flip) = match c.cheapest {
-            Some((s, ms, flip)) => (
-                format!("{} {} {}", s.points, s.rsm, s.visibility.name()),
-                format!("{ms:.3}"),
-                format!("{flip:.6}"),
-            ),
-            None if c.target_flip.is_some() => ("none".into(), String::new(), String::new()),
-            None => Default::default(),
-        };
-        let (best, best_ms, best_flip) = match c.most_accurate_within {
-            Some((s, ms, flip)) => (
-                format!("{} {} {}", s.points, s.rsm, s.visibility.name()),
-                format!("{ms:.3}"),
-                format!("{flip:.6}"),
-            ),
-            None if c.budget_ms.is_some() => ("none".into(), String::new(), String::new()),
-            None => Default::default(),
-        };
+        let (grid, ms, flip) = grid_row_cells(c.cheapest, c.target_flip.is_some());
+        let (best, best_ms, best_flip) =
+            grid_row_cells(c.most_accurate_within, c.budget_ms.is_some());
         let _ = writeln!(
             csv,
             "{},\"{}\",{},{},{:.4},{:.3},{:.6},{:.6},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
