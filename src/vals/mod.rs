@@ -960,10 +960,13 @@ fn rank_within_budget(
             .any(|p| p.choice.same_setting(&best.choice));
         if !known {
             let measured_ms = time_one(&best.choice)?;
-            search.pilots.push(budget::timed::TimedPilot {
-                choice: best.choice,
-                measured_ms,
-            });
+            search.add_pilot(
+                budget::timed::TimedPilot {
+                    choice: best.choice,
+                    measured_ms,
+                },
+                fixed_predicted_ms,
+            );
         }
         let measured_ms = search.time_of(&best.choice, fixed_predicted_ms);
         if measured_ms <= budget_ms {

@@ -136,7 +136,27 @@ pub struct TimeSearch {
     pub pilots: Vec<TimedPilot>,
 }
 
+/// A candidate's predicted work, ms: its predicted frame time less the predicted fixed part.
+fn work_ms(c: &BudgetChoice, fixed_predicted_ms: f64) -> f64 {
+    (c.predicted_ms - fixed_predicted_ms).max(0.0)
+}
+
+/// [`TimeFit::fit`] to the pilots' times against their candidates' predicted work.
+fn fit_to(pilots: &[TimedPilot], fixed_predicted_ms: f64) -> TimeFit {
+    let measured: Vec<(f64, f64)> = pilots
+        .iter()
+        .map(|p| (work_ms(&p.choice, fixed_predicted_ms), p.measured_ms))
+        .collect();
+    TimeFit::fit(&measured, fixed_predicted_ms)
+}
+
 impl TimeSearch {
+    /// Adds a pilot timed after the search (the accuracy pilots' choice) and refits.
+    pub fn add_pilot(&mut self, pilot: TimedPilot, fixed_predicted_ms: f64) {
+        self.pilots.push(pilot);
+        self.fit = fit_to(&self.pilots, fixed_predicted_ms);
+    }
+
     /// A candidate's frame time by what the search knows: a pilot's measurement (NaN for one
     /// that failed), else the fit. `fixed_predicted_ms` as given to [`search`].
     pub fn time_of(&self, c: &BudgetChoice, fixed_predicted_ms: f64) -> f64 {
@@ -144,10 +164,7 @@ impl TimeSearch {
             .iter()
             .find(|p| p.choice.same_setting(c))
             .map(|p| p.measured_ms)
-            .unwrap_or_else(|| {
-                self.fit
-                    .time_ms((c.predicted_ms - fixed_predicted_ms).max(0.0))
-            })
+            .unwrap_or_else(|| self.fit.time_ms(work_ms(c, fixed_predicted_ms)))
     }
 }
 
@@ -170,14 +187,8 @@ pub fn search<E>(
     if candidates.is_empty() {
         return Ok(None);
     }
-    let work = |c: &BudgetChoice| (c.predicted_ms - fixed_predicted_ms).max(0.0);
-    let fit_of = |pilots: &[TimedPilot]| {
-        let measured: Vec<(f64, f64)> = pilots
-            .iter()
-            .map(|p| (work(&p.choice), p.measured_ms))
-            .collect();
-        TimeFit::fit(&measured, fixed_predicted_ms)
-    };
+    let work = |c: &BudgetChoice| work_ms(c, fixed_predicted_ms);
+    let fit_of = |pilots: &[TimedPilot]| fit_to(pilots, fixed_predicted_ms);
     let timed = |pilots: &[TimedPilot], c: &BudgetChoice| {
         pilots
             .iter()
@@ -421,6 +432,17 @@ mod tests {
             .into_iter()
             .min_by(|a, b| slow(a).total_cmp(&slow(b)))
             .unwrap();
+        // A pilot timed after the search (the accuracy pilots' choice) refits the times.
+        let mut refitted = alone.clone();
+        let extra = TimedPilot {
+            choice: cheapest,
+            measured_ms: slow(&cheapest),
+        };
+        refitted.add_pilot(extra, fixed);
+        assert_eq!(refitted.pilots, vec![extra]);
+        let expected = TimeFit::fit(&[(cheapest.predicted_ms - fixed, extra.measured_ms)], fixed);
+        assert_eq!(refitted.fit, expected);
+        assert_ne!(refitted.fit, alone.fit);
         assert!(!missed.choice.met, "{missed:?}");
         assert!(missed.choice.same_setting(&cheapest), "{missed:?}");
         assert_eq!(
