@@ -986,6 +986,12 @@ impl BudgetChoice {
     pub fn same_setting(&self, other: &BudgetChoice) -> bool {
         (self.points, self.rsm, self.visibility) == (other.points, other.rsm, other.visibility)
     }
+
+    /// Orders candidates by how close to converged they are: points, then RSM side, then
+    /// visibility ([`Visibility::richness`]); the greatest is the pilots' converged image.
+    pub fn richness(&self) -> (usize, u32, u32) {
+        (self.points, self.rsm, self.visibility.richness())
+    }
 }
 
 impl Survey {
@@ -1345,7 +1351,8 @@ fn geometric_mean_error<'a>(pilots: impl Iterator<Item = &'a Pilot>) -> f64 {
 mod tests {
     use super::*;
 
-    fn survey_of(name: &str) -> Survey {
+    /// The survey of a built-in scene from its own camera (also the timing search's tests').
+    pub(super) fn survey_of(name: &str) -> Survey {
         let scene = crate::scene::load_with(name, &crate::scene::LoadParams::default())
             .expect("built-in scene");
         let world = scene.world_from_node_at(0.0);
@@ -1580,14 +1587,14 @@ mod tests {
         }
     }
 
-    /// When the scaled predictions leave no candidate meeting the target, the most accurate
-    /// one is measured while its prediction is within [`PROBE_SPREAD`] of the target, and
-    /// not beyond.
     /// [`synthetic`] with rays to every stratum.
     fn with_rays(points: usize, predicted_flip: f64, predicted_ms: f64) -> BudgetChoice {
         synthetic(points, Visibility::Rays, predicted_flip, predicted_ms)
     }
 
+    /// When the scaled predictions leave no candidate meeting the target, the most accurate
+    /// one is measured while its prediction is within [`PROBE_SPREAD`] of the target, and
+    /// not beyond.
     #[test]
     fn a_candidate_predicted_just_short_of_the_target_is_still_measured() {
         let candidate = with_rays;

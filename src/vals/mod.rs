@@ -904,11 +904,7 @@ fn rank_within_budget(
         .iter()
         .filter(|c| c.visibility != budget::Visibility::Sum)
         .collect();
-    let Some(converged) = eligible
-        .iter()
-        .max_by_key(|c| (c.points, c.rsm, c.visibility.richness()))
-        .copied()
-    else {
+    let Some(converged) = eligible.iter().max_by_key(|c| c.richness()).copied() else {
         return Ok(None);
     };
     let within: Vec<budget::BudgetChoice> = eligible
@@ -923,30 +919,12 @@ fn rank_within_budget(
     {
         return Ok(None);
     }
-    let mut render = |choice: &budget::BudgetChoice| {
-        let image = (frames.render)(
-            &with_candidate(settings, choice, |_| false),
-            world_from_node,
-            camera,
-        );
-        passed_over(image, choice)
-    };
-    let Some(reference) = render(converged)? else {
+    let view = (settings, world_from_node, camera);
+    let Some(mut probe) = ConvergenceProbe::new(frames.render, view, [converged])? else {
         return Ok(None);
     };
-    let exposure = crate::image_io::compare::auto_exposure(&reference);
     let ranked = budget::Survey::search_within(&within, converged, frames.count, |choice| {
-        let measured = render(choice)?.map_or(f64::NAN, |image| {
-            crate::image_io::compare::flip(&image, &reference, exposure)
-        });
-        log::info!(
-            "budget mode: accuracy pilot {} points, RSM {}, {:?}: FLIP {measured:.4} (predicted {:.4})",
-            choice.points,
-            choice.rsm,
-            choice.visibility,
-            choice.predicted_flip
-        );
-        Ok::<_, RenderError>(measured)
+        probe.measure("accuracy pilot", choice)
     })?;
     let mut changed = false;
     if let Some(best) = ranked
@@ -1004,48 +982,22 @@ fn search_with_pilots(
 ) -> Result<Option<(budget::PilotSearch, PilotRun)>, RenderError> {
     let started = Instant::now();
     let candidates = allowed_candidates(survey, options, settings);
-    let mut render = |choice: &budget::BudgetChoice| {
-        let image = (pilot.render)(
-            &with_candidate(settings, choice, |_| false),
-            world_from_node,
-            camera,
-        );
-        passed_over(image, choice)
-    };
     // The converged image: the richest candidate that renders. A knob given outside the
     // candidates' range (or `occlusion=union`) leaves nothing to measure, and then, as when
     // nothing renders, the survey's prediction decides.
     let mut by_rank = candidates.clone();
-    by_rank.sort_by_key(|c| std::cmp::Reverse((c.points, c.rsm, c.visibility.richness())));
-    let mut converged = None;
-    for choice in by_rank.iter().take(3) {
-        if let Some(image) = render(choice)? {
-            converged = Some((*choice, image));
-            break;
-        }
-    }
-    let Some((converged, reference)) = converged else {
+    by_rank.sort_by_key(|c| std::cmp::Reverse(c.richness()));
+    let view = (settings, world_from_node, camera);
+    let Some(mut probe) = ConvergenceProbe::new(pilot.render, view, by_rank.iter().take(3))? else {
         return Ok(None);
     };
-    let exposure = crate::image_io::compare::auto_exposure(&reference);
+    let converged = probe.converged;
     let search = budget::Survey::search(
         &candidates,
         &converged,
         target_flip,
         pilot.count,
-        |choice| {
-            let measured = render(choice)?.map_or(f64::NAN, |image| {
-                crate::image_io::compare::flip(&image, &reference, exposure)
-            });
-            log::info!(
-                "budget mode: pilot {} points, RSM {}, {:?}: FLIP {measured:.4} (predicted {:.4})",
-                choice.points,
-                choice.rsm,
-                choice.visibility,
-                choice.predicted_flip
-            );
-            Ok::<_, RenderError>(measured)
-        },
+        |choice| probe.measure("pilot", choice),
     )?;
     let run = PilotRun {
         size: pilot.size,
@@ -1053,6 +1005,70 @@ fn search_with_pilots(
         converged,
     };
     Ok(Some((search, run)))
+}
+
+/// Pilot frames that measure candidates' convergence FLIP against a converged image: the
+/// first of the given candidates that renders. Under a FLIP target and, within a time budget,
+/// for accuracy.
+struct ConvergenceProbe<'r, 'a, 'v> {
+    render: &'r mut RenderPilot<'a>,
+    view: (&'v SparseSettings, &'v [Mat4], &'v CameraView),
+    converged: budget::BudgetChoice,
+    reference: Image,
+    exposure: f32,
+}
+
+impl<'r, 'a, 'v> ConvergenceProbe<'r, 'a, 'v> {
+    /// `None` when none of `converged_first` renders.
+    fn new<'c>(
+        render: &'r mut RenderPilot<'a>,
+        view: (&'v SparseSettings, &'v [Mat4], &'v CameraView),
+        converged_first: impl IntoIterator<Item = &'c budget::BudgetChoice>,
+    ) -> Result<Option<Self>, RenderError> {
+        for choice in converged_first {
+            if let Some(reference) = pilot_image(render, view, choice)? {
+                let exposure = crate::image_io::compare::auto_exposure(&reference);
+                return Ok(Some(Self {
+                    render,
+                    view,
+                    converged: *choice,
+                    reference,
+                    exposure,
+                }));
+            }
+        }
+        Ok(None)
+    }
+
+    /// A candidate's convergence FLIP (NaN when its frame failed and it was passed over),
+    /// logged as a `kind` pilot.
+    fn measure(&mut self, kind: &str, choice: &budget::BudgetChoice) -> Result<f64, RenderError> {
+        let measured = pilot_image(self.render, self.view, choice)?.map_or(f64::NAN, |image| {
+            crate::image_io::compare::flip(&image, &self.reference, self.exposure)
+        });
+        log::info!(
+            "budget mode: {kind} {} points, RSM {}, {:?}: FLIP {measured:.4} (predicted {:.4})",
+            choice.points,
+            choice.rsm,
+            choice.visibility,
+            choice.predicted_flip
+        );
+        Ok(measured)
+    }
+}
+
+/// One pilot frame of a candidate's settings; `None` when it failed and is passed over.
+fn pilot_image(
+    render: &mut RenderPilot<'_>,
+    (settings, world_from_node, camera): (&SparseSettings, &[Mat4], &CameraView),
+    choice: &budget::BudgetChoice,
+) -> Result<Option<Image>, RenderError> {
+    let image = render(
+        &with_candidate(settings, choice, |_| false),
+        world_from_node,
+        camera,
+    );
+    passed_over(image, choice)
 }
 
 /// A candidate for the JSON report.

@@ -267,16 +267,9 @@ pub fn search<E>(
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::survey_of;
     use super::super::{BudgetTarget, Survey, DEFAULT_PILOTS};
     use super::*;
-
-    fn survey_of(name: &str) -> Survey {
-        let scene = crate::scene::load_with(name, &crate::scene::LoadParams::default())
-            .expect("built-in scene");
-        let world = scene.world_from_node_at(0.0);
-        let camera = scene.camera_view(None, 1.0, &world).expect("camera");
-        Survey::new(&scene, &world, Some(&camera), 1)
-    }
 
     fn close(a: f64, b: f64) -> bool {
         (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()))
