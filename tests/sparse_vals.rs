@@ -1593,3 +1593,66 @@ fn solutions_on_one_device_share_its_pipelines_and_render_as_on_their_own() {
     assert_eq!(after_cornell.indirect.pixels, alone.indirect.pixels);
     assert_eq!(after_cornell.direct.pixels, alone.direct.pixels);
 }
+
+/// Budget mode's pilots build the method many times over one scene through a `SceneCache`:
+/// those builds share the scene's upload, its meshes' BVHs and each point count's cut links,
+/// and render what a build of its own renders, to the bit.
+#[test]
+fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_renders() {
+    use std::sync::Arc;
+    let Some(ctx) = common::gpu() else { return };
+    let scene = builtin::load("door-room", &BuiltinParams { max_edge: 0.25 }).expect("door room");
+    let world = scene.world_from_node();
+    let view = camera(&scene, 24);
+    let rays = sparse_settings(32, 256, OcclusionMode::Rays, true);
+    assert!(rays.link_test);
+    let fewer = SparseSettings {
+        sparse_points: 128,
+        ..rays
+    };
+    let cache = valgi::vals::SceneCache::new(&scene);
+    let build = |s: SparseSettings| {
+        SparseMethod::from_cache(&ctx, &cache, settings(24), s, None).expect("cached build")
+    };
+    let (mut first, mut other, mut again) = (build(rays), build(fewer), build(rays));
+    let mut fresh = SparseMethod::new(&ctx, &scene, settings(24), rays).expect("fresh build");
+
+    assert!(Arc::ptr_eq(
+        &first.raster.scene_gpu,
+        &other.raster.scene_gpu
+    ));
+    assert!(Arc::ptr_eq(
+        &first.sparse.bvh().meshes,
+        &again.sparse.bvh().meshes
+    ));
+    assert!(!Arc::ptr_eq(
+        &first.raster.scene_gpu,
+        &fresh.raster.scene_gpu
+    ));
+    // The partition cuts links; a cut mesh's points are new on every cut, so the same
+    // allocation in `again` is the first build's cut, taken from the cache.
+    assert!(first.link_cut.links > 0, "{:?}", first.link_cut);
+    let cut_mesh = (0..scene.meshes.len())
+        .find(|&m| !Arc::ptr_eq(&first.points[m], &fresh.points[m]))
+        .expect("a mesh whose links were cut");
+    assert!(Arc::ptr_eq(
+        &first.points[cut_mesh],
+        &again.points[cut_mesh]
+    ));
+    assert_eq!((again.link_cut, again.meshes_computed), (first.link_cut, 0));
+
+    let indirect = |m: &mut SparseMethod| {
+        m.render(&ctx, &scene, &world, &view)
+            .expect("render")
+            .indirect
+            .pixels
+    };
+    let expected = indirect(&mut fresh);
+    assert!(expected.iter().any(|p| p[0] > 0.0), "an indirect image");
+    assert!(indirect(&mut first) == expected);
+    assert!(indirect(&mut again) == expected);
+    assert!(
+        indirect(&mut other) != expected,
+        "fewer points, another image"
+    );
+}

@@ -90,11 +90,22 @@ struct MeshRange {
     empty: bool,
 }
 
-/// The per-mesh BVHs of a scene, flattened, and their GPU buffers.
-pub struct SceneBvh {
+/// Every mesh's BVH in its model space (the bottom level), flattened, and their texels: built
+/// once per scene and shared by every [`SceneBvh`] over it (budget mode's pilots build the
+/// sparse method once per candidate; on Sponza this build was 0.4 s of each).
+pub struct MeshBvhs {
     pub nodes: Vec<BvhNode>,
     pub triangles: Vec<BvhTriangle>,
     meshes: Vec<MeshRange>,
+    node_texels: wgpu::Texture,
+    triangle_texels: wgpu::Texture,
+    pub bytes: GpuBytes,
+}
+
+/// A scene's shadow-ray BVH: its meshes' BVHs and the top level over the instances placed
+/// this frame, with their GPU texels.
+pub struct SceneBvh {
+    pub meshes: std::sync::Arc<MeshBvhs>,
     /// The instances with triangles, in the top level's leaf order (a leaf's instances are
     /// contiguous); written each frame by [`SceneBvh::update`].
     pub instances: Vec<BvhInstance>,
@@ -104,12 +115,11 @@ pub struct SceneBvh {
     /// The instances [`SceneBvh::update`] built the top level from (scene order), so a
     /// frame that places them the same way skips the rebuild and the upload.
     placed: Option<Vec<BvhInstance>>,
-    /// The nodes, triangles, instances and top-level nodes as rgba32uint texels
-    /// ([`BVH_ROW_TEXELS`] a row); the last two are rewritten by [`SceneBvh::update`].
-    pub node_texels: wgpu::Texture,
-    pub triangle_texels: wgpu::Texture,
+    /// The instances and top-level nodes as rgba32uint texels ([`BVH_ROW_TEXELS`] a row),
+    /// rewritten by [`SceneBvh::update`].
     pub instance_texels: wgpu::Texture,
     pub top_texels: wgpu::Texture,
+    /// The GPU bytes of the whole BVH, the shared mesh level's included.
     pub bytes: GpuBytes,
     /// Bind group 1 of the shaders that include `bvh.wgsl`.
     pub layout: GroupLayout,
@@ -333,7 +343,24 @@ pub fn ray_triangle(origin: Vec3, dir: Vec3, t_max: f32, tri: &BvhTriangle) -> O
 
 pub use crate::scene::pick::{ray_box, safe_inverse};
 
-impl SceneBvh {
+/// The texels of `words` for the BVH of `scene` (`what` names the part in a size error),
+/// their bytes added to `bytes`.
+fn bvh_texels(
+    ctx: &GpuContext,
+    scene: &Scene,
+    what: &str,
+    words: &[u32],
+    bytes: &mut GpuBytes,
+) -> Result<wgpu::Texture, GpuError> {
+    let remedy = "Use a coarser --max-edge, or a scene with fewer triangles or instances";
+    let name = format!("the shadow-ray BVH {what} of scene '{}'", scene.name);
+    texel_rows(ctx, &name, words, remedy).map(|(texture, size)| {
+        bytes.0 += size;
+        texture
+    })
+}
+
+impl MeshBvhs {
     pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let mut nodes = Vec::new();
         let mut triangles = Vec::new();
@@ -369,47 +396,78 @@ impl SceneBvh {
         if triangles.is_empty() {
             triangles.push(BvhTriangle::default());
         }
+        let mut bytes = GpuBytes::default();
+        let node_texels = bvh_texels(
+            ctx,
+            scene,
+            "nodes",
+            bytemuck::cast_slice(&nodes),
+            &mut bytes,
+        )?;
+        let triangle_texels = bvh_texels(
+            ctx,
+            scene,
+            "triangles",
+            bytemuck::cast_slice(&triangles),
+            &mut bytes,
+        )?;
+        Ok(Self {
+            nodes,
+            triangles,
+            meshes,
+            node_texels,
+            triangle_texels,
+            bytes,
+        })
+    }
+}
+
+impl SceneBvh {
+    /// The BVH of `scene` with its mesh level built for it alone.
+    pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
+        Self::over(ctx, scene, std::sync::Arc::new(MeshBvhs::new(ctx, scene)?))
+    }
+
+    /// The BVH of `scene` over `meshes`, its mesh level (which other BVHs may share).
+    pub fn over(
+        ctx: &GpuContext,
+        scene: &Scene,
+        meshes: std::sync::Arc<MeshBvhs>,
+    ) -> Result<Self, GpuError> {
         let instances = vec![BvhInstance::default(); scene.instances.len().max(1)];
         // A binary tree over n leaves has at most 2n − 1 nodes.
         let top_nodes = vec![UNREACHABLE_LEAF; 2 * scene.instances.len().max(1)];
-        let remedy = "Use a coarser --max-edge, or a scene with fewer triangles or instances";
-        let mut bytes = GpuBytes::default();
-        let mut texels = |what: &str, words: &[u32]| {
-            texel_rows(
-                ctx,
-                &format!("the shadow-ray BVH {what} of scene '{}'", scene.name),
-                words,
-                remedy,
-            )
-            .map(|(texture, size)| {
-                bytes.0 += size;
-                texture
-            })
-        };
-        let node_texels = texels("nodes", bytemuck::cast_slice(&nodes))?;
-        let triangle_texels = texels("triangles", bytemuck::cast_slice(&triangles))?;
-        let instance_texels = texels("instances", bytemuck::cast_slice(&instances))?;
-        let top_texels = texels("top-level nodes", bytemuck::cast_slice(&top_nodes))?;
+        let mut bytes = meshes.bytes;
+        let instance_texels = bvh_texels(
+            ctx,
+            scene,
+            "instances",
+            bytemuck::cast_slice(&instances),
+            &mut bytes,
+        )?;
+        let top_texels = bvh_texels(
+            ctx,
+            scene,
+            "top-level nodes",
+            bytemuck::cast_slice(&top_nodes),
+            &mut bytes,
+        )?;
         let layout = Self::layout(ctx);
         let view = |texture: &wgpu::Texture| texture.create_view(&Default::default());
         let group = layout.bind(
             &ctx.device,
             &[
-                &view(&node_texels),
-                &view(&triangle_texels),
+                &view(&meshes.node_texels),
+                &view(&meshes.triangle_texels),
                 &view(&instance_texels),
                 &view(&top_texels),
             ],
         );
         Ok(Self {
-            nodes,
-            triangles,
             meshes,
             instances,
             top_nodes,
             placed: None,
-            node_texels,
-            triangle_texels,
             instance_texels,
             top_texels,
             bytes,
@@ -445,7 +503,7 @@ impl SceneBvh {
             .instances
             .iter()
             .filter_map(|inst| {
-                let range = self.meshes[inst.mesh];
+                let range = self.meshes.meshes[inst.mesh];
                 let world_from_model = world_from_node[inst.node];
                 let invertible = world_from_model.determinant().abs() > 1e-30;
                 if range.empty || !invertible || !world_from_model.is_finite() {
@@ -503,11 +561,12 @@ impl SceneBvh {
                 let first_node = inst.world_min[3].to_bits() as usize;
                 let first_triangle = inst.world_max[3].to_bits() as usize;
                 walk(
-                    &self.nodes[first_node..],
+                    &self.meshes.nodes[first_node..],
                     origin,
                     safe_inverse(dir),
                     |leaf| {
-                        let triangles = &self.triangles[first_triangle + leaf.first as usize..];
+                        let triangles =
+                            &self.meshes.triangles[first_triangle + leaf.first as usize..];
                         triangles[..leaf.prim_count as usize]
                             .iter()
                             .any(|tri| ray_triangle(origin, dir, 1.0, tri).is_some())

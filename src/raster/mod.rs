@@ -8,6 +8,8 @@ pub mod shadow_atlas;
 pub mod shadows;
 pub mod types;
 
+use std::sync::Arc;
+
 use glam::Mat4;
 
 use crate::frame::View;
@@ -165,7 +167,9 @@ pub const VIEW_BLOCK: u32 = 256;
 /// per [`View`].
 pub struct Rasterizer {
     pub settings: RenderSettings,
-    pub scene_gpu: SceneGpu,
+    /// The scene's upload, shared with other rasterizers over the same scene
+    /// ([`Rasterizer::over`]).
+    pub scene_gpu: Arc<SceneGpu>,
     lights_buffer: wgpu::Buffer,
     shadow_views_buffer: wgpu::Buffer,
     /// The lights and views again as the uniform blocks the direct pass reads when they fit
@@ -199,9 +203,22 @@ impl Rasterizer {
         scene: &Scene,
         settings: RenderSettings,
     ) -> Result<Self, RenderError> {
+        // The mono view's size is checked here so that a bad size fails before any upload.
+        crate::frame::check_size(ctx, settings.width, settings.height, settings.ssaa)?;
+        let scene_gpu = Arc::new(SceneGpu::upload(ctx, scene)?);
+        Self::over(ctx, scene, settings, scene_gpu)
+    }
+
+    /// The rasterizer over `scene_gpu`, an upload of `scene` that other rasterizers may share
+    /// (budget mode's pilots build a method per candidate over one scene).
+    pub fn over(
+        ctx: &GpuContext,
+        scene: &Scene,
+        settings: RenderSettings,
+        scene_gpu: Arc<SceneGpu>,
+    ) -> Result<Self, RenderError> {
         let device = &ctx.device;
         let limits = device.limits();
-        // The mono view's size is checked here so that a bad size fails before any upload.
         crate::frame::check_size(ctx, settings.width, settings.height, settings.ssaa)?;
         let shadow_resolution = settings.shadow_resolution;
         let max_shadow_resolution = limits.max_texture_dimension_2d;
@@ -212,7 +229,6 @@ impl Rasterizer {
             )));
         }
         let atlas = plan_shadow_atlas(scene, &settings, limits.max_texture_array_layers)?;
-        let scene_gpu = SceneGpu::upload(ctx, scene)?;
         let mut shadow_bytes = GpuBytes::default();
 
         let storage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;

@@ -9,6 +9,7 @@
 pub mod budget;
 pub mod math;
 pub mod points;
+pub mod scene_cache;
 pub mod sparse;
 pub mod visibility;
 
@@ -28,6 +29,8 @@ use crate::scene::{CameraView, Scene};
 use glam::Mat4;
 use math::{OcclusionMode, Weights};
 use points::MeshPoints;
+use scene_cache::PreparedPoints;
+pub use scene_cache::SceneCache;
 pub use sparse::Stage;
 use sparse::{GatherForm, KernelGroups, SparseGpu, SparseOptions, VisibilityLookup};
 
@@ -1138,7 +1141,22 @@ impl SparseMethod {
         settings: SparseSettings,
         val_source: Option<Box<dyn ValSource>>,
     ) -> Result<Self, RenderError> {
-        let raster = Rasterizer::new(ctx, scene, render)?;
+        Self::from_cache(ctx, &SceneCache::new(scene), render, settings, val_source)
+    }
+
+    /// The sparse method over `cache`'s scene, taking from `cache` what an earlier build over
+    /// it made (budget mode's pilots) and leaving there what this one makes.
+    pub fn from_cache(
+        ctx: &GpuContext,
+        cache: &SceneCache<'_>,
+        render: RenderSettings,
+        settings: SparseSettings,
+        val_source: Option<Box<dyn ValSource>>,
+    ) -> Result<Self, RenderError> {
+        let scene = cache.scene;
+        // A bad size fails before any upload.
+        crate::frame::check_size(ctx, render.width, render.height, render.ssaa)?;
+        let raster = Rasterizer::over(ctx, scene, render, cache.scene_gpu(ctx)?)?;
         let rsm = Rsm::with_external(
             ctx,
             scene,
@@ -1148,29 +1166,23 @@ impl SparseMethod {
             val_source.as_ref().map(|s| s.external()),
         )?;
         let started = Instant::now();
-        // Measures each mesh's turn (`points::curvature_boost`): computed once, for the size
-        // check and the placement both.
-        let counts = points::points_per_mesh(scene, settings.sparse_points);
-        if let Some((mesh, count)) = points::oversized_mesh(scene, &counts) {
-            return Err(RenderError::Settings(format!(
-                "--sparse-points {}: mesh '{mesh}' of scene '{}' would get {count} sparse \
-                 points; links address at most {} per mesh: lower --sparse-points",
-                settings.sparse_points,
-                scene.name,
-                points::MAX_POINTS_PER_MESH
-            )));
-        }
-        let (points, meshes_computed) = points::scene_points_for(scene, &counts, settings.seed);
-        let (points, link_cut) = if settings.link_test {
-            points::cut_links_through_walls(scene, &points)
-        } else {
-            (points, points::LinkCut::default())
-        };
+        let PreparedPoints {
+            points,
+            link_cut,
+            meshes_computed,
+        } = cache.points(settings.sparse_points, settings.seed, settings.link_test)?;
         let preprocess_ms = started.elapsed().as_secs_f64() * 1000.0;
         let sensor = val_source
             .as_ref()
             .and_then(|source| source.external().sensor.as_ref());
-        let sparse = SparseGpu::new(ctx, scene, &raster.scene_gpu, &points, &rsm, sensor)?;
+        let sparse = SparseGpu::new(
+            ctx,
+            scene,
+            (&raster.scene_gpu, cache.mesh_bvhs(ctx)?),
+            &points,
+            &rsm,
+            sensor,
+        )?;
         Ok(Self {
             settings,
             raster,
@@ -1394,6 +1406,8 @@ impl SparseMethod {
         options: &MethodOptions,
     ) -> Result<Self, RenderError> {
         let mut settings = SparseSettings::from_options(options)?;
+        // Budget mode builds the method once per pilot, then once more for its choice.
+        let cache = SceneCache::new(scene);
         let budget = match budget_target(options)? {
             Some(target) => {
                 // A time budget is predicted for this device: the fitted times scaled by the
@@ -1415,7 +1429,8 @@ impl SparseMethod {
                                         world: &[Mat4],
                                         camera: &CameraView|
                  -> Result<Image, RenderError> {
-                    let mut method = SparseMethod::new(ctx, scene, pilot_render, *settings)?;
+                    let mut method =
+                        SparseMethod::from_cache(ctx, &cache, pilot_render, *settings, None)?;
                     let mut indirect = method.render(ctx, scene, world, camera)?.indirect;
                     indirect.sanitize();
                     Ok(indirect)
@@ -1425,7 +1440,7 @@ impl SparseMethod {
                                       world: &[Mat4],
                                       camera: &CameraView|
                  -> Result<f64, RenderError> {
-                    time_frames(ctx, scene, render, *settings, world, camera)
+                    time_frames(ctx, &cache, render, *settings, world, camera)
                 };
                 let count: usize = options.get("budget-pilots", budget::DEFAULT_PILOTS)?;
                 let pilots = match target {
@@ -1457,7 +1472,7 @@ impl SparseMethod {
             }
             None => None,
         };
-        let mut method = SparseMethod::new(ctx, scene, render, settings)?;
+        let mut method = SparseMethod::from_cache(ctx, &cache, render, settings, None)?;
         method.budget = budget;
         Ok(method)
     }
@@ -1468,13 +1483,14 @@ impl SparseMethod {
 /// `valgi render` reports it) after the first, ms: a budget holds for every frame.
 fn time_frames(
     ctx: &GpuContext,
-    scene: &Scene,
+    cache: &SceneCache<'_>,
     render: RenderSettings,
     settings: SparseSettings,
     world_from_node: &[Mat4],
     camera: &CameraView,
 ) -> Result<f64, RenderError> {
-    let mut method = SparseMethod::new(ctx, scene, render, settings)?;
+    let scene = cache.scene;
+    let mut method = SparseMethod::from_cache(ctx, cache, render, settings, None)?;
     let view = View::new(
         ctx,
         "timing pilot",

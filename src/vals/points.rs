@@ -5,6 +5,7 @@
 //! interpolation weights of paper eq. 12, which rigid motion leaves unchanged, so they are
 //! computed here once. Every point gets an occluder-disc radius from its Voronoi region.
 
+use std::cell::OnceCell;
 use std::collections::{BinaryHeap, HashMap};
 use std::hash::{Hash, Hasher};
 use std::num::NonZero;
@@ -529,6 +530,16 @@ pub fn cut_links_through_walls(
     scene: &Scene,
     points: &[Arc<MeshPoints>],
 ) -> (Vec<Arc<MeshPoints>>, LinkCut) {
+    cut_links_with(scene, points, &OnceCell::new())
+}
+
+/// [`cut_links_through_walls`] with the tracer of `scene` at rest kept in `tracer`: built on
+/// first use, and reused by the next call over the same scene (one per budget pilot).
+pub fn cut_links_with<'s>(
+    scene: &'s Scene,
+    points: &[Arc<MeshPoints>],
+    tracer: &OnceCell<crate::trace::Tracer<'s>>,
+) -> (Vec<Arc<MeshPoints>>, LinkCut) {
     let moving = scene.moving_nodes();
     let mut uses = vec![0usize; scene.meshes.len()];
     for inst in &scene.instances {
@@ -551,7 +562,7 @@ pub fn cut_links_through_walls(
         return (out, cut);
     }
     let world_from_node = scene.world_from_node_at(0.0);
-    let tracer = crate::trace::Tracer::new(scene, &world_from_node);
+    let tracer = tracer.get_or_init(|| crate::trace::Tracer::new(scene, &world_from_node));
     let eps = tracer.epsilon;
     // A vertex or point on the seam with another mesh (a ceiling's edge against a wall) sits
     // on that mesh's surface: the segment leaves it at t = 0, which is no wall between them.

@@ -20,7 +20,7 @@ use super::points::{MeshPoints, LINKS};
 use crate::frame::View;
 use crate::gpu::bindings::{GroupLayout, Slot};
 use crate::gpu::{compute_pipeline_groups, linear_groups, GpuBytes, GpuContext, GpuError, Passes};
-use crate::light::bvh::{SceneBvh, BVH_ROW_TEXELS};
+use crate::light::bvh::{MeshBvhs, SceneBvh, BVH_ROW_TEXELS};
 use crate::light::rsm::{Rsm, MAX_CLUSTERS};
 use crate::light::sensor::SensorBuffers;
 use crate::light::val_windows::{self, ValReads, ValWindows};
@@ -925,7 +925,7 @@ impl SparseGpu {
     pub fn new(
         ctx: &GpuContext,
         scene: &Scene,
-        scene_gpu: &SceneGpu,
+        (scene_gpu, mesh_bvhs): (&SceneGpu, Arc<MeshBvhs>),
         points: &[Arc<MeshPoints>],
         rsm: &Rsm,
         sensor: Option<&SensorBuffers>,
@@ -1209,7 +1209,7 @@ impl SparseGpu {
         );
 
         // Visibility: group 0 its buffers, group 1 the scene's BVH.
-        let bvh = SceneBvh::new(ctx, scene)?;
+        let bvh = SceneBvh::over(ctx, scene, mesh_bvhs)?;
         bytes.add(GpuBytes(bvh.bytes.0));
         let val_texels = ValTexels::new(ctx, vals_buffer)?;
         bytes.add(GpuBytes(val_texels.bytes));
