@@ -3,6 +3,7 @@
 //!
 //! - [`rsm`]: reflective shadow maps → one buffer of VALs for all lights.
 //! - [`points`]: the preprocessing — sparse points per mesh, vertex links, disc radii.
+//! - [`scene_cache`]: what builds over one scene share (budget mode's pilots).
 //! - [`sparse`]: the GPU passes gather → renormalize → occlusion → interpolation → apply.
 //! - [`math`]: the CPU twin of every kernel, and the documentation of the math.
 
