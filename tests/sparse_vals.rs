@@ -1622,8 +1622,8 @@ fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_ren
         &other.raster.scene_gpu
     ));
     assert!(Arc::ptr_eq(
-        &first.sparse.bvh().meshes,
-        &again.sparse.bvh().meshes
+        &first.sparse.bvh().bottom,
+        &again.sparse.bvh().bottom
     ));
     assert!(!Arc::ptr_eq(
         &first.raster.scene_gpu,

@@ -12,6 +12,7 @@
 //! zero-filled on every call, and on the software Vulkan driver the two 64-entry stacks of
 //! the walk this replaced were half the visibility pass's time.
 
+use std::sync::Arc;
 use std::time::Duration;
 
 use bytemuck::{Pod, Zeroable};
@@ -96,7 +97,8 @@ struct MeshRange {
 pub struct MeshBvhs {
     pub nodes: Vec<BvhNode>,
     pub triangles: Vec<BvhTriangle>,
-    meshes: Vec<MeshRange>,
+    /// Where each mesh's nodes and triangles start.
+    ranges: Vec<MeshRange>,
     node_texels: wgpu::Texture,
     triangle_texels: wgpu::Texture,
     pub bytes: GpuBytes,
@@ -105,7 +107,8 @@ pub struct MeshBvhs {
 /// A scene's shadow-ray BVH: its meshes' BVHs and the top level over the instances placed
 /// this frame, with their GPU texels.
 pub struct SceneBvh {
-    pub meshes: std::sync::Arc<MeshBvhs>,
+    /// The bottom level, which other BVHs over the scene may share.
+    pub bottom: Arc<MeshBvhs>,
     /// The instances with triangles, in the top level's leaf order (a leaf's instances are
     /// contiguous); written each frame by [`SceneBvh::update`].
     pub instances: Vec<BvhInstance>,
@@ -364,7 +367,7 @@ impl MeshBvhs {
     pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let mut nodes = Vec::new();
         let mut triangles = Vec::new();
-        let mut meshes = Vec::with_capacity(scene.meshes.len());
+        let mut ranges = Vec::with_capacity(scene.meshes.len());
         for mesh in &scene.meshes {
             let textured = scene
                 .materials
@@ -385,7 +388,7 @@ impl MeshBvhs {
                     ..MeshRange::default()
                 },
             };
-            meshes.push(range);
+            ranges.push(range);
             nodes.extend(mesh_nodes);
             triangles.extend(mesh_triangles);
         }
@@ -414,7 +417,7 @@ impl MeshBvhs {
         Ok(Self {
             nodes,
             triangles,
-            meshes,
+            ranges,
             node_texels,
             triangle_texels,
             bytes,
@@ -425,19 +428,15 @@ impl MeshBvhs {
 impl SceneBvh {
     /// The BVH of `scene` with its mesh level built for it alone.
     pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
-        Self::over(ctx, scene, std::sync::Arc::new(MeshBvhs::new(ctx, scene)?))
+        Self::over(ctx, scene, Arc::new(MeshBvhs::new(ctx, scene)?))
     }
 
-    /// The BVH of `scene` over `meshes`, its mesh level (which other BVHs may share).
-    pub fn over(
-        ctx: &GpuContext,
-        scene: &Scene,
-        meshes: std::sync::Arc<MeshBvhs>,
-    ) -> Result<Self, GpuError> {
+    /// The BVH of `scene` over `bottom`, its meshes' BVHs (which other BVHs may share).
+    pub fn over(ctx: &GpuContext, scene: &Scene, bottom: Arc<MeshBvhs>) -> Result<Self, GpuError> {
         let instances = vec![BvhInstance::default(); scene.instances.len().max(1)];
         // A binary tree over n leaves has at most 2n − 1 nodes.
         let top_nodes = vec![UNREACHABLE_LEAF; 2 * scene.instances.len().max(1)];
-        let mut bytes = meshes.bytes;
+        let mut bytes = bottom.bytes;
         let instance_texels = bvh_texels(
             ctx,
             scene,
@@ -457,14 +456,14 @@ impl SceneBvh {
         let group = layout.bind(
             &ctx.device,
             &[
-                &view(&meshes.node_texels),
-                &view(&meshes.triangle_texels),
+                &view(&bottom.node_texels),
+                &view(&bottom.triangle_texels),
                 &view(&instance_texels),
                 &view(&top_texels),
             ],
         );
         Ok(Self {
-            meshes,
+            bottom,
             instances,
             top_nodes,
             placed: None,
@@ -503,7 +502,7 @@ impl SceneBvh {
             .instances
             .iter()
             .filter_map(|inst| {
-                let range = self.meshes.meshes[inst.mesh];
+                let range = self.bottom.ranges[inst.mesh];
                 let world_from_model = world_from_node[inst.node];
                 let invertible = world_from_model.determinant().abs() > 1e-30;
                 if range.empty || !invertible || !world_from_model.is_finite() {
@@ -561,12 +560,12 @@ impl SceneBvh {
                 let first_node = inst.world_min[3].to_bits() as usize;
                 let first_triangle = inst.world_max[3].to_bits() as usize;
                 walk(
-                    &self.meshes.nodes[first_node..],
+                    &self.bottom.nodes[first_node..],
                     origin,
                     safe_inverse(dir),
                     |leaf| {
                         let triangles =
-                            &self.meshes.triangles[first_triangle + leaf.first as usize..];
+                            &self.bottom.triangles[first_triangle + leaf.first as usize..];
                         triangles[..leaf.prim_count as usize]
                             .iter()
                             .any(|tri| ray_triangle(origin, dir, 1.0, tri).is_some())
