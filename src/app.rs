@@ -298,8 +298,11 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
     }
     let setup_started = Instant::now();
     let ctx = GpuContext::new()?;
+    let first_world = scene.world_from_node_at(request.time);
+    let rig = rig_views(request, &scene, &first_world)?;
     let settings = crate::raster::RenderSettings {
         camera: scene.camera_index(request.camera.as_deref()),
+        views_per_frame: rig.len() as u32,
         ..request.settings
     };
     let preparing = crate::progress::Step::new(true, 1, &format!("preparing {}", request.method));
@@ -321,9 +324,8 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         "scene loaded in {load_ms:.0} ms, method '{}' set up in {setup_ms:.0} ms",
         request.method
     );
-    let first_world = scene.world_from_node_at(request.time);
     let mut views = Vec::new();
-    for rig in rig_views(request, &scene, &first_world)? {
+    for rig in rig {
         views.push(View::new(
             &ctx,
             &rig.name,

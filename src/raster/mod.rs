@@ -44,6 +44,10 @@ pub struct RenderSettings {
     /// method builds from the camera's view before any frame (budget mode's survey); `None`:
     /// the scene's first camera, or the framing default without one.
     pub camera: Option<usize>,
+    /// Views each frame records (`--views`: two for stereo, one per CAVE wall), for what a
+    /// method times before any frame: budget mode's timing pilots record as many, each of
+    /// `width` × `height`, through the scene camera.
+    pub views_per_frame: u32,
 }
 
 impl RenderSettings {
@@ -99,6 +103,7 @@ impl Default for RenderSettings {
             max_vals: crate::light::rsm::DEFAULT_MAX_VALS,
             gpu_memory_mib: None,
             camera: None,
+            views_per_frame: 1,
         }
     }
 }

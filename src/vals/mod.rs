@@ -533,8 +533,13 @@ pub fn apply_budget(
         (budget::BudgetTarget::Flip(f), None) => format!("predicted FLIP ≤ {f}"),
         (budget::BudgetTarget::Ms(ms), _) => match &timed {
             Some((_, run)) => format!(
-                "frame ≤ {ms} ms at {}×{} on this device, timed by pilots",
-                run.size.0, run.size.1
+                "frame ≤ {ms} ms at {}×{}{} on this device, timed by pilots",
+                run.size.0,
+                run.size.1,
+                match run.views {
+                    1 => String::new(),
+                    n => format!(" through {n} views"),
+                }
             ),
             None => format!("predicted frame ≤ {ms} ms"),
         },
@@ -574,6 +579,7 @@ pub fn apply_budget(
     let timing_report = timed.as_ref().map(|(search, run)| {
         serde_json::json!({
             "size": [run.size.0, run.size.1],
+            "views": run.views,
             "frames": budget::timed::TIMING_FRAMES,
             "ms": round3(run.ms),
             "fit": {
@@ -711,12 +717,14 @@ pub struct TimingPilots<'a> {
     pub count: usize,
     /// The render's size (width, height), which they run at.
     pub size: (u32, u32),
+    /// Views per frame, as the render's frames record them.
+    pub views: u32,
     pub time: &'a mut TimePilot<'a>,
     pub frames: PilotFrames<'a>,
 }
 
-/// Renders settings for [`budget::timed::TIMING_FRAMES`] frames at the render's size, seen
-/// from the survey's camera, and returns the longest frame time after the first, ms.
+/// Renders settings for [`budget::timed::TIMING_FRAMES`] frames at the render's size and
+/// through its number of views, seen from the survey's camera, and returns the longest frame time after the first, ms.
 pub type TimePilot<'a> =
     dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<f64, RenderError> + 'a;
 
@@ -874,6 +882,7 @@ fn time_with_pilots(
     )?;
     let run = TimingRun {
         size: pilot.size,
+        views: pilot.views,
         ms: started.elapsed().as_secs_f64() * 1000.0,
         accuracy,
     };
@@ -971,6 +980,7 @@ fn rank_within_budget(
 /// What the timing pilots cost, for the report.
 struct TimingRun {
     size: (u32, u32),
+    views: u32,
     ms: f64,
     accuracy: Option<AccuracyRun>,
 }
@@ -1453,6 +1463,7 @@ impl SparseMethod {
                     budget::BudgetTarget::Ms(_) => Pilots::Time(TimingPilots {
                         count,
                         size: (render.width, render.height),
+                        views: render.views_per_frame.max(1),
                         time: &mut time_pilot,
                         frames: PilotFrames {
                             count,
@@ -1479,8 +1490,10 @@ impl SparseMethod {
     }
 }
 
-/// One timing pilot: the sparse method with `settings` at `render`'s size, through one view,
-/// for [`budget::timed::TIMING_FRAMES`] frames; the longest frame time (the passes' total, as
+/// One timing pilot: the sparse method with `settings` at `render`'s size, through as many
+/// views as the render's frames record (`views_per_frame`, each through `camera`: the
+/// per-view passes cost about the same in any direction), for
+/// [`budget::timed::TIMING_FRAMES`] frames; the longest frame time (the passes' total, as
 /// `valgi render` reports it) after the first, ms: a budget holds for every frame.
 fn time_frames(
     ctx: &GpuContext,
@@ -1492,23 +1505,22 @@ fn time_frames(
 ) -> Result<f64, RenderError> {
     let scene = cache.scene;
     let mut method = SparseMethod::from_cache(ctx, cache, render, settings, None)?;
-    let view = View::new(
-        ctx,
-        "timing pilot",
-        *camera,
-        (render.width, render.height),
-        render.ssaa,
-    )?;
+    let views = (0..render.views_per_frame.max(1))
+        .map(|_| {
+            View::new(
+                ctx,
+                "timing pilot",
+                *camera,
+                (render.width, render.height),
+                render.ssaa,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let mut longest: f64 = 0.0;
     for frame in 0..budget::timed::TIMING_FRAMES {
         crate::progress::check()?;
-        let recorded = crate::frame::record_frame(
-            &mut method,
-            ctx,
-            scene,
-            world_from_node,
-            std::slice::from_ref(&view),
-        )?;
+        let recorded =
+            crate::frame::record_frame(&mut method, ctx, scene, world_from_node, &views)?;
         if frame > 0 {
             longest = longest.max(recorded.timings.merged().total_ms());
         }

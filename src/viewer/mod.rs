@@ -939,6 +939,7 @@ impl Running {
         let settings = RenderSettings {
             width: size.0,
             height: size.1,
+            views_per_frame: self.views.len().max(1) as u32,
             ..self.request.settings
         };
         let generation = self.state.rebuilds.request(name, options.clone());
