@@ -8,7 +8,7 @@ use crate::atlas::{
     bake_in_memory, load_atlas, AtlasLayer, AtlasOnVals, LoadedAtlas, ATLAS_OPTION,
     FIRST_BOUNCE_ATTRIBUTE,
 };
-use crate::frame::Method;
+use crate::frame::{IndirectLayer, Method};
 use crate::gpu::GpuContext;
 use crate::method::{Entry, MethodOptions, OptionSpec};
 use crate::raster::{RenderError, RenderSettings};
@@ -84,10 +84,10 @@ fn with_atlas(
     options: &MethodOptions,
     atlas: &LoadedAtlas,
 ) -> Result<SparseMethod, RenderError> {
-    let mut sparse = SparseMethod::from_options(ctx, scene, render, options)?;
     let layer = AtlasLayer::from_loaded(ctx, scene, atlas)?;
-    sparse.layer = Some(Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas")));
-    Ok(sparse)
+    let layer: Box<dyn IndirectLayer> = Box::new(AtlasOnVals::new(ctx, layer, "sparse+atlas"));
+    // Built first: budget mode's timing pilots time the sparse light with its layer.
+    SparseMethod::from_options_with_layer(ctx, scene, render, options, Some(layer))
 }
 
 #[cfg(test)]

@@ -1656,3 +1656,71 @@ fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_ren
         "fewer points, another image"
     );
 }
+
+/// A layer that counts the views it records and leaves the sparse light under it as it is.
+struct CountingLayer(std::sync::Arc<std::sync::atomic::AtomicUsize>);
+
+impl valgi::frame::IndirectLayer for CountingLayer {
+    fn method_name(&self) -> &'static str {
+        "sparse+counting"
+    }
+
+    fn update(&mut self, _: &GpuContext, _: &valgi::frame::FrameInput, _: &[&valgi::frame::View]) {}
+
+    fn record_view(
+        &mut self,
+        _: &GpuContext,
+        view: &valgi::frame::View,
+        passes: &mut valgi::gpu::Passes,
+        draw_under: &mut dyn FnMut(
+            &mut valgi::gpu::Passes,
+            &wgpu::TextureView,
+        ) -> Result<(), valgi::gpu::GpuError>,
+    ) -> Result<(), valgi::raster::RenderError> {
+        self.0.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        draw_under(passes, &view.targets.radiance_indirect)?;
+        Ok(())
+    }
+
+    fn gpu_bytes(&self) -> u64 {
+        0
+    }
+}
+
+/// Under a time budget the frame to fit is the composed method's (`sparse+atlas` adds the
+/// atlas's passes to every view): each timing pilot renders with the layer, through as many
+/// views as the render's frames, and the layer comes back to the method chosen.
+#[test]
+fn timing_pilots_render_the_composed_methods_layer_through_every_view() {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    // One candidate (every knob given): one timing pilot.
+    let (_, options) = MethodOptions::parse_spec(
+        "sparse:quality=auto,budget-ms=1e7,sparse-points=1024,rsm=32,occlusion=off",
+    )
+    .unwrap();
+    let render = valgi::raster::RenderSettings {
+        views_per_frame: 2,
+        ..settings(24)
+    };
+    let recorded = std::sync::Arc::new(AtomicUsize::new(0));
+    let layer = Box::new(CountingLayer(recorded.clone()));
+    let mut method =
+        SparseMethod::from_options_with_layer(&ctx, &scene, render, &options, Some(layer))
+            .expect("budget mode");
+    let budget = method.budget.clone().expect("a budget report");
+    let pilots = budget["timing_pilots"]["measured"]
+        .as_array()
+        .map_or(0, Vec::len);
+    assert_eq!(pilots, 1, "{budget}");
+    assert_eq!(budget["timing_pilots"]["views"], 2, "{budget}");
+    let frames = valgi::vals::budget::timed::TIMING_FRAMES;
+    assert_eq!(recorded.load(Ordering::Relaxed), pilots * frames * 2);
+    // The method chosen records through the layer.
+    let world = scene.world_from_node();
+    method
+        .render(&ctx, &scene, &world, &camera(&scene, 24))
+        .expect("render");
+    assert_eq!(recorded.load(Ordering::Relaxed), pilots * frames * 2 + 1);
+}

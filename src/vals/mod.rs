@@ -1416,6 +1416,21 @@ impl SparseMethod {
         render: RenderSettings,
         options: &MethodOptions,
     ) -> Result<Self, RenderError> {
+        Self::from_options_with_layer(ctx, scene, render, options, None)
+    }
+
+    /// [`Self::from_options`] with `layer` on top of the sparse light (`sparse+atlas`'s
+    /// atlas). Budget mode's timing pilots render with it, so that a time budget holds for
+    /// the composed frame.
+    pub fn from_options_with_layer(
+        ctx: &GpuContext,
+        scene: &Scene,
+        render: RenderSettings,
+        options: &MethodOptions,
+        layer: Option<Box<dyn IndirectLayer>>,
+    ) -> Result<Self, RenderError> {
+        // Lent to each timing pilot in turn.
+        let layer = std::cell::RefCell::new(layer);
         let mut settings = SparseSettings::from_options(options)?;
         // Budget mode builds the method once per pilot, then once more for its choice.
         let cache = SceneCache::new(scene);
@@ -1451,7 +1466,7 @@ impl SparseMethod {
                                       world: &[Mat4],
                                       camera: &CameraView|
                  -> Result<f64, RenderError> {
-                    time_frames(ctx, &cache, render, *settings, world, camera)
+                    time_frames(ctx, &cache, render, *settings, (world, camera), &layer)
                 };
                 let count: usize = options.get("budget-pilots", budget::DEFAULT_PILOTS)?;
                 let pilots = match target {
@@ -1486,25 +1501,41 @@ impl SparseMethod {
         };
         let mut method = SparseMethod::from_cache(ctx, &cache, render, settings, None)?;
         method.budget = budget;
+        method.layer = layer.into_inner();
         Ok(method)
     }
 }
 
-/// One timing pilot: the sparse method with `settings` at `render`'s size, through as many
-/// views as the render's frames record (`views_per_frame`, each through `camera`: the
-/// per-view passes cost about the same in any direction), for
-/// [`budget::timed::TIMING_FRAMES`] frames; the longest frame time (the passes' total, as
-/// `valgi render` reports it) after the first, ms: a budget holds for every frame.
+/// One timing pilot: the sparse method with `settings` (and the composed method's `layer`)
+/// at `render`'s size, through as many views as the render's frames record
+/// (`views_per_frame`, each through `camera`: the per-view passes cost about the same in any
+/// direction), for [`budget::timed::TIMING_FRAMES`] frames; the longest frame time (the
+/// passes' total, as `valgi render` reports it) after the first, ms: a budget holds for every
+/// frame.
 fn time_frames(
     ctx: &GpuContext,
     cache: &SceneCache<'_>,
     render: RenderSettings,
     settings: SparseSettings,
-    world_from_node: &[Mat4],
-    camera: &CameraView,
+    view: (&[Mat4], &CameraView),
+    layer: &std::cell::RefCell<Option<Box<dyn IndirectLayer>>>,
 ) -> Result<f64, RenderError> {
-    let scene = cache.scene;
     let mut method = SparseMethod::from_cache(ctx, cache, render, settings, None)?;
+    // The composed method's layer rides along, and goes back whatever the frames do.
+    method.layer = layer.borrow_mut().take();
+    let timed = longest_frame(ctx, cache.scene, render, &mut method, view);
+    *layer.borrow_mut() = method.layer.take();
+    timed
+}
+
+/// The longest of `method`'s [`budget::timed::TIMING_FRAMES`] frames after the first, ms.
+fn longest_frame(
+    ctx: &GpuContext,
+    scene: &Scene,
+    render: RenderSettings,
+    method: &mut SparseMethod,
+    (world_from_node, camera): (&[Mat4], &CameraView),
+) -> Result<f64, RenderError> {
     let views = (0..render.views_per_frame.max(1))
         .map(|_| {
             View::new(
@@ -1519,8 +1550,7 @@ fn time_frames(
     let mut longest: f64 = 0.0;
     for frame in 0..budget::timed::TIMING_FRAMES {
         crate::progress::check()?;
-        let recorded =
-            crate::frame::record_frame(&mut method, ctx, scene, world_from_node, &views)?;
+        let recorded = crate::frame::record_frame(method, ctx, scene, world_from_node, &views)?;
         if frame > 0 {
             longest = longest.max(recorded.timings.merged().total_ms());
         }
