@@ -1062,6 +1062,42 @@ fn a_time_budget_times_every_view_a_frame_records() {
     }
 }
 
+/// `render`'s default method (`sparse+atlas`) under a time budget keeps its atlas layer: the
+/// timing pilots borrow it and hand it back.
+#[test]
+fn the_default_method_under_a_time_budget_keeps_its_atlas() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let out = temp_out("cli-budget-atlas", "cornell.exr");
+    let output = valgi()
+        .args([
+            "render", "--scene", "cornell", "--width", "32", "--height", "32",
+        ])
+        .args(["--quality", "auto", "--budget-ms", "1e7"])
+        .args([
+            "--sparse-points",
+            "1024",
+            "--rsm",
+            "32",
+            "--occlusion",
+            "off",
+        ])
+        .args(["--out", &out])
+        .output()
+        .expect("run valgi");
+    common::assert_success(&output);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(report["method"], "sparse+atlas", "{report}");
+    assert!(
+        report["passes"]["atlas lookup"].as_f64().is_some(),
+        "{report}"
+    );
+    let pilots = &report["budget"]["timing_pilots"]["measured"];
+    assert_eq!(pilots.as_array().map(Vec::len), Some(1), "{report}");
+}
+
 /// The default method's atlas is baked in memory; a scene whose charts the default bake
 /// cannot fit (3000 separate triangles need a 274² atlas, the bake's is 256²) renders the
 /// sparse method alone with a warning, while `--method sparse+atlas` asked for by name is
