@@ -517,6 +517,18 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         obj.insert("load_ms".into(), serde_json::json!(round3(load_ms)));
         obj.insert("setup_ms".into(), serde_json::json!(round3(setup_ms)));
         obj.extend(method.report());
+        // Budget mode says what it chose and why a line per knob; an imported scene's
+        // tessellation is one of them, chosen as the scene was loaded.
+        if let Some(budget) = obj.get_mut("budget").and_then(|b| b.as_object_mut()) {
+            let why = match tessellation.source {
+                "option" => "given".to_string(),
+                _ => tessellation.why.clone(),
+            };
+            budget.insert(
+                "max_edge".into(),
+                serde_json::json!({ "value": tessellation.max_edge, "why": why }),
+            );
+        }
         obj.insert(
             "wall_ms".into(),
             serde_json::json!(round3(started.elapsed().as_secs_f64() * 1000.0)),
@@ -526,7 +538,7 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
 }
 
 /// The tessellation a scene was loaded with and why.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Tessellation {
     /// Longest triangle edge asked for, metres.
     pub max_edge: f32,
@@ -537,13 +549,16 @@ pub struct Tessellation {
     /// The edge the meshes were refined to: `max_edge` unless the triangle budget raised it
     /// (the scene's warnings say so); `None` when nothing was refined.
     pub used_max_edge: Option<f32>,
+    /// Why `max_edge` is what it is, in words.
+    pub why: String,
 }
 
 impl Tessellation {
-    pub fn to_json(self) -> serde_json::Map<String, serde_json::Value> {
+    pub fn to_json(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut map = serde_json::Map::new();
         map.insert("max_edge".into(), serde_json::json!(self.max_edge));
         map.insert("max_edge_source".into(), serde_json::json!(self.source));
+        map.insert("max_edge_why".into(), serde_json::json!(self.why));
         map.insert(
             "max_edge_used".into(),
             serde_json::json!(self.used_max_edge),
@@ -596,6 +611,8 @@ pub fn load_scene_edited(
         emitter_lights,
     };
     let mut failure: Option<AppError> = None;
+    // The finest sparse method's edge and why.
+    let mut finest: Option<(f32, String)> = None;
     let (mut scene, edges) = scene::load_choosing_max_edge(spec, &params, |raw| {
         if max_edge.is_some() {
             return None;
@@ -614,7 +631,6 @@ pub fn load_scene_edited(
                 }
             }
         }
-        let mut finest: Option<f32> = None;
         for (method, options) in methods {
             if !crate::vals::uses_sparse_points(method) {
                 continue;
@@ -623,21 +639,36 @@ pub fn load_scene_edited(
                 .as_ref()
                 .map(|(s, selector)| (s, selector.as_deref(), aspect));
             match crate::vals::default_max_edge(raw, options, view) {
-                Ok(Some(edge)) => finest = Some(finest.map_or(edge, |f| f.min(edge))),
+                Ok(Some((edge, why))) => {
+                    if finest.as_ref().is_none_or(|(f, _)| edge < *f) {
+                        finest = Some((edge, why));
+                    }
+                }
                 Ok(None) => {}
                 Err(e) => failure = Some(e.into()),
             }
         }
-        finest
+        finest.as_ref().map(|(edge, _)| *edge)
     })?;
     if let Some(e) = failure {
         return Err(e);
     }
     let camera = edits.apply(&mut scene, camera, aspect)?;
-    let (max_edge, source) = match (max_edge, edges.chosen) {
-        (Some(given), _) => (given, "option"),
-        (None, Some(spacing)) => (spacing, "sparse spacing"),
-        (None, None) => (fallback, "default"),
+    let (max_edge, source, why) = match (max_edge, edges.chosen) {
+        (Some(given), _) => (given, "option", "given (--max-edge)".to_string()),
+        (None, Some(chosen)) => {
+            let (edge, mut why) = finest.unwrap_or((chosen, String::new()));
+            // A built-in scene is never refined past the tessellation it was built with.
+            if chosen > edge {
+                why = format!("{why}; no finer than the built-in scene's {fallback} m");
+            }
+            (chosen, "sparse spacing", why)
+        }
+        (None, None) => (
+            fallback,
+            "default",
+            format!("{fallback} m, the default without a method that gathers at sparse points"),
+        ),
     };
     Ok((
         scene,
@@ -645,6 +676,7 @@ pub fn load_scene_edited(
             max_edge,
             source,
             used_max_edge: edges.used,
+            why,
         },
         camera,
     ))

@@ -780,10 +780,26 @@ fn budget_mode_says_what_it_chose_and_why_and_keeps_what_was_given() {
     let budget = &cornell["budget"];
     assert_eq!(budget["occlusion"]["value"], "rays", "{budget}");
     assert_eq!(cornell["occlusion"], "rays");
-    for knob in ["sparse_points", "rsm", "occlusion", "visibility_rays"] {
+    for knob in [
+        "sparse_points",
+        "rsm",
+        "occlusion",
+        "visibility_rays",
+        "max_edge",
+    ] {
         let why = budget[knob]["why"].as_str().unwrap_or_default();
         assert!(why.len() > 20, "{knob}: {budget}");
     }
+    // The tessellation's line is the scene's: Cornell's 5 cm, coarser than its survey's
+    // points would ask for (every candidate's are closer than 7 cm).
+    assert_eq!(budget["max_edge"]["value"], cornell["max_edge"], "{budget}");
+    assert!(
+        budget["max_edge"]["why"]
+            .as_str()
+            .unwrap()
+            .contains("no finer than the built-in scene's"),
+        "{budget}"
+    );
     // The placed points are the chosen count, give or take the rounding of each mesh's share.
     let chosen = budget["sparse_points"]["value"].as_u64().unwrap() as f64;
     let placed = cornell["sparse_points"].as_u64().unwrap() as f64;
@@ -1096,6 +1112,56 @@ fn the_default_method_under_a_time_budget_keeps_its_atlas() {
     );
     let pilots = &report["budget"]["timing_pilots"]["measured"];
     assert_eq!(pilots.as_array().map(Vec::len), Some(1), "{report}");
+}
+
+/// An imported scene's tessellation is budget mode's fifth knob: under a time budget it is
+/// refined for the densest candidate (the point count is measured on the device after the
+/// scene is refined), and the budget's `max_edge` line says so.
+#[test]
+fn a_time_budget_refines_an_imported_scene_for_the_densest_candidate_and_says_why() {
+    if common::gpu().is_none() {
+        return;
+    }
+    let dir = common::temp_dir("cli-budget-max-edge");
+    let scene = dir.join("floor.obj");
+    // A 2 m × 2 m floor of two triangles.
+    std::fs::write(
+        &scene,
+        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n",
+    )
+    .unwrap();
+    let output = valgi()
+        .args(["render", "--scene"])
+        .arg(&scene)
+        .args(["--light", "point:0,1,0,1", "--method", "sparse"])
+        .args(["--width", "16", "--height", "16", "--no-write"])
+        .args([
+            "--quality",
+            "auto",
+            "--budget-ms",
+            "1e7",
+            "--budget-pilots",
+            "0",
+        ])
+        .output()
+        .expect("run valgi");
+    common::assert_success(&output);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    assert_eq!(report["max_edge_source"], "sparse spacing", "{report}");
+    let line = &report["budget"]["max_edge"];
+    assert_eq!(line["value"], report["max_edge"], "{report}");
+    assert!(
+        line["why"].as_str().unwrap().contains("densest candidate"),
+        "{line}"
+    );
+    let densest = *valgi::vals::budget::CANDIDATE_POINTS.last().unwrap() as f64;
+    let expected = (4.0 / densest).sqrt() * std::f64::consts::FRAC_1_SQRT_2;
+    let edge = line["value"].as_f64().unwrap();
+    assert!(
+        (edge / expected - 1.0).abs() < 1e-3,
+        "{edge} against {expected}"
+    );
 }
 
 /// The default method's atlas is baked in memory; a scene whose charts the default bake

@@ -187,12 +187,12 @@ pub const EDGE_PER_POINT_SPACING: f32 = std::f32::consts::FRAC_1_SQRT_2;
 /// Under a FLIP target the count comes from a survey of the scene as it will be rendered:
 /// `edited` is the scene with the command line's lights and camera (and that camera's name and
 /// the image's aspect); without it the raw scene and its default camera at aspect 1 are
-/// surveyed.
+/// surveyed. Returns the edge and why it is that edge.
 pub fn default_max_edge(
     scene: &Scene,
     options: &MethodOptions,
     edited: Option<(&Scene, Option<&str>, f32)>,
-) -> Result<Option<f32>, RenderError> {
+) -> Result<Option<(f32, String)>, RenderError> {
     let mut points: usize =
         options.get("sparse-points", SparseSettings::default().sparse_points)?;
     if points == 0 {
@@ -201,6 +201,7 @@ pub fn default_max_edge(
         ));
     }
     let given = options.given("sparse-points");
+    let mut whose = "its".to_string();
     match (budget_target(options)?, given) {
         (Some(budget::BudgetTarget::Flip(flip)), false) => {
             // Budget mode chooses the point count, and so the tessellation, before the scene
@@ -212,15 +213,25 @@ pub fn default_max_edge(
             let survey = budget::Survey::new(surveyed, &world, camera.as_ref(), 1)
                 .pricing_glossy(glossy, surveyed);
             points = survey.choose(budget::BudgetTarget::Flip(flip)).points;
+            whose = format!("the survey's point count for FLIP ≤ {flip}:");
         }
         (Some(budget::BudgetTarget::Ms(_)), false) => {
             // A time budget's point count depends on the device, which is not open yet:
             // tessellate for the densest candidate (finer meshes cost only preprocessing).
             points = *budget::CANDIDATE_POINTS.last().expect("candidates");
+            whose = "the densest candidate's (a time budget's point count is measured on the \
+                     device, after the scene is refined):"
+                .to_string();
         }
         _ => {}
     }
-    Ok(points::point_spacing(scene, points).map(|spacing| spacing * EDGE_PER_POINT_SPACING))
+    Ok(points::point_spacing(scene, points).map(|spacing| {
+        let edge = spacing * EDGE_PER_POINT_SPACING;
+        let why = format!(
+            "1/√2 of the spacing of {whose} {points} sparse points ({spacing:.3e} m apart)"
+        );
+        (edge, why)
+    }))
 }
 
 /// The sparse method's structs shared with WGSL, for the layout test.

@@ -344,6 +344,10 @@ pub fn run(request: &ViewerRequest) -> Result<serde_json::Value, ViewerError> {
                     "default"
                 },
                 used_max_edge: Some(max_edge),
+                why: match request.max_edge {
+                    Some(_) => "given (--max-edge)".to_string(),
+                    None => format!("{max_edge} m, the preview ball's tessellation"),
+                },
             };
             (
                 live.scene(),
