@@ -184,9 +184,7 @@ fn sparse_renders_numbered_frames_of_an_animation_with_table2_timings() {
         .arg(&dir)
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let report = common::success_report(&output);
     for key in [
         "rsm",
         "direct",
@@ -765,9 +763,7 @@ fn budget_render(scene: &str, extra: &[&str]) -> serde_json::Value {
         .args(["--out", &out])
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    serde_json::from_str(stdout.lines().last().unwrap()).unwrap()
+    common::success_report(&output)
 }
 
 #[test]
@@ -1102,9 +1098,7 @@ fn the_default_method_under_a_time_budget_keeps_its_atlas() {
         .args(["--out", &out])
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let report = common::success_report(&output);
     assert_eq!(report["method"], "sparse+atlas", "{report}");
     assert!(
         report["passes"]["atlas lookup"].as_f64().is_some(),
@@ -1145,9 +1139,7 @@ fn a_time_budget_refines_an_imported_scene_for_the_densest_candidate_and_says_wh
         ])
         .output()
         .expect("run valgi");
-    common::assert_success(&output);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let report: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let report = common::success_report(&output);
     assert_eq!(report["max_edge_source"], "sparse spacing", "{report}");
     let line = &report["budget"]["max_edge"];
     assert_eq!(line["value"], report["max_edge"], "{report}");
