@@ -735,7 +735,8 @@ pub struct TimingPilots<'a> {
 }
 
 /// Renders settings for [`budget::timed::TIMING_FRAMES`] frames at the render's size and
-/// through its number of views, seen from the survey's camera, and returns the longest frame time after the first, ms.
+/// through its number of views, seen from the survey's camera, and returns the longest frame
+/// time after the first, ms.
 pub type TimePilot<'a> =
     dyn FnMut(&SparseSettings, &[Mat4], &CameraView) -> Result<f64, RenderError> + 'a;
 
