@@ -755,9 +755,19 @@ fn auto_exposure_is_reported_and_a_black_png_is_named() {
 
 /// `valgi render --method sparse --quality auto` at 32² and its JSON line.
 fn budget_render(scene: &str, extra: &[&str]) -> serde_json::Value {
-    let out = temp_out("cli-budget", &format!("{scene}.exr"));
-    let output = valgi()
-        .args(["render", "--scene", scene, "--method", "sparse"])
+    budget_render_as(Some("sparse"), scene, extra)
+}
+
+/// [`budget_render`] with `method` (`None`: `render`'s default).
+fn budget_render_as(method: Option<&str>, scene: &str, extra: &[&str]) -> serde_json::Value {
+    let name = method.unwrap_or("default").replace('+', "-");
+    let out = temp_out("cli-budget", &format!("{scene}-{name}.exr"));
+    let mut command = valgi();
+    command.args(["render", "--scene", scene]);
+    if let Some(method) = method {
+        command.args(["--method", method]);
+    }
+    let output = command
         .args(["--width", "32", "--height", "32", "--quality", "auto"])
         .args(extra)
         .args(["--out", &out])
@@ -1070,24 +1080,20 @@ fn the_default_method_under_a_time_budget_keeps_its_atlas() {
     if common::gpu().is_none() {
         return;
     }
-    let out = temp_out("cli-budget-atlas", "cornell.exr");
-    let output = valgi()
-        .args([
-            "render", "--scene", "cornell", "--width", "32", "--height", "32",
-        ])
-        .args(["--quality", "auto", "--budget-ms", "1e7"])
-        .args([
+    let report = budget_render_as(
+        None,
+        "cornell",
+        &[
+            "--budget-ms",
+            "1e7",
             "--sparse-points",
             "1024",
             "--rsm",
             "32",
             "--occlusion",
             "off",
-        ])
-        .args(["--out", &out])
-        .output()
-        .expect("run valgi");
-    let report = common::success_report(&output);
+        ],
+    );
     assert_eq!(report["method"], "sparse+atlas", "{report}");
     assert!(
         report["passes"]["atlas lookup"].as_f64().is_some(),

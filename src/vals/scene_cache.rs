@@ -36,6 +36,18 @@ pub struct SceneCache<'s> {
     points: RefCell<HashMap<(usize, u64, bool), PreparedPoints>>,
 }
 
+/// What `cell` keeps, made by `make` on first use (a failure keeps nothing).
+fn kept<T>(
+    cell: &OnceCell<Arc<T>>,
+    make: impl FnOnce() -> Result<T, RenderError>,
+) -> Result<Arc<T>, RenderError> {
+    if let Some(value) = cell.get() {
+        return Ok(value.clone());
+    }
+    let value = Arc::new(make()?);
+    Ok(cell.get_or_init(|| value).clone())
+}
+
 impl<'s> SceneCache<'s> {
     pub fn new(scene: &'s Scene) -> Self {
         Self {
@@ -49,20 +61,12 @@ impl<'s> SceneCache<'s> {
 
     /// The scene's upload (vertices, indices, instances, materials and their textures).
     pub fn scene_gpu(&self, ctx: &GpuContext) -> Result<Arc<SceneGpu>, RenderError> {
-        if let Some(upload) = self.scene_gpu.get() {
-            return Ok(upload.clone());
-        }
-        let upload = Arc::new(SceneGpu::upload(ctx, self.scene)?);
-        Ok(self.scene_gpu.get_or_init(|| upload).clone())
+        kept(&self.scene_gpu, || Ok(SceneGpu::upload(ctx, self.scene)?))
     }
 
     /// The shadow rays' bottom level: every mesh's BVH in model space.
     pub fn mesh_bvhs(&self, ctx: &GpuContext) -> Result<Arc<MeshBvhs>, RenderError> {
-        if let Some(bvhs) = self.mesh_bvhs.get() {
-            return Ok(bvhs.clone());
-        }
-        let bvhs = Arc::new(MeshBvhs::new(ctx, self.scene)?);
-        Ok(self.mesh_bvhs.get_or_init(|| bvhs).clone())
+        kept(&self.mesh_bvhs, || Ok(MeshBvhs::new(ctx, self.scene)?))
     }
 
     /// `total` sparse points placed by area and turn with `seed`, their links cut through
