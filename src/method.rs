@@ -257,6 +257,14 @@ impl MethodOptions {
         self.entries.insert(key.to_string(), value.to_string());
     }
 
+    /// The options `key=value` of `pairs` (a method's [`crate::frame::Method::resolved_options`]).
+    pub fn from_pairs(pairs: impl IntoIterator<Item = (String, String)>) -> Self {
+        Self {
+            entries: pairs.into_iter().collect(),
+            read: RefCell::default(),
+        }
+    }
+
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
     }

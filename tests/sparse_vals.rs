@@ -1595,10 +1595,13 @@ fn solutions_on_one_device_share_its_pipelines_and_render_as_on_their_own() {
 }
 
 /// Budget mode's pilots build the method many times over one scene through a `SceneCache`:
-/// those builds share the scene's upload, its meshes' BVHs and each point count's cut links,
-/// and render what a build of its own renders, to the bit.
+/// those builds share the scene's upload, its meshes' BVHs and each point count's cut links.
+/// Builds through caches of their own (the viewer's rebuilds, a benchmark's warm-up instance)
+/// share the upload and the BVHs while a build over the same content lives, and nothing holds
+/// them once none does; an edited scene gets its own. Every build renders what a build on its
+/// own renders, to the bit.
 #[test]
-fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_renders() {
+fn builds_over_one_scene_share_its_parts_and_render_what_a_build_alone_renders() {
     use std::sync::Arc;
     let Some(ctx) = common::gpu() else { return };
     let scene = builtin::load("door-room", &BuiltinParams { max_edge: 0.25 }).expect("door room");
@@ -1610,30 +1613,55 @@ fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_ren
         sparse_points: 128,
         ..rays
     };
+    let indirect = |m: &mut SparseMethod| {
+        m.render(&ctx, &scene, &world, &view)
+            .expect("render")
+            .indirect
+            .pixels
+    };
+
+    let mut alone = SparseMethod::new(&ctx, &scene, settings(24), rays).expect("build alone");
+    let expected = indirect(&mut alone);
+    assert!(expected.iter().any(|p| p[0] > 0.0), "an indirect image");
+    let alone_upload = Arc::downgrade(&alone.raster.scene_gpu);
+    let alone_bvhs = Arc::downgrade(&alone.sparse.bvh().bottom);
+    drop(alone);
+    assert!(alone_upload.upgrade().is_none() && alone_bvhs.upgrade().is_none());
+
     let cache = valgi::vals::SceneCache::new(&scene);
     let build = |s: SparseSettings| {
         SparseMethod::from_cache(&ctx, &cache, settings(24), s, None).expect("cached build")
     };
     let (mut first, mut other, mut again) = (build(rays), build(fewer), build(rays));
-    let mut fresh = SparseMethod::new(&ctx, &scene, settings(24), rays).expect("fresh build");
+    let mut own_cache = SparseMethod::new(&ctx, &scene, settings(24), rays).expect("build");
+    let mut edited_scene = scene.clone();
+    edited_scene.meshes[0].positions[0].y += 1e-3;
+    let edited = SparseMethod::new(&ctx, &edited_scene, settings(24), rays).expect("edited build");
 
-    assert!(Arc::ptr_eq(
-        &first.raster.scene_gpu,
-        &other.raster.scene_gpu
-    ));
-    assert!(Arc::ptr_eq(
-        &first.sparse.bvh().bottom,
-        &again.sparse.bvh().bottom
-    ));
+    for shares in [&other, &again, &own_cache] {
+        assert!(Arc::ptr_eq(
+            &first.raster.scene_gpu,
+            &shares.raster.scene_gpu
+        ));
+        assert!(Arc::ptr_eq(
+            &first.sparse.bvh().bottom,
+            &shares.sparse.bvh().bottom
+        ));
+    }
     assert!(!Arc::ptr_eq(
         &first.raster.scene_gpu,
-        &fresh.raster.scene_gpu
+        &edited.raster.scene_gpu
     ));
-    // The partition cuts links; a cut mesh's points are new on every cut, so the same
-    // allocation in `again` is the first build's cut, taken from the cache.
+    assert!(!Arc::ptr_eq(
+        &first.sparse.bvh().bottom,
+        &edited.sparse.bvh().bottom
+    ));
+    // The partition cuts links, and a cut mesh's points are new on every cut (not the
+    // placement's): the same allocation in `again` is the first build's cut, from the cache.
     assert!(first.link_cut.links > 0, "{:?}", first.link_cut);
+    let (placed, _) = valgi::vals::points::scene_points(&scene, rays.sparse_points, rays.seed);
     let cut_mesh = (0..scene.meshes.len())
-        .find(|&m| !Arc::ptr_eq(&first.points[m], &fresh.points[m]))
+        .find(|&m| !Arc::ptr_eq(&first.points[m], &placed[m]))
         .expect("a mesh whose links were cut");
     assert!(Arc::ptr_eq(
         &first.points[cut_mesh],
@@ -1641,16 +1669,9 @@ fn builds_over_one_scene_cache_share_its_parts_and_render_what_a_fresh_build_ren
     ));
     assert_eq!((again.link_cut, again.meshes_computed), (first.link_cut, 0));
 
-    let indirect = |m: &mut SparseMethod| {
-        m.render(&ctx, &scene, &world, &view)
-            .expect("render")
-            .indirect
-            .pixels
-    };
-    let expected = indirect(&mut fresh);
-    assert!(expected.iter().any(|p| p[0] > 0.0), "an indirect image");
     assert!(indirect(&mut first) == expected);
     assert!(indirect(&mut again) == expected);
+    assert!(indirect(&mut own_cache) == expected);
     assert!(
         indirect(&mut other) != expected,
         "fewer points, another image"
@@ -1723,4 +1744,70 @@ fn timing_pilots_render_the_composed_methods_layer_through_every_view() {
         .render(&ctx, &scene, &world, &camera(&scene, 24))
         .expect("render");
     assert_eq!(recorded.load(Ordering::Relaxed), pilots * frames * 2 + 1);
+}
+
+/// A method in budget mode says how to build its choice again without the search
+/// (`Method::resolved_options`, what `valgi eval` builds its warm-up instance with): the
+/// chosen knobs written in, the budget's own options gone, the others kept; built from
+/// them, the method has the same settings, renders the same image, and searches nothing.
+#[test]
+fn a_budget_choice_builds_again_from_its_resolved_options_without_a_search() {
+    let Some(ctx) = common::gpu() else { return };
+    let scene = cornell_coarse();
+    // A budget no frame fits: the cheapest candidate, whose knobs are none of the defaults.
+    let (_, options) =
+        MethodOptions::parse_spec("sparse:quality=auto,budget-ms=0.001,seed=7,glossy=off").unwrap();
+    let mut searched =
+        SparseMethod::from_options(&ctx, &scene, settings(24), &options).expect("budget mode");
+    assert!(searched.budget.is_some());
+    let pairs = searched
+        .resolved_options()
+        .expect("a budget choice resolves");
+    let resolved = MethodOptions::from_pairs(pairs);
+    for key in ["quality", "budget-ms", "target-flip", "budget-pilots"] {
+        assert!(!resolved.given(key), "{key} in {resolved}");
+    }
+    let defaults = SparseSettings::default();
+    let chosen = searched.settings;
+    assert_ne!(
+        (chosen.sparse_points, chosen.rsm, chosen.options.occlusion),
+        (
+            defaults.sparse_points,
+            defaults.rsm,
+            defaults.options.occlusion
+        ),
+        "the choice differs from the defaults, so the knobs must be written in"
+    );
+    valgi::method::check_options("sparse", &resolved).expect("options sparse takes");
+    let mut rebuilt =
+        SparseMethod::from_options(&ctx, &scene, settings(24), &resolved).expect("rebuilt");
+    let again = rebuilt.settings;
+    assert_eq!(
+        (again.sparse_points, again.rsm, again.rsm_texels, again.seed),
+        (chosen.sparse_points, chosen.rsm, chosen.rsm_texels, 7)
+    );
+    assert_eq!(
+        (
+            again.options.occlusion,
+            again.options.adaptive_rays,
+            again.options.glossy
+        ),
+        (
+            chosen.options.occlusion,
+            chosen.options.adaptive_rays,
+            GlossyGather::Off
+        )
+    );
+    assert!(rebuilt.budget.is_none() && rebuilt.resolved_options().is_none());
+    let world = scene.world_from_node();
+    let view = camera(&scene, 24);
+    let indirect = |m: &mut SparseMethod| {
+        m.render(&ctx, &scene, &world, &view)
+            .expect("render")
+            .indirect
+            .pixels
+    };
+    let expected = indirect(&mut searched);
+    assert!(expected.iter().any(|p| p[0] > 0.0), "an indirect image");
+    assert!(indirect(&mut rebuilt) == expected);
 }

@@ -335,14 +335,14 @@ pub fn load_atlas(path: &Path) -> Result<LoadedAtlas, RenderError> {
 /// stops it. A bake the layout refuses (charts that need a larger atlas) is an error that
 /// says how to bake the file instead.
 ///
-/// The last bake is kept, by the scene's content ([`scene_content_key`]): the viewer builds
+/// The last bake is kept, by the scene's content ([`Scene::content_key`]): the viewer builds
 /// the method again on every change of a knob, and `valgi eval` builds each method twice (a
 /// warm-up instance), over the same scene, and the bake was 2.0 of the 2.5 s such a build of
 /// `sparse+atlas` took on the Cornell box.
 pub fn bake_in_memory(scene: &Scene, from_bounce: u32) -> Result<Arc<LoadedAtlas>, RenderError> {
     type LastBake = Mutex<Option<(u64, u32, Arc<LoadedAtlas>)>>;
     static LAST_BAKE: LastBake = Mutex::new(None);
-    let key = scene_content_key(scene);
+    let key = scene.content_key();
     if let Ok(last) = LAST_BAKE.lock() {
         if let Some((_, _, atlas)) = last
             .as_ref()
@@ -357,66 +357,6 @@ pub fn bake_in_memory(scene: &Scene, from_bounce: u32) -> Result<Arc<LoadedAtlas
         *last = Some((key, from_bounce, atlas.clone()));
     }
     Ok(atlas)
-}
-
-/// A fingerprint of everything in `scene` a bake reads: the nodes, meshes, materials,
-/// textures, instances, lights and animations (the cameras, the name and the warnings are left
-/// out). Their derived `Debug` forms feed the hash, so a field added to any of them counts
-/// without this function knowing of it; the meshes' vertex arrays and the textures' bytes
-/// are hashed as bytes (spelled out, Sponza took 0.34 s; as bytes 0.05 s), the meshes taken apart
-/// field by field so that a field added to `Mesh` fails to compile here until it counts.
-pub fn scene_content_key(scene: &Scene) -> u64 {
-    use std::hash::{Hash, Hasher};
-    struct HashWriter<'h>(&'h mut std::collections::hash_map::DefaultHasher);
-    impl std::fmt::Write for HashWriter<'_> {
-        fn write_str(&mut self, s: &str) -> std::fmt::Result {
-            s.hash(self.0);
-            Ok(())
-        }
-    }
-    let mut hasher = std::collections::hash_map::DefaultHasher::new();
-    let _ = std::fmt::Write::write_fmt(
-        &mut HashWriter(&mut hasher),
-        format_args!(
-            "{:?}",
-            (
-                &scene.nodes,
-                &scene.materials,
-                &scene.instances,
-                &scene.lights,
-                &scene.animations,
-            )
-        ),
-    );
-    for mesh in &scene.meshes {
-        let crate::scene::Mesh {
-            name,
-            positions,
-            normals,
-            tangents,
-            uv0,
-            uv1,
-            indices,
-            material,
-        } = mesh;
-        (name, material).hash(&mut hasher);
-        let bytes: [&[u8]; 5] = [
-            bytemuck::cast_slice(positions),
-            bytemuck::cast_slice(normals),
-            bytemuck::cast_slice(tangents),
-            bytemuck::cast_slice(uv0),
-            bytemuck::cast_slice(indices),
-        ];
-        bytes.hash(&mut hasher);
-        uv1.as_deref()
-            .map(bytemuck::cast_slice::<_, u8>)
-            .hash(&mut hasher);
-    }
-    for texture in &scene.textures {
-        (texture.width, texture.height, &texture.rgba8).hash(&mut hasher);
-        format!("{:?}", texture.color_space).hash(&mut hasher);
-    }
-    hasher.finish()
 }
 
 /// [`bake_in_memory`] without the kept bake.
@@ -1104,12 +1044,12 @@ mod kept_bake_tests {
     #[test]
     fn the_same_scene_takes_the_kept_bake_and_any_change_bakes_anew() {
         let scene = builtin::load("cornell", &BuiltinParams { max_edge: 0.25 }).expect("cornell");
-        let key = scene_content_key(&scene);
+        let key = scene.content_key();
         let mut unread = scene.clone();
         unread.name = "another name".into();
         unread.cameras.clear();
         unread.warnings.push("a warning".into());
-        assert_eq!(scene_content_key(&unread), key);
+        assert_eq!(unread.content_key(), key);
         type Edit = (&'static str, fn(&mut Scene));
         let edits: [Edit; 5] = [
             ("a light's intensity", |s| s.lights[0].intensity *= 1.001),
@@ -1123,7 +1063,7 @@ mod kept_bake_tests {
         for (what, edit) in edits {
             let mut edited = scene.clone();
             edit(&mut edited);
-            assert_ne!(scene_content_key(&edited), key, "{what}");
+            assert_ne!(edited.content_key(), key, "{what}");
         }
 
         let first = bake_in_memory(&scene, 2).expect("bake");

@@ -657,7 +657,12 @@ pub fn run(request: &EvalRequest) -> Result<EvalSummary, EvalError> {
                 // pipeline's first dispatch compiles it, and on lavapipe with a cold shader
                 // cache that took 6.5 s of a 0.16 s frame (glossy-row's budget-mode gather),
                 // which the mean over three frames made a 14× slower row.
-                let mut warm = method::create(name, &ctx, scene, settings, options)?;
+                // A method in budget mode is built there with its choice written in, so
+                // that its pilots run once, on the timed instance.
+                let warm_options = method
+                    .resolved_options()
+                    .map_or_else(|| options.clone(), MethodOptions::from_pairs);
+                let mut warm = method::create(name, &ctx, scene, settings, &warm_options)?;
                 warm.render(&ctx, scene, &world0, &camera0)?;
             }
             let settings_text = options.to_string();

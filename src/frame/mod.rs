@@ -428,6 +428,13 @@ pub trait Method: Send {
     /// GPU bytes the method owns (scene, shadow maps, solution), views excluded.
     fn gpu_bytes(&self) -> u64;
 
+    /// The `key=value` options that build this method again as it is, without the search its
+    /// own options asked for (budget mode's pilots): what a benchmark's untimed warm-up
+    /// instance is built with. `None` when the options it was built with already do.
+    fn resolved_options(&self) -> Option<Vec<(String, String)>> {
+        None
+    }
+
     /// Method-specific keys for the JSON report (empty by default).
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         serde_json::Map::new()

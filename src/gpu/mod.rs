@@ -176,6 +176,15 @@ pub struct GpuContext {
     >,
 }
 
+/// The live `T`s of [`GpuContext::live_by_key`], one list per device and type.
+struct Live<T>(std::sync::Mutex<Vec<(u64, std::sync::Weak<T>)>>);
+
+impl<T> Default for Live<T> {
+    fn default() -> Self {
+        Self(std::sync::Mutex::new(Vec::new()))
+    }
+}
+
 impl GpuContext {
     /// The device's one `T`, made by `make` the first time it is asked for: pipelines that do
     /// not depend on their user (every view's resolve) are compiled once, not per user.
@@ -206,6 +215,41 @@ impl GpuContext {
             }
         }
         Ok(value)
+    }
+
+    /// The `T` made for `key` (a scene's [`crate::scene::Scene::content_key`]) that something
+    /// still holds on this device, else a new one made by `make`. Builds over the same scene
+    /// (the viewer's rebuilds, a benchmark's warm-up instance beside its timed one, budget
+    /// mode's pilots) then share one upload of it. Only weak references are kept here: each
+    /// object lives exactly as long as its users.
+    pub fn live_by_key<T, E>(
+        &self,
+        key: u64,
+        make: impl FnOnce() -> Result<T, E>,
+    ) -> Result<std::sync::Arc<T>, E>
+    where
+        T: std::any::Any + Send + Sync,
+    {
+        let live = match self.shared(|| Ok::<_, std::convert::Infallible>(Live::<T>::default())) {
+            Ok(live) => live,
+            Err(never) => match never {},
+        };
+        if let Ok(mut entries) = live.0.lock() {
+            entries.retain(|(_, weak)| weak.strong_count() > 0);
+            let found = entries
+                .iter()
+                .find(|(k, _)| *k == key)
+                .and_then(|(_, weak)| weak.upgrade());
+            if let Some(found) = found {
+                return Ok(found);
+            }
+        }
+        // Made outside the lock: `make` may take long (an upload) or ask for other objects.
+        let made = std::sync::Arc::new(make()?);
+        if let Ok(mut entries) = live.0.lock() {
+            entries.push((key, std::sync::Arc::downgrade(&made)));
+        }
+        Ok(made)
     }
 
     /// Uploads one mip level of a 2D texture: `data` is `width × height` texels of

@@ -364,6 +364,17 @@ fn bvh_texels(
 }
 
 impl MeshBvhs {
+    /// `scene`'s mesh BVHs, the ones a live user of the same content (`content_key`,
+    /// [`Scene::content_key`]) holds on this device or else new ones
+    /// ([`GpuContext::live_by_key`]).
+    pub fn shared(
+        ctx: &GpuContext,
+        scene: &Scene,
+        content_key: u64,
+    ) -> Result<Arc<Self>, GpuError> {
+        ctx.live_by_key(content_key, || Self::new(ctx, scene))
+    }
+
     pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
         let mut nodes = Vec::new();
         let mut triangles = Vec::new();
@@ -426,9 +437,14 @@ impl MeshBvhs {
 }
 
 impl SceneBvh {
-    /// The BVH of `scene` with its mesh level built for it alone.
+    /// The BVH of `scene`, its mesh level shared with the live BVHs of the same content
+    /// ([`MeshBvhs::shared`]).
     pub fn new(ctx: &GpuContext, scene: &Scene) -> Result<Self, GpuError> {
-        Self::over(ctx, scene, Arc::new(MeshBvhs::new(ctx, scene)?))
+        Self::over(
+            ctx,
+            scene,
+            MeshBvhs::shared(ctx, scene, scene.content_key())?,
+        )
     }
 
     /// The BVH of `scene` over `bottom`, its meshes' BVHs (which other BVHs may share).

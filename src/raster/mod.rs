@@ -210,7 +210,7 @@ impl Rasterizer {
     ) -> Result<Self, RenderError> {
         // The mono view's size is checked here so that a bad size fails before any upload.
         crate::frame::check_size(ctx, settings.width, settings.height, settings.ssaa)?;
-        let scene_gpu = Arc::new(SceneGpu::upload(ctx, scene)?);
+        let scene_gpu = SceneGpu::shared(ctx, scene, scene.content_key())?;
         Self::over(ctx, scene, settings, scene_gpu)
     }
 

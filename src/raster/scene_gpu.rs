@@ -2,6 +2,8 @@
 //! (textures with mip chains, default 1×1 textures where a material has none), and a storage
 //! buffer of per-instance transforms refreshed every frame so rigid motion costs one upload.
 
+use std::sync::Arc;
+
 use glam::{Mat3, Mat4, Vec4};
 use rayon::prelude::*;
 
@@ -37,6 +39,18 @@ pub struct SceneGpu {
 }
 
 impl SceneGpu {
+    /// `scene`'s upload, the one a live user of the same content (`content_key`,
+    /// [`Scene::content_key`]) holds on this device or else a new one
+    /// ([`GpuContext::live_by_key`]). Its per-frame state, the instances' transforms, is
+    /// written by each user before its own submission.
+    pub fn shared(
+        ctx: &GpuContext,
+        scene: &Scene,
+        content_key: u64,
+    ) -> Result<Arc<Self>, SceneTooLarge> {
+        ctx.live_by_key(content_key, || Self::upload(ctx, scene))
+    }
+
     pub fn upload(ctx: &GpuContext, scene: &Scene) -> Result<Self, SceneTooLarge> {
         let device = &ctx.device;
         let limits = device.limits();

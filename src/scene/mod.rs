@@ -513,6 +513,68 @@ impl Aabb {
 }
 
 impl Scene {
+    /// A fingerprint of everything in the scene that what is made from it reads (an atlas
+    /// bake, the GPU upload, the meshes' BVHs, the sparse points): the nodes, meshes,
+    /// materials, textures, instances, lights and animations (the cameras, the name and the
+    /// warnings are left out). Their derived `Debug` forms feed the hash, so a field added to
+    /// any of them counts without this function knowing of it; the meshes' vertex arrays and
+    /// the textures' bytes are hashed as bytes (spelled out, Sponza took 0.34 s; as bytes
+    /// 0.05 s), the meshes taken apart field by field so that a field added to `Mesh` fails to
+    /// compile here until it counts.
+    pub fn content_key(&self) -> u64 {
+        use std::hash::{Hash, Hasher};
+        struct HashWriter<'h>(&'h mut std::collections::hash_map::DefaultHasher);
+        impl std::fmt::Write for HashWriter<'_> {
+            fn write_str(&mut self, s: &str) -> std::fmt::Result {
+                s.hash(self.0);
+                Ok(())
+            }
+        }
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        let _ = std::fmt::Write::write_fmt(
+            &mut HashWriter(&mut hasher),
+            format_args!(
+                "{:?}",
+                (
+                    &self.nodes,
+                    &self.materials,
+                    &self.instances,
+                    &self.lights,
+                    &self.animations,
+                )
+            ),
+        );
+        for mesh in &self.meshes {
+            let Mesh {
+                name,
+                positions,
+                normals,
+                tangents,
+                uv0,
+                uv1,
+                indices,
+                material,
+            } = mesh;
+            (name, material).hash(&mut hasher);
+            let bytes: [&[u8]; 5] = [
+                bytemuck::cast_slice(positions),
+                bytemuck::cast_slice(normals),
+                bytemuck::cast_slice(tangents),
+                bytemuck::cast_slice(uv0),
+                bytemuck::cast_slice(indices),
+            ];
+            bytes.hash(&mut hasher);
+            uv1.as_deref()
+                .map(bytemuck::cast_slice::<_, u8>)
+                .hash(&mut hasher);
+        }
+        for texture in &self.textures {
+            (texture.width, texture.height, &texture.rgba8).hash(&mut hasher);
+            format!("{:?}", texture.color_space).hash(&mut hasher);
+        }
+        hasher.finish()
+    }
+
     /// World transform of every node at animation time `time` (seconds). Animations override
     /// the animated TRS components of their target nodes; with no animations the result is the
     /// rest pose.

@@ -1144,6 +1144,8 @@ pub struct SparseMethod {
     report: serde_json::Map<String, serde_json::Value>,
     /// What `--quality auto` chose and why (`None` for manual settings).
     pub budget: Option<serde_json::Value>,
+    /// The options with that choice written in as manual knobs (`None` for manual settings).
+    resolved_options: Option<Vec<(String, String)>>,
 }
 
 impl SparseMethod {
@@ -1221,6 +1223,7 @@ impl SparseMethod {
             per_view: ViewCache::default(),
             report: Default::default(),
             budget: None,
+            resolved_options: None,
         })
     }
 
@@ -1399,6 +1402,10 @@ impl Method for SparseMethod {
         self.raster.gpu_bytes() + self.rsm.bytes.0 + self.solution_bytes() + layer
     }
 
+    fn resolved_options(&self) -> Option<Vec<(String, String)>> {
+        self.resolved_options.clone()
+    }
+
     fn report(&self) -> serde_json::Map<String, serde_json::Value> {
         let mut report = self.report.clone();
         if let Some(budget) = &self.budget {
@@ -1512,10 +1519,46 @@ impl SparseMethod {
             None => None,
         };
         let mut method = SparseMethod::from_cache(ctx, &cache, render, settings, None)?;
+        method.resolved_options = budget
+            .is_some()
+            .then(|| with_choice_written_in(options, &settings));
         method.budget = budget;
         method.layer = layer.into_inner();
         Ok(method)
     }
+}
+
+/// `options` with budget mode's choice (`settings`) written in as manual knobs: they build
+/// the chosen method again without its survey and pilots.
+fn with_choice_written_in(
+    options: &MethodOptions,
+    settings: &SparseSettings,
+) -> Vec<(String, String)> {
+    let search = ["quality", "target-flip", "budget-ms", "budget-pilots"];
+    let occlusion = match settings.options.occlusion {
+        OcclusionMode::Off => "off",
+        OcclusionMode::Sum => "sum",
+        OcclusionMode::Union => "union",
+        OcclusionMode::Rays => "rays",
+    };
+    let visibility_rays = if settings.options.adaptive_rays {
+        "adaptive"
+    } else {
+        "all"
+    };
+    let chosen = [
+        ("sparse-points", settings.sparse_points.to_string()),
+        ("rsm", settings.rsm.to_string()),
+        ("occlusion", occlusion.to_string()),
+        ("visibility-rays", visibility_rays.to_string()),
+    ];
+    let mut pairs: Vec<(String, String)> = options
+        .entries()
+        .filter(|(key, _)| !search.contains(key) && !chosen.iter().any(|(k, _)| k == key))
+        .map(|(key, value)| (key.to_string(), value.to_string()))
+        .collect();
+    pairs.extend(chosen.map(|(key, value)| (key.to_string(), value)));
+    pairs
 }
 
 /// One timing pilot: the sparse method with `settings` (and the composed method's `layer`)

@@ -2,7 +2,7 @@
 
 use std::cell::{OnceCell, RefCell};
 use std::collections::HashMap;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use crate::gpu::GpuContext;
 use crate::light::bvh::MeshBvhs;
@@ -27,8 +27,14 @@ pub struct PreparedPoints {
 /// Budget mode builds the method once per pilot and once more for its choice, all over one
 /// scene: on Sponza (657k triangles, 8192 points, lavapipe) the upload was 0.8 s of a 3.7 s
 /// build, the tracer 0.6 s, the meshes' BVHs 0.4 s and the link test's rays 0.9 s.
+///
+/// Beyond one cache, builds over the same scene content share too (the viewer's rebuilds,
+/// `valgi eval`'s warm-up instance): the upload and the BVHs with any live build on the device
+/// ([`SceneGpu::shared`], [`MeshBvhs::shared`]), the link-tested points with the last few
+/// builds in the process ([`KEPT_LINK_CUTS`]).
 pub struct SceneCache<'s> {
     pub scene: &'s Scene,
+    content_key: OnceCell<u64>,
     scene_gpu: OnceCell<Arc<SceneGpu>>,
     mesh_bvhs: OnceCell<Arc<MeshBvhs>>,
     tracer: OnceCell<Tracer<'s>>,
@@ -39,12 +45,12 @@ pub struct SceneCache<'s> {
 /// What `cell` keeps, made by `make` on first use (a failure keeps nothing).
 fn kept<T>(
     cell: &OnceCell<Arc<T>>,
-    make: impl FnOnce() -> Result<T, RenderError>,
+    make: impl FnOnce() -> Result<Arc<T>, RenderError>,
 ) -> Result<Arc<T>, RenderError> {
     if let Some(value) = cell.get() {
         return Ok(value.clone());
     }
-    let value = Arc::new(make()?);
+    let value = make()?;
     Ok(cell.get_or_init(|| value).clone())
 }
 
@@ -52,6 +58,7 @@ impl<'s> SceneCache<'s> {
     pub fn new(scene: &'s Scene) -> Self {
         Self {
             scene,
+            content_key: OnceCell::new(),
             scene_gpu: OnceCell::new(),
             mesh_bvhs: OnceCell::new(),
             tracer: OnceCell::new(),
@@ -59,14 +66,23 @@ impl<'s> SceneCache<'s> {
         }
     }
 
+    /// [`Scene::content_key`], computed once (53 ms on Sponza).
+    fn content_key(&self) -> u64 {
+        *self.content_key.get_or_init(|| self.scene.content_key())
+    }
+
     /// The scene's upload (vertices, indices, instances, materials and their textures).
     pub fn scene_gpu(&self, ctx: &GpuContext) -> Result<Arc<SceneGpu>, RenderError> {
-        kept(&self.scene_gpu, || Ok(SceneGpu::upload(ctx, self.scene)?))
+        kept(&self.scene_gpu, || {
+            Ok(SceneGpu::shared(ctx, self.scene, self.content_key())?)
+        })
     }
 
     /// The shadow rays' bottom level: every mesh's BVH in model space.
     pub fn mesh_bvhs(&self, ctx: &GpuContext) -> Result<Arc<MeshBvhs>, RenderError> {
-        kept(&self.mesh_bvhs, || Ok(MeshBvhs::new(ctx, self.scene)?))
+        kept(&self.mesh_bvhs, || {
+            Ok(MeshBvhs::shared(ctx, self.scene, self.content_key())?)
+        })
     }
 
     /// `total` sparse points placed by area and turn with `seed`, their links cut through
@@ -97,18 +113,114 @@ impl<'s> SceneCache<'s> {
                 points::MAX_POINTS_PER_MESH
             )));
         }
-        let (placed, meshes_computed) = points::scene_points_for(scene, &counts, seed);
-        let (points, link_cut) = if link_test {
-            points::cut_links_with(scene, &placed, &self.tracer)
-        } else {
-            (placed, LinkCut::default())
-        };
-        let prepared = PreparedPoints {
-            points,
-            link_cut,
-            meshes_computed,
+        let kept_key = (self.content_key(), total, seed);
+        let prepared = match link_test.then(|| kept_link_cut(kept_key)).flatten() {
+            Some(kept) => kept,
+            None => {
+                let (placed, meshes_computed) = points::scene_points_for(scene, &counts, seed);
+                let (points, link_cut) = if link_test {
+                    points::cut_links_with(scene, &placed, &self.tracer)
+                } else {
+                    (placed, LinkCut::default())
+                };
+                let prepared = PreparedPoints {
+                    points,
+                    link_cut,
+                    meshes_computed,
+                };
+                if link_test {
+                    keep_link_cut(kept_key, &prepared);
+                }
+                prepared
+            }
         };
         self.points.borrow_mut().insert(key, prepared.clone());
         Ok(prepared)
+    }
+}
+
+/// How many link-tested point sets the process keeps, the most recent first. The placement
+/// itself is cached per mesh (`points::scene_points_for`); the link test needs the whole
+/// scene's tracer and its rays (1.5 s on Sponza at 8192 points), which a rebuild with another
+/// RSM side or occlusion would otherwise pay again.
+pub const KEPT_LINK_CUTS: usize = 4;
+
+/// (scene content, point count, seed).
+type LinkCutKey = (u64, usize, u64);
+
+/// Link-tested point sets by [`LinkCutKey`], the most recently used last, at most
+/// [`KEPT_LINK_CUTS`].
+#[derive(Default)]
+struct KeptLinkCuts(Vec<(LinkCutKey, PreparedPoints)>);
+
+impl KeptLinkCuts {
+    /// The set kept for `key`, now the most recently used; counted as computed nowhere.
+    fn take(&mut self, key: LinkCutKey) -> Option<PreparedPoints> {
+        let at = self.0.iter().position(|(k, _)| *k == key)?;
+        let entry = self.0.remove(at);
+        let found = PreparedPoints {
+            meshes_computed: 0,
+            ..entry.1.clone()
+        };
+        self.0.push(entry);
+        Some(found)
+    }
+
+    /// Keeps `prepared` for `key`, dropping the least recently used beyond the bound.
+    fn keep(&mut self, key: LinkCutKey, prepared: &PreparedPoints) {
+        self.0.retain(|(k, _)| *k != key);
+        self.0.push((key, prepared.clone()));
+        let excess = self.0.len().saturating_sub(KEPT_LINK_CUTS);
+        self.0.drain(..excess);
+    }
+}
+
+static LINK_CUTS: Mutex<KeptLinkCuts> = Mutex::new(KeptLinkCuts(Vec::new()));
+
+fn kept_link_cut(key: LinkCutKey) -> Option<PreparedPoints> {
+    LINK_CUTS.lock().ok()?.take(key)
+}
+
+fn keep_link_cut(key: LinkCutKey, prepared: &PreparedPoints) {
+    if let Ok(mut kept) = LINK_CUTS.lock() {
+        kept.keep(key, prepared);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prepared(links: usize) -> PreparedPoints {
+        PreparedPoints {
+            points: vec![],
+            link_cut: LinkCut {
+                meshes: 1,
+                links,
+                kept_rows: 0,
+            },
+            meshes_computed: 2,
+        }
+    }
+
+    /// The store keeps the most recently used sets, at most `KEPT_LINK_CUTS`, and hands a
+    /// kept one back as computed nowhere.
+    #[test]
+    fn the_kept_link_cuts_are_the_most_recently_used_few() {
+        let mut kept = KeptLinkCuts::default();
+        let key = |i: usize| (7, 1024 * i, 3);
+        for i in 0..KEPT_LINK_CUTS {
+            kept.keep(key(i), &prepared(i));
+        }
+        let first = kept.take(key(0)).expect("kept");
+        assert_eq!((first.link_cut.links, first.meshes_computed), (0, 0));
+        // Set 0 was just used: one more set drops set 1, the least recently used.
+        kept.keep(key(KEPT_LINK_CUTS), &prepared(KEPT_LINK_CUTS));
+        assert!(kept.take(key(1)).is_none());
+        for i in (0..KEPT_LINK_CUTS + 1).filter(|&i| i != 1) {
+            assert_eq!(kept.take(key(i)).map(|p| p.link_cut.links), Some(i));
+        }
+        assert!(kept.take((8, 0, 3)).is_none(), "another scene's content");
+        assert_eq!(kept.0.len(), KEPT_LINK_CUTS);
     }
 }
