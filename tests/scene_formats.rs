@@ -978,7 +978,7 @@ fn budget_mode_tessellates_for_the_points_it_picks_with_the_command_line_light()
     let mut settings = valgi::vals::SparseSettings::default();
     let report = valgi::vals::apply_budget(
         &scene,
-        (None, aspect),
+        (None, aspect, 64.0 * 64.0),
         &options,
         target,
         None,

@@ -45,8 +45,8 @@
 //!
 //! **Timing pilots** ([`timed`]). Under `--budget-ms` the candidates are timed: a few frames
 //! of each at the render's own size on the render's device, the measured times refitting the
-//! predicted ones (their fixed part, which the survey prices at one figure whatever the image
-//! size, most of all), until the most accurate candidate within the budget is one measured
+//! predicted ones (their fixed part, which the survey prices from the median scene's passes
+//! and the pixels a frame shades, most of all), until the most accurate candidate within the budget is one measured
 //! within it. Small pilot frames then rank the candidates within the budget by measured
 //! accuracy ([`Survey::search_within`]), which the survey's prediction misjudges between
 //! kinds of occlusion.
@@ -163,6 +163,10 @@ pub struct Survey {
     /// Whether the gather will gather glossy light (`glossy auto` leaves the lobes out of an
     /// all-Lambert scene): it prices the gather ([`model::gather_cost`]).
     pub gathers_glossy: bool,
+    /// The pixels a frame shades (width × height × SSAA² × views): they price the per-pixel
+    /// passes ([`model::FRAME_MS_PER_PIXEL`]); [`model::FIT_PIXELS`] unless told
+    /// ([`Survey::shading`]).
+    pub frame_pixels: f64,
 }
 
 /// Light views as the RSM lays them out: (light, forward, up, tan of the half field of view)
@@ -424,6 +428,7 @@ impl Survey {
             survey_ms: 0.0,
             time_scale: 1.0,
             gathers_glossy: true,
+            frame_pixels: model::FIT_PIXELS,
         };
         // Leaving visibility out shows seen + hidden where seen is right: relative to the
         // brighter of the two, hidden / (seen + hidden), and weighted by that brightness (a
@@ -879,6 +884,17 @@ pub mod model {
     /// 128², ms: the same for every choice, so it only shifts the budget. The fit's fixed
     /// part per scene ran from 14 ms (Cornell) to 195 ms (glossy-row), median 66.
     pub const FRAME_MS_FIXED: f64 = 60.0;
+    /// The pixels a frame of the fit shaded: one view of 128², no supersampling.
+    pub const FIT_PIXELS: f64 = 128.0 * 128.0;
+    /// What each further pixel a frame shades adds to [`FRAME_MS_FIXED`], ms: the G-buffer,
+    /// direct light, apply and resolve run per pixel of every view. `valgi render --method
+    /// sparse --sparse-points 1024 --rsm 32 --occlusion off --frames 3 --no-write` at 128²,
+    /// 512² and 1280×720 (lavapipe, 2-core AMD EPYC; the faster of frames 2–3): Cornell 11.1,
+    /// 47.0 and 120.2 ms, 1.46e-4 and 1.21e-4 ms a pixel over the 128² frame; the door room
+    /// 125.5, 175.0 and 273.0 ms, 2.0e-4 and 1.63e-4. Before this term a time budget's
+    /// survey priced a 1280×720 frame's fixed part at the 128² figure, and those frames
+    /// overspent it by 1.15–1.88× (`budget-pilots=0`).
+    pub const FRAME_MS_PER_PIXEL: f64 = 1.5e-4;
     /// The FMA peak (`gpu::peak::fma_peak`, the kernel with its body written out eight
     /// times) of the device the times above were fitted on, FMA/s: 56.5–56.9 GFMA/s on the
     /// fit's machine. On another device the times are scaled by this over that device's
@@ -995,10 +1011,20 @@ impl BudgetChoice {
 }
 
 impl Survey {
+    /// The survey pricing frames that shade `pixels` pixels (width × height × SSAA² × views).
+    pub fn shading(mut self, pixels: f64) -> Self {
+        if pixels.is_finite() && pixels > 0.0 {
+            self.frame_pixels = pixels;
+        }
+        self
+    }
+
     /// The part of every candidate's predicted frame time that no knob changes
-    /// ([`model::FRAME_MS_FIXED`] on this device).
+    /// ([`model::FRAME_MS_FIXED`] at the fit's 128², and [`model::FRAME_MS_PER_PIXEL`] for
+    /// every pixel more or fewer, on this device).
     pub fn predicted_fixed_ms(&self) -> f64 {
-        self.time_scale * model::FRAME_MS_FIXED
+        let per_pixel = model::FRAME_MS_PER_PIXEL * (self.frame_pixels - model::FIT_PIXELS);
+        self.time_scale * (model::FRAME_MS_FIXED + per_pixel).max(0.0)
     }
 
     /// Predicts a candidate's convergence FLIP and frame time.
@@ -1358,6 +1384,44 @@ mod tests {
         let world = scene.world_from_node_at(0.0);
         let camera = scene.camera_view(None, 1.0, &world).expect("camera");
         Survey::new(&scene, &world, Some(&camera), 1)
+    }
+
+    /// The per-pixel passes are priced by the pixels a frame shades: a 1280×720 frame's
+    /// fixed part is the 128² fit's plus every further pixel's cost, the same for every
+    /// candidate, so that under a time budget the survey alone picks a cheaper candidate for
+    /// the larger frame, one whose whole predicted frame fits.
+    #[test]
+    fn a_larger_frame_prices_its_pixels_and_fits_a_cheaper_candidate_in_the_budget() {
+        let small = survey_of("cornell");
+        assert_eq!(small.frame_pixels, model::FIT_PIXELS);
+        assert_eq!(small.predicted_fixed_ms(), model::FRAME_MS_FIXED);
+        let pixels = 1280.0 * 720.0;
+        let large = small.clone().shading(pixels);
+        let extra = model::FRAME_MS_PER_PIXEL * (pixels - model::FIT_PIXELS);
+        assert!((large.predicted_fixed_ms() - (model::FRAME_MS_FIXED + extra)).abs() < 1e-9);
+        for (points, rsm, visibility) in
+            [(1024, 32, Visibility::Off), (8192, 128, Visibility::Rays)]
+        {
+            let (a, b) = (
+                small.predict(points, rsm, visibility),
+                large.predict(points, rsm, visibility),
+            );
+            assert!((b.predicted_ms - a.predicted_ms - extra).abs() < 1e-6);
+            assert_eq!(a.predicted_flip, b.predicted_flip);
+        }
+        // A nonsense pixel count leaves the fit's.
+        assert_eq!(
+            small.clone().shading(f64::NAN).frame_pixels,
+            model::FIT_PIXELS
+        );
+        let budget = BudgetTarget::Ms(model::FRAME_MS_FIXED + extra + 100.0);
+        let (at_small, at_large) = (small.choose(budget), large.choose(budget));
+        assert!(at_large.met && at_large.predicted_ms <= model::FRAME_MS_FIXED + extra + 100.0);
+        assert!(
+            at_small.predicted_ms - small.predicted_fixed_ms()
+                > at_large.predicted_ms - large.predicted_fixed_ms(),
+            "{at_small:?} against {at_large:?}"
+        );
     }
 
     #[test]

@@ -463,9 +463,10 @@ pub fn budget_target(options: &MethodOptions) -> Result<Option<budget::BudgetTar
 pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
 
 /// Applies `--quality auto` to `settings`: surveys `scene` as the render's camera (`camera`,
-/// an index; `None`: the scene's first) sees it at time 0, chooses, and sets every budget knob
-/// the options do not give explicitly. Returns the JSON `budget` report: per knob its value
-/// and why.
+/// an index; `None`: the scene's first) sees it at time 0 in an image of `aspect`, prices the
+/// per-pixel passes for frames shading `frame_pixels` (width × height × SSAA² × views),
+/// chooses, and sets every budget knob the options do not give explicitly. Returns the JSON
+/// `budget` report: per knob its value and why.
 ///
 /// `pilots` measure candidates: under a FLIP target [`Pilots::Flip`] renders a candidate's
 /// settings to its indirect image for the pilot search ([`budget::Survey::search`]), under a
@@ -474,7 +475,7 @@ pub const DEFAULT_TARGET_FLIP: f64 = 0.05;
 /// alone.
 pub fn apply_budget(
     scene: &Scene,
-    (camera, aspect): (Option<usize>, f32),
+    (camera, aspect, frame_pixels): (Option<usize>, f32, f64),
     options: &MethodOptions,
     target: budget::BudgetTarget,
     device_fma_peak: Option<f64>,
@@ -487,7 +488,8 @@ pub fn apply_budget(
         .camera_view(selector.as_deref(), aspect, &world)
         .map_err(|e| RenderError::Settings(e.to_string()))?;
     let mut survey = budget::Survey::new(scene, &world, Some(&camera), settings.seed)
-        .pricing_glossy(settings.options.glossy, scene);
+        .pricing_glossy(settings.options.glossy, scene)
+        .shading(frame_pixels);
     if let Some(peak) = device_fma_peak.filter(|p| *p > 0.0 && p.is_finite()) {
         survey.time_scale = budget::model::FIT_FMA_PEAK / peak;
     }
@@ -644,6 +646,9 @@ pub fn apply_budget(
         "survey_ms": crate::gpu::timing::round3(survey.survey_ms),
         "surveyed_from": survey.eye.map(|e| [e.x, e.y, e.z]),
         "time_scale": survey.time_scale,
+        // The pixels a frame shades, and the part of its predicted time no knob changes.
+        "frame_pixels": survey.frame_pixels,
+        "predicted_fixed_ms": crate::gpu::timing::round3(survey.predicted_fixed_ms()),
         // The chosen gather's cost per pair relative to the fitted one: with or without the
         // glossy lobes (`glossy auto` on an all-Lambert scene, or `off`), with or without the
         // cluster visibility.
@@ -1506,9 +1511,13 @@ impl SparseMethod {
                         },
                     }),
                 };
+                let frame_pixels = f64::from(render.width)
+                    * f64::from(render.height)
+                    * f64::from(render.ssaa.max(1)).powi(2)
+                    * f64::from(render.views_per_frame.max(1));
                 Some(apply_budget(
                     scene,
-                    (render.camera, aspect),
+                    (render.camera, aspect, frame_pixels),
                     options,
                     target,
                     peak,
