@@ -1103,51 +1103,87 @@ fn the_default_method_under_a_time_budget_keeps_its_atlas() {
     assert_eq!(pilots.as_array().map(Vec::len), Some(1), "{report}");
 }
 
-/// An imported scene's tessellation is budget mode's fifth knob: under a time budget it is
-/// refined for the densest candidate (the point count is measured on the device after the
-/// scene is refined), and the budget's `max_edge` line says so.
+/// An imported scene's tessellation is budget mode's fifth knob. Under a time budget the
+/// scene is first refined for the densest candidate (the point count is measured on the
+/// device after the scene is refined); once the budget has chosen fewer points, the scene is
+/// refined again for them and the choice built over it. The budget's `max_edge` line says
+/// which.
 #[test]
-fn a_time_budget_refines_an_imported_scene_for_the_densest_candidate_and_says_why() {
+fn a_time_budget_refines_an_imported_scene_for_the_points_it_chose_and_says_why() {
     if common::gpu().is_none() {
         return;
     }
     let dir = common::temp_dir("cli-budget-max-edge");
-    let scene = dir.join("floor.obj");
-    // A 2 m × 2 m floor of two triangles.
+    let scene = dir.join("corner.obj");
+    // A 2 m × 2 m floor and a 2 m × 2 m wall behind it, two triangles each: a single plane
+    // sends no light to itself, and budget mode has nothing to budget there.
     std::fs::write(
         &scene,
-        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 3 2\nf 1 4 3\n",
+        "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv -1 2 -1\nv 1 2 -1\n\
+         f 1 3 2\nf 1 4 3\nf 1 2 6\nf 1 6 5\n",
     )
     .unwrap();
-    let output = valgi()
-        .args(["render", "--scene"])
-        .arg(&scene)
-        .args(["--light", "point:0,1,0,1", "--method", "sparse"])
-        .args(["--width", "16", "--height", "16", "--no-write"])
-        .args([
-            "--quality",
-            "auto",
-            "--budget-ms",
-            "1e7",
-            "--budget-pilots",
-            "0",
-        ])
-        .output()
-        .expect("run valgi");
-    let report = common::success_report(&output);
-    assert_eq!(report["max_edge_source"], "sparse spacing", "{report}");
-    let line = &report["budget"]["max_edge"];
-    assert_eq!(line["value"], report["max_edge"], "{report}");
+    let render = |budget_ms: &str| {
+        let output = valgi()
+            .args(["render", "--scene"])
+            .arg(&scene)
+            .args(["--light", "point:0,1,0.5,5", "--method", "sparse"])
+            .args(["--width", "16", "--height", "16", "--no-write"])
+            .args(["--quality", "auto", "--budget-ms", budget_ms])
+            .args(["--budget-pilots", "0"])
+            .output()
+            .expect("run valgi");
+        common::success_report(&output)
+    };
+    // The edge for `points` on the 8 m² corner, and the report's line.
+    let expected = |points: usize| (8.0 / points as f64).sqrt() * std::f64::consts::FRAC_1_SQRT_2;
+    let check_edge = |report: &serde_json::Value, points: usize| {
+        assert_eq!(report["max_edge_source"], "sparse spacing", "{report}");
+        let line = &report["budget"]["max_edge"];
+        assert_eq!(line["value"], report["max_edge"], "{report}");
+        let edge = line["value"].as_f64().unwrap();
+        assert!(
+            (edge / expected(points) - 1.0).abs() < 1e-3,
+            "{edge} against {} for {points} points",
+            expected(points)
+        );
+        line["why"].as_str().unwrap().to_string()
+    };
+
+    // Every candidate fits: the densest is chosen, and the scene stays as first refined.
+    let densest = *valgi::vals::budget::CANDIDATE_POINTS.last().unwrap();
+    let rich = render("1e7");
+    assert_eq!(rich["budget"]["sparse_points"]["value"], densest, "{rich}");
+    let why = check_edge(&rich, densest);
     assert!(
-        line["why"].as_str().unwrap().contains("densest candidate"),
-        "{line}"
+        why.contains("densest candidate") && !why.contains("again"),
+        "{why}"
     );
-    let densest = *valgi::vals::budget::CANDIDATE_POINTS.last().unwrap() as f64;
-    let expected = (4.0 / densest).sqrt() * std::f64::consts::FRAC_1_SQRT_2;
-    let edge = line["value"].as_f64().unwrap();
+
+    // None fits: the cheapest candidate, and the corner refined again for its points, four
+    // times coarser along an edge.
+    let fewest = valgi::vals::budget::CANDIDATE_POINTS[0];
+    let cheap = render("0.001");
+    assert_eq!(cheap["budget"]["sparse_points"]["value"], fewest, "{cheap}");
+    assert_eq!(cheap["budget"]["met"], false, "{cheap}");
+    let why = check_edge(&cheap, fewest);
+    assert!(why.contains("refined again for the choice"), "{why}");
+    let triangles = |r: &serde_json::Value| r["triangles"].as_u64().unwrap();
     assert!(
-        (edge / expected - 1.0).abs() < 1e-3,
-        "{edge} against {expected}"
+        triangles(&cheap) * 8 < triangles(&rich),
+        "{} triangles against {}",
+        triangles(&cheap),
+        triangles(&rich)
+    );
+    // The method rendered is the choice, over the coarser corner: the same points as the
+    // choice built over the scene as first refined would place (two-sided OBJ sheets get
+    // their points on both sides).
+    let placed = |r: &serde_json::Value| r["sparse_points"].as_u64().unwrap() as f64;
+    assert!(
+        (placed(&cheap) / placed(&rich) - fewest as f64 / densest as f64).abs() < 0.01,
+        "{} points against {}",
+        placed(&cheap),
+        placed(&rich)
     );
 }
 

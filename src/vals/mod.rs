@@ -217,7 +217,8 @@ pub fn default_max_edge(
         }
         (Some(budget::BudgetTarget::Ms(_)), false) => {
             // A time budget's point count depends on the device, which is not open yet:
-            // tessellate for the densest candidate (finer meshes cost only preprocessing).
+            // tessellate for the densest candidate, whose points a coarser mesh would blur
+            // (`valgi render` refines the scene again once the budget has chosen).
             points = *budget::CANDIDATE_POINTS.last().expect("candidates");
             whose = "the densest candidate's (a time budget's point count is measured on the \
                      device, after the scene is refined):"

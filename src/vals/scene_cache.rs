@@ -139,7 +139,7 @@ impl<'s> SceneCache<'s> {
     }
 }
 
-/// How many link-tested point sets the process keeps, the most recent first. The placement
+/// How many link-tested point sets the process keeps, the most recently used. The placement
 /// itself is cached per mesh (`points::scene_points_for`); the link test needs the whole
 /// scene's tracer and its rays (1.5 s on Sponza at 8192 points), which a rebuild with another
 /// RSM side or occlusion would otherwise pay again.
