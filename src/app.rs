@@ -336,19 +336,21 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         )?;
         let reload_ms = reloading.elapsed().as_secs_f64() * 1000.0;
         load_ms += reload_ms;
-        let budget = method.report().remove("budget");
-        let densest_edge = tessellation.max_edge;
+        retessellation = Some(Retessellation {
+            budget: method.report().remove("budget"),
+            densest_edge: tessellation.max_edge,
+            reload_ms,
+        });
         let name = method.name();
         // The dense scene's method goes first: its GPU memory is not needed again.
         drop(method);
         method = method::create(name, &ctx, &refined, settings, &resolved)?;
-        retessellation = Some((budget, densest_edge, reload_ms));
         scene = refined;
         tessellation = refined_tessellation;
     }
     // The method's construction: GPU context, uploads, pipelines and its preprocessing (a
     // second load of the scene counts as loading).
-    let reload_ms = retessellation.as_ref().map_or(0.0, |(_, _, ms)| *ms);
+    let reload_ms = retessellation.as_ref().map_or(0.0, |r| r.reload_ms);
     let setup_ms = setup_started.elapsed().as_secs_f64() * 1000.0 - reload_ms;
     log::info!(
         "scene loaded in {load_ms:.0} ms, method '{}' set up in {setup_ms:.0} ms",
@@ -547,8 +549,8 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         obj.insert("load_ms".into(), serde_json::json!(round3(load_ms)));
         obj.insert("setup_ms".into(), serde_json::json!(round3(setup_ms)));
         obj.extend(method.report());
-        if let Some((Some(budget), _, _)) = &retessellation {
-            obj.insert("budget".into(), budget.clone());
+        if let Some(budget) = retessellation.as_ref().and_then(|r| r.budget.clone()) {
+            obj.insert("budget".into(), budget);
         }
         // Budget mode says what it chose and why a line per knob; an imported scene's
         // tessellation is one of them, chosen as the scene was loaded (or loaded again).
@@ -557,11 +559,12 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
                 "option" => "given".to_string(),
                 _ => tessellation.why.clone(),
             };
-            if let Some((_, densest_edge, reload_ms)) = &retessellation {
+            if let Some(again) = &retessellation {
                 why = format!(
                     "{why}: the scene was refined again for the choice, which the budget made \
-                     on it refined for the densest candidate ({densest_edge:.3e} m); loading \
-                     it again took {reload_ms:.0} ms"
+                     on it refined for the densest candidate ({:.3e} m); loading it again took \
+                     {:.0} ms",
+                    again.densest_edge, again.reload_ms
                 );
             }
             budget.insert(
@@ -575,6 +578,16 @@ pub fn render(request: &RenderRequest) -> Result<serde_json::Value, AppError> {
         );
     }
     Ok(report)
+}
+
+/// A scene loaded again for a time budget's choice ([`refines_for_time_budget`]).
+struct Retessellation {
+    /// The budget's report, from the method built over the scene as first refined.
+    budget: Option<serde_json::Value>,
+    /// The edge the scene was first refined to, for the densest candidate, metres.
+    densest_edge: f32,
+    /// What loading it again took, ms.
+    reload_ms: f64,
 }
 
 /// The options that build `method`'s time-budget choice again over the scene refined for it,
