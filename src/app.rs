@@ -608,8 +608,8 @@ fn refines_for_time_budget(
         crate::vals::budget_target(&request.options),
         Ok(Some(crate::vals::budget::BudgetTarget::Ms(_)))
     );
-    if request.max_edge.is_some()
-        || tessellation.source != "sparse spacing"
+    // A `--max-edge` given makes the source `option`.
+    if tessellation.source != "sparse spacing"
         || !imported
         || !time_budget
         || request.options.given("sparse-points")

@@ -261,6 +261,18 @@ pub enum OcclusionMode {
     Rays,
 }
 
+impl OcclusionMode {
+    /// Its value of the `occlusion` option, as the JSON report also names it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Sum => "sum",
+            Self::Union => "union",
+            Self::Rays => "rays",
+        }
+    }
+}
+
 /// An occluder disc: a sparse point with its Voronoi radius.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct OccluderDisc {

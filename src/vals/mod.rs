@@ -669,7 +669,7 @@ pub fn apply_budget(
                 survey.lit_area, used.val_error)),
         },
         "occlusion": {
-            "value": format!("{:?}", settings.options.occlusion).to_lowercase(),
+            "value": settings.options.occlusion.name(),
             "why": why("occlusion", if settings.options.occlusion == OcclusionMode::Rays {
                 format!("geometry blocks {:.3} of the one-bounce light the camera sees: rays to {} clusters per point",
                     survey.occluded_share, survey.clusters)
@@ -682,7 +682,7 @@ pub fn apply_budget(
             }),
         },
         "visibility_rays": {
-            "value": if settings.options.adaptive_rays { "adaptive" } else { "all" },
+            "value": visibility_rays_value(settings.options.adaptive_rays),
             "why": why("visibility-rays", match used.visibility {
                 budget::Visibility::Off | budget::Visibility::Sum => "no rays".to_string(),
                 budget::Visibility::Rays => format!(
@@ -1349,9 +1349,9 @@ impl Method for SparseMethod {
             "glossy_gathered": self.sparse.gathers_glossy(&opts),
             "spheres_gathered": self.sparse.gathers_spheres(&opts),
             "glossy_eye": match self.settings.glossy_eye { GlossyEye::Mid => "mid", GlossyEye::PerView => "per-view" },
-            "occlusion": format!("{:?}", opts.occlusion).to_lowercase(),
+            "occlusion": opts.occlusion.name(),
             "weights": format!("{:?}", opts.weights).to_lowercase(),
-            "visibility_rays": if opts.adaptive_rays { "adaptive" } else { "all" },
+            "visibility_rays": visibility_rays_value(opts.adaptive_rays),
             "visibility_lookup": if self.sparse.visibility_select_tree(&opts) { "tree" } else { "switch" },
             "gather_vals": match opts.gather {
                 GatherForm::Compute => ValReads::name(self.sparse.gathers_in_windows(&opts)),
@@ -1538,6 +1538,15 @@ impl SparseMethod {
     }
 }
 
+/// The `visibility-rays` option's value for `adaptive` rays or not.
+fn visibility_rays_value(adaptive: bool) -> &'static str {
+    if adaptive {
+        "adaptive"
+    } else {
+        "all"
+    }
+}
+
 /// `options` with budget mode's choice (`settings`) written in as manual knobs: they build
 /// the chosen method again without its survey and pilots.
 fn with_choice_written_in(
@@ -1545,22 +1554,14 @@ fn with_choice_written_in(
     settings: &SparseSettings,
 ) -> Vec<(String, String)> {
     let search = ["quality", "target-flip", "budget-ms", "budget-pilots"];
-    let occlusion = match settings.options.occlusion {
-        OcclusionMode::Off => "off",
-        OcclusionMode::Sum => "sum",
-        OcclusionMode::Union => "union",
-        OcclusionMode::Rays => "rays",
-    };
-    let visibility_rays = if settings.options.adaptive_rays {
-        "adaptive"
-    } else {
-        "all"
-    };
     let chosen = [
         ("sparse-points", settings.sparse_points.to_string()),
         ("rsm", settings.rsm.to_string()),
-        ("occlusion", occlusion.to_string()),
-        ("visibility-rays", visibility_rays.to_string()),
+        ("occlusion", settings.options.occlusion.name().to_string()),
+        (
+            "visibility-rays",
+            visibility_rays_value(settings.options.adaptive_rays).to_string(),
+        ),
     ];
     let mut pairs: Vec<(String, String)> = options
         .entries()
