@@ -1,11 +1,13 @@
 // The per-view passes of second-order illumination with negative indirect lights (§A.3–A.8):
 //
-//   points            S_cam: world position, normal and eye distance of every pixel
-//   downsample        S_locam: per 2×2 block the covered pixel nearest the block's median depth
+//   points_main       S_cam: world position, normal and eye distance of every pixel (low
+//                     resolution off)
+//   points_blocks     low resolution on: S_cam; S_locam, per 2×2 block the covered pixel
+//                     nearest the block's median depth; and per 8×8 tile whether any pixel
+//                     differs from its low-resolution parent by more than the discontinuity
+//                     threshold. Flagged tiles are appended to a list whose length becomes
+//                     the indirect dispatch of the patch passes
 //   positive_low      E_s, E_neg and the weighted direction at every low-resolution point
-//   classify          per 8×8 tile: does any pixel differ from its low-resolution parent by
-//                     more than the discontinuity threshold? Flagged tiles are appended to a
-//                     list whose length becomes the indirect dispatch of the patch passes
 //   positive_tiles    the same terms at full resolution in the flagged tiles (indirect)
 //   positive_full     the same terms at every pixel (low resolution off)
 //   select_negatives  M negative lights from the Halton camera candidates
@@ -105,15 +107,20 @@ fn has_full_terms(pixel: vec2<u32>) -> bool {
     return atomicLoad(&tiles[tile_flag_slot(tile_of(pixel))]) != 0u;
 }
 
-fn terms_at(pixel: vec2<u32>) -> PositiveTerms {
-    if (has_full_terms(pixel)) {
+// The pixel's own terms where `full` (`has_full_terms`), its parent's otherwise.
+fn terms_of(pixel: vec2<u32>, full: bool) -> PositiveTerms {
+    if (full) {
         return full_terms[full_index(pixel)];
     }
     return low_terms[parent_index(pixel)];
 }
 
-fn en_at(pixel: vec2<u32>) -> vec3<f32> {
-    if (has_full_terms(pixel)) {
+fn terms_at(pixel: vec2<u32>) -> PositiveTerms {
+    return terms_of(pixel, has_full_terms(pixel));
+}
+
+fn en_of(pixel: vec2<u32>, full: bool) -> vec3<f32> {
+    if (full) {
         return full_en[full_index(pixel)].rgb;
     }
     return low_en[parent_index(pixel)].rgb;
@@ -286,76 +293,153 @@ fn full_column(first: vec2<u32>) -> array<SurfacePoint, COLUMN> {
     return q;
 }
 
+// S_cam at one pixel from the G-buffer: world position, normal and eye distance (all zero
+// where no surface covers it).
+fn surface_point(pixel: vec2<u32>) -> SurfacePoint {
+    var point: SurfacePoint;
+    point.position = vec4<f32>(0.0);
+    point.normal = vec4<f32>(0.0);
+    let texel = vec2<i32>(pixel);
+    if (textureLoad(gbuffer_specular, texel, 0).a > 0.5) {
+        let depth = textureLoad(gbuffer_depth, texel, 0);
+        let uv = (vec2<f32>(pixel) + 0.5) / vec2<f32>(f32(params.full_width), f32(params.full_height));
+        let world = frame.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
+        let p = world.xyz / world.w;
+        point.position = vec4<f32>(p, 1.0);
+        point.normal = vec4<f32>(normalize(textureLoad(gbuffer_normal, texel, 0).xyz), length(p - params.eye.xyz));
+    }
+    return point;
+}
+
+// S_cam at every pixel, for the passes at full resolution (low resolution off).
 @compute @workgroup_size(8, 8, 1)
 fn points_main(@builtin(global_invocation_id) id: vec3<u32>) {
     if (id.x >= params.full_width || id.y >= params.full_height) {
         return;
     }
-    let pixel = vec2<i32>(id.xy);
-    var point: SurfacePoint;
-    point.position = vec4<f32>(0.0);
-    point.normal = vec4<f32>(0.0);
-    if (textureLoad(gbuffer_specular, pixel, 0).a > 0.5) {
-        let depth = textureLoad(gbuffer_depth, pixel, 0);
-        let uv = (vec2<f32>(pixel) + 0.5) / vec2<f32>(f32(params.full_width), f32(params.full_height));
-        let world = frame.world_from_clip * vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, depth, 1.0);
-        let p = world.xyz / world.w;
-        point.position = vec4<f32>(p, 1.0);
-        point.normal = vec4<f32>(normalize(textureLoad(gbuffer_normal, pixel, 0).xyz), length(p - params.eye.xyz));
-    }
-    points[full_index(id.xy)] = point;
+    points[full_index(id.xy)] = surface_point(id.xy);
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn downsample(@builtin(global_invocation_id) id: vec3<u32>) {
-    if (id.x >= params.low_width || id.y >= params.low_height) {
-        return;
-    }
-    // The covered children's eye distances, sorted, give the median; the child nearest it
-    // stands for the block (averaging would invent points on no surface).
+// S_locam (§A.7): of a 2×2 block's covered children, the index of the one whose eye distance
+// is nearest the block's median (4 when none is covered); the median of the covered
+// distances, and not their average, since an average would invent a point on no surface.
+// A sorting network with the uncovered children at +∞ and selects instead of a sort's loops:
+// llvmpipe runs a data-dependent loop under a mask until every lane is done.
+fn block_representative(children: array<SurfacePoint, 4>) -> u32 {
     var d: array<f32, 4>;
-    var idx: array<u32, 4>;
     var k = 0u;
     for (var j = 0u; j < 4u; j++) {
-        let child = id.xy * 2u + vec2<u32>(j % 2u, j / 2u);
-        if (child.x < params.full_width && child.y < params.full_height) {
-            let p = points[full_index(child)];
-            if (p.position.w > 0.5) {
-                d[k] = p.normal.w;
-                idx[k] = full_index(child);
-                k += 1u;
+        let covered = children[j].position.w > 0.5;
+        d[j] = select(3.4e38, children[j].normal.w, covered);
+        k += select(0u, 1u, covered);
+    }
+    if (k == 0u) {
+        return 4u;
+    }
+    // Sorted ascending: the k covered distances first.
+    let a0 = min(d[0], d[1]);
+    let a1 = max(d[0], d[1]);
+    let a2 = min(d[2], d[3]);
+    let a3 = max(d[2], d[3]);
+    let s0 = min(a0, a2);
+    let b2 = max(a0, a2);
+    let b1 = min(a1, a3);
+    let s3 = max(a1, a3);
+    let s1 = min(b1, b2);
+    let s2 = max(b1, b2);
+    // k = 1: s0; 2: (s0 + s1)/2; 3: s1; 4: (s1 + s2)/2.
+    var median = s0;
+    if (k == 2u) {
+        median = 0.5 * (s0 + s1);
+    } else if (k == 3u) {
+        median = s1;
+    } else if (k == 4u) {
+        median = 0.5 * (s1 + s2);
+    }
+    var best = 4u;
+    var gap = 3.4e38;
+    for (var j = 0u; j < 4u; j++) {
+        let g = abs(d[j] - median);
+        if (children[j].position.w > 0.5 && g < gap) {
+            gap = g;
+            best = j;
+        }
+    }
+    return best;
+}
+
+// The discontinuity test (§A.7): a covered pixel is recomputed at full resolution when its
+// parent is uncovered, lies more than τ_x pixel footprints away or turns its normal past τ_n.
+fn discontinuous(p: SurfacePoint, parent: SurfacePoint) -> bool {
+    if (p.position.w < 0.5) {
+        return false;
+    }
+    if (parent.position.w < 0.5) {
+        return true;
+    }
+    let footprint = p.normal.w * params.footprint_scale;
+    return length(p.position.xyz - parent.position.xyz) > params.threshold_pos * footprint
+        || dot(p.normal.xyz, parent.normal.xyz) < params.threshold_normal;
+}
+
+// The 2 × 2 tiles of a `points_blocks` workgroup: whether any pixel is discontinuous.
+var<workgroup> tile_flagged: array<atomic<u32>, 4>;
+
+// With low resolution on, one invocation per 2×2 block and one workgroup per 2 × 2 tiles of
+// 8×8 pixels: S_cam of the block's four pixels, their representative S_locam, and each tile's
+// flag (any pixel discontinuous from its parent), the flagged tiles appended to the list whose
+// length becomes the indirect dispatch of the patch passes. One pass rather than three
+// (points, downsample, classify) reads the G-buffer once and S_cam not at all.
+@compute @workgroup_size(8, 8, 1)
+fn points_blocks(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_id) lid: vec3<u32>, @builtin(local_invocation_index) lindex: u32, @builtin(workgroup_id) wid: vec3<u32>) {
+    if (lindex < 4u) {
+        atomicStore(&tile_flagged[lindex], 0u);
+    }
+    workgroupBarrier();
+    if (inside(id.xy, low_size())) {
+        var children: array<SurfacePoint, 4>;
+        for (var j = 0u; j < 4u; j++) {
+            let child = id.xy * 2u + vec2<u32>(j % 2u, j / 2u);
+            if (inside(child, full_size())) {
+                children[j] = surface_point(child);
+                points[full_index(child)] = children[j];
+            }
+        }
+        let best = block_representative(children);
+        var parent: SurfacePoint;
+        var broken = false;
+        for (var j = 0u; j < 4u; j++) {
+            if (j == best) {
+                parent = children[j];
+            }
+        }
+        for (var j = 0u; j < 4u; j++) {
+            broken = broken || discontinuous(children[j], parent);
+        }
+        low_points[id.y * params.low_width + id.x] = parent;
+        if (broken) {
+            let local_tile = lid.x / 4u + 2u * (lid.y / 4u);
+            atomicOr(&tile_flagged[local_tile], 1u);
+        }
+    }
+    workgroupBarrier();
+    if (lindex < 4u) {
+        let tile_xy = wid.xy * 2u + vec2<u32>(lindex % 2u, lindex / 2u);
+        let origin = tile_xy * TILE;
+        if (inside(origin, full_size())) {
+            let tile = tile_xy.y * params.tiles_x + tile_xy.x;
+            let flagged = atomicLoad(&tile_flagged[lindex]);
+            atomicStore(&tiles[tile_flag_slot(tile)], flagged);
+            if (flagged != 0u) {
+                let slot = atomicAdd(&tiles[0], 1u);
+                atomicStore(&tiles[tile_list_slot(slot)], tile);
+                // The tile's pixels inside the image, counted here rather than by an atomic
+                // add in every invocation (which llvmpipe runs lane by lane).
+                let size = min(vec2<u32>(TILE), full_size() - origin);
+                atomicAdd(&tiles[3], size.x * size.y);
             }
         }
     }
-    var out: SurfacePoint;
-    out.position = vec4<f32>(0.0);
-    out.normal = vec4<f32>(0.0);
-    if (k > 0u) {
-        var sorted = d;
-        for (var a = 1u; a < k; a++) {
-            var b = a;
-            while (b > 0u && sorted[b - 1u] > sorted[b]) {
-                let tmp = sorted[b];
-                sorted[b] = sorted[b - 1u];
-                sorted[b - 1u] = tmp;
-                b -= 1u;
-            }
-        }
-        var median = sorted[k / 2u];
-        if (k % 2u == 0u) {
-            median = 0.5 * (sorted[k / 2u - 1u] + sorted[k / 2u]);
-        }
-        var best = 0u;
-        var gap = 3.4e38;
-        for (var j = 0u; j < k; j++) {
-            if (abs(d[j] - median) < gap) {
-                gap = abs(d[j] - median);
-                best = j;
-            }
-        }
-        out = points[idx[best]];
-    }
-    low_points[id.y * params.low_width + id.x] = out;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -366,48 +450,6 @@ fn positive_low(@builtin(global_invocation_id) id: vec3<u32>) {
         let pixel = first + vec2<u32>(0u, k);
         if (inside(pixel, low_size())) {
             low_terms[pixel.y * params.low_width + pixel.x] = t[k];
-        }
-    }
-}
-
-var<workgroup> tile_flagged: atomic<u32>;
-
-// One workgroup per tile: flag it when any pixel is discontinuous from its parent.
-@compute @workgroup_size(8, 8, 1)
-fn classify(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>) {
-    if (lid == 0u) {
-        atomicStore(&tile_flagged, 0u);
-    }
-    workgroupBarrier();
-    if (id.x < params.full_width && id.y < params.full_height) {
-        let p = points[full_index(id.xy)];
-        let parent = low_points[parent_index(id.xy)];
-        if (p.position.w > 0.5) {
-            var broken = parent.position.w < 0.5;
-            if (!broken) {
-                let footprint = p.normal.w * params.footprint_scale;
-                broken = length(p.position.xyz - parent.position.xyz) > params.threshold_pos * footprint
-                    || dot(p.normal.xyz, parent.normal.xyz) < params.threshold_normal;
-            }
-            if (broken) {
-                atomicOr(&tile_flagged, 1u);
-            }
-        }
-    }
-    workgroupBarrier();
-    if (lid == 0u) {
-        let tile = wid.y * params.tiles_x + wid.x;
-        let flagged = atomicLoad(&tile_flagged);
-        atomicStore(&tiles[tile_flag_slot(tile)], flagged);
-        if (flagged != 0u) {
-            let slot = atomicAdd(&tiles[0], 1u);
-            atomicStore(&tiles[tile_list_slot(slot)], tile);
-            // The tile's pixels inside the image, counted here rather than by an atomic add in
-            // every invocation (which llvmpipe runs lane by lane: the pass 3.9–4.2 → 3.1–3.5 ms
-            // at 640×480).
-            let origin = wid.xy * TILE;
-            let size = min(vec2<u32>(TILE), full_size() - origin);
-            atomicAdd(&tiles[3], size.x * size.y);
         }
     }
 }
@@ -548,8 +590,9 @@ struct PixelStats {
     n: vec2<f32>,
 }
 
-// One pixel of the gather: its indirect radiance stored, its statistics returned.
-fn gather_pixel(pixel: vec2<u32>) -> PixelStats {
+// One pixel of the gather: its indirect radiance stored, its statistics returned. `full`:
+// whether its tile has terms of its own (`has_full_terms`, read once per tile).
+fn gather_pixel(pixel: vec2<u32>, full: bool) -> PixelStats {
     var out: PixelStats;
     out.s = vec4<f32>(0.0);
     out.n = vec2<f32>(0.0);
@@ -559,11 +602,11 @@ fn gather_pixel(pixel: vec2<u32>) -> PixelStats {
     var radiance = vec3<f32>(0.0);
     if (points[full_index(pixel)].position.w > 0.5) {
         let rho = textureLoad(gbuffer_diffuse, vec2<i32>(pixel), 0).rgb / PI;
-        let terms = terms_at(pixel);
+        let terms = terms_of(pixel, full);
         let positive = rho * terms.e_s.rgb;
         var negative = vec3<f32>(0.0);
         if (params.negative_target > 0u) {
-            negative = rho * en_at(pixel);
+            negative = rho * en_of(pixel, full);
         }
         let raw = positive - negative;
         radiance = max(raw, vec3<f32>(0.0));
@@ -584,10 +627,13 @@ var<workgroup> partial_n: array<vec2<f32>, 16>;
 @compute @workgroup_size(8, 2, 1)
 fn gather(@builtin(local_invocation_id) lid3: vec3<u32>, @builtin(local_invocation_index) lid: u32, @builtin(workgroup_id) wid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let first = wid.xy * TILE + vec2<u32>(lid3.x, lid3.y * COLUMN);
+    // The workgroup is one tile: its flag is read once, not per pixel (an atomic load, which
+    // llvmpipe runs lane by lane).
+    let full = has_full_terms(wid.xy * TILE);
     var s = vec4<f32>(0.0);
     var n = vec2<f32>(0.0);
     for (var k = 0u; k < COLUMN; k++) {
-        let p = gather_pixel(first + vec2<u32>(0u, k));
+        let p = gather_pixel(first + vec2<u32>(0u, k), full);
         s += p.s;
         n += p.n;
     }

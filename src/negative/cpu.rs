@@ -515,7 +515,7 @@ pub fn select_negatives(
     (lights, tried)
 }
 
-/// The CPU twin of `downsample`: of a 2×2 block's covered points, the one whose eye distance
+/// The CPU twin of `block_representative` (`points_blocks`): of a 2×2 block's covered points, the one whose eye distance
 /// is nearest the block's median (`None` when none is covered).
 pub fn block_representative(block: &[SurfacePoint]) -> Option<usize> {
     let mut depths: Vec<f32> = block
@@ -544,7 +544,7 @@ pub fn block_representative(block: &[SurfacePoint]) -> Option<usize> {
     best
 }
 
-/// The CPU twin of the discontinuity test in `classify` (§A.7): a covered pixel must be
+/// The CPU twin of `discontinuous` (`points_blocks`, §A.7): a covered pixel must be
 /// recomputed when its low-resolution parent is uncovered, lies more than τ_x pixel
 /// footprints away, or turns its normal past τ_n. `footprint_scale` = 2·tan(fov_y/2)/H.
 pub fn discontinuous(

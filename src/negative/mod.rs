@@ -301,12 +301,12 @@ pub fn shared_layouts() -> Vec<crate::raster::types::SharedLayout> {
 pub const POSITIVE_GROUP: u32 = 64;
 /// Workgroup of the negative-light selection (one workgroup).
 pub const SELECT_GROUP: u32 = 256;
-/// Entry points of `negative_view.wgsl` with one 8×8 workgroup per tile.
+/// Entry points of `negative_view.wgsl` with 8×8 workgroups (one per 8×8 tile of pixels, of
+/// low-resolution points, or of 2×2 blocks in `points_blocks`), unless listed below.
 pub const VIEW_ENTRIES: &[&str] = &[
     "points_main",
-    "downsample",
+    "points_blocks",
     "positive_low",
-    "classify",
     "positive_tiles",
     "positive_full",
     "negative_low",
@@ -885,13 +885,12 @@ impl Method for NegativeMethod {
         ctx.queue
             .write_buffer(&state.tiles, 0, bytemuck::cast_slice(&[0u32, 1, 1, 0]));
         let full = (w.div_ceil(PIXEL_TILE), h.div_ceil(PIXEL_TILE));
-        let low = (
-            w.div_ceil(2).div_ceil(PIXEL_TILE),
-            h.div_ceil(2).div_ceil(PIXEL_TILE),
-        );
         // The light loops' workgroups cover COLUMN times as many rows.
         let full_columns = (full.0, h.div_ceil(PIXEL_TILE * COLUMN));
-        let low_columns = (low.0, h.div_ceil(2).div_ceil(PIXEL_TILE * COLUMN));
+        let low_columns = (
+            w.div_ceil(2).div_ceil(PIXEL_TILE),
+            h.div_ceil(2).div_ceil(PIXEL_TILE * COLUMN),
+        );
         let group = &state.group;
         let run = |passes: &mut Passes, label: &str, entry: &str, groups: (u32, u32)| {
             let pipeline = self.pipeline(entry);
@@ -909,16 +908,22 @@ impl Method for NegativeMethod {
                 pass.dispatch_workgroups_indirect(&state.dispatch_args, 0);
             })
         };
-        run(passes, "negative points", "points_main", full)?;
         if s.lowres {
-            run(passes, "negative downsample", "downsample", low)?;
+            // One workgroup per 2 × 2 tiles.
+            let blocks = (full.0.div_ceil(2), full.1.div_ceil(2));
+            run(
+                passes,
+                "negative points and blocks",
+                "points_blocks",
+                blocks,
+            )?;
             run(passes, "negative positive low", "positive_low", low_columns)?;
-            run(passes, "negative classify", "classify", full)?;
             passes
                 .encoder()
                 .copy_buffer_to_buffer(&state.tiles, 0, &state.dispatch_args, 0, 12);
             patch(passes, "negative positive tiles", "positive_tiles")?;
         } else {
+            run(passes, "negative points", "points_main", full)?;
             run(
                 passes,
                 "negative positive full",
