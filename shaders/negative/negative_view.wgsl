@@ -126,36 +126,43 @@ fn en_of(pixel: vec2<u32>, full: bool) -> vec3<f32> {
     return low_en[parent_index(pixel)].rgb;
 }
 
-// Emitter side of a Lambertian point light seen from p, per unit Φ/π:
-// max(0, n_l·t̂_{l→p})/max(d², d²_min) (or /(d² + r²) with the disc falloff) in `factor`, so
-// that the light's irradiance arriving at p is Φ/π·factor, and t̂_{p→l} in `to_light`; zero
-// for an inactive light or one at p. The flux is applied by the caller, once per light for
-// all its points: on a CPU device (Mesa's llvmpipe) each division and square root is a slow
-// vector instruction, so this takes one of each per pair.
+// A Lambertian point light seen from p, per unit Φ/π, with the cosines left unnormalized:
+// `d` = x_l − p, `emit` = max(0, −n_l·d)/(|d|²·D) with D = max(d², d²_min) (or d² + r² with
+// the disc falloff), so that for a receiver normal n the arriving irradiance is
+// Φ/π·emit·max(0, n·d) = Φ/π·max(0, n_l·t̂_{l→p})·max(0, n·t̂_{p→l})/D. Zero for an inactive
+// light or one at p. One division a pair and no square root: on a CPU device (Mesa's
+// llvmpipe) each is a slow vector instruction, and the normalized form took two divisions and
+// a square root. The flux is applied by the caller, once per light for all its points.
 struct Emitter {
-    factor: f32,
-    to_light: vec3<f32>,
+    emit: f32,
+    d: vec3<f32>,
+    d2: f32,
     // 1 when the point falloff's d²_min guard replaced d².
     clamped: f32,
 }
 
 fn emitter(p: vec3<f32>, light: IndirectLight) -> Emitter {
-    let d = light.position.xyz - p;
-    let d2 = dot(d, d);
-    let lit = light.position.w >= 0.5 && d2 > 0.0;
     var out: Emitter;
-    // 1/sqrt, not inverseSqrt: a correctly rounded square root and division, the CPU twin's
-    // operations, so that near-grazing cosines agree with it.
-    out.to_light = d * select(0.0, 1.0 / sqrt(d2), lit);
-    let cos_l = max(0.0, -dot(light.normal.xyz, out.to_light));
-    var denominator = max(d2, params.d2_min);
-    out.clamped = select(0.0, 1.0, lit && d2 < params.d2_min);
+    out.d = light.position.xyz - p;
+    out.d2 = dot(out.d, out.d);
+    var denominator = max(out.d2, params.d2_min);
     if (DISC_FALLOFF) {
-        denominator = d2 + light.normal.w;
-        out.clamped = 0.0;
+        denominator = out.d2 + light.normal.w;
     }
-    out.factor = select(0.0, cos_l / denominator, lit);
+    // |d|²·D > 0 also drops a light so near that the product underflows (|d| ≲ 1e-16 m), as
+    // d² = 0 is dropped: its direction is not defined.
+    let scale = out.d2 * denominator;
+    let lit = light.position.w >= 0.5 && scale > 0.0;
+    out.clamped = select(0.0, 1.0, lit && out.d2 < params.d2_min && !DISC_FALLOFF);
+    let cos_l = max(0.0, -dot(light.normal.xyz, out.d));
+    out.emit = select(0.0, cos_l / scale, lit);
     return out;
+}
+
+// Whether a light at `d` from a point of normal n lies behind its tangent plane by more than
+// COPLANAR_COS: −n·t̂ > c, i.e. n·d < 0 and (n·d)² > c²·|d|², without the square root.
+fn behind_plane(n_dot_d: f32, d2: f32) -> bool {
+    return n_dot_d < 0.0 && n_dot_d * n_dot_d > COPLANAR_COS * COPLANAR_COS * d2;
 }
 
 // The light loops take a column of four pixels per invocation (pixel k of invocation (x, y)
@@ -177,16 +184,18 @@ struct PositiveSums {
 fn add_positive(sums: ptr<function, PositiveSums>, point: SurfacePoint, light: IndirectLight, flux_over_pi: vec3<f32>, y: f32) {
     let a = emitter(point.position.xyz, light);
     (*sums).clamped += a.clamped;
-    let cos_p = dot(point.normal.xyz, a.to_light);
-    (*sums).e_s += flux_over_pi * (a.factor * max(0.0, cos_p));
+    let n_dot_d = dot(point.normal.xyz, a.d);
+    (*sums).e_s += flux_over_pi * (a.emit * max(0.0, n_dot_d));
     // The share arriving from behind the tangent plane, per unit Φ/π.
-    let behind = a.factor * select(0.0, -cos_p, -cos_p > COPLANAR_COS);
+    let behind = a.emit * select(0.0, -n_dot_d, behind_plane(n_dot_d, a.d2));
     (*sums).e_neg += flux_over_pi * behind;
     // Y(Φ/π·x) = Y(Φ/π)·x: the weights are luminances of the sums' terms.
     if (WEIGHT_MODE == WEIGHT_ARRIVING) {
-        (*sums).direction += (y * a.factor) * light.normal.xyz;
+        // The arriving intensity without the receiver's cosine: emit·|d|.
+        (*sums).direction += (y * a.emit * sqrt(a.d2)) * light.normal.xyz;
     } else if (WEIGHT_MODE == WEIGHT_PROPAGATION) {
-        (*sums).direction += (y * behind) * -a.to_light;
+        // −t̂_{p→l} = −d/|d| (behind is 0 where d is).
+        (*sums).direction += (y * behind * select(0.0, 1.0 / sqrt(a.d2), a.d2 > 0.0)) * -a.d;
     } else {
         (*sums).direction += (y * behind) * light.normal.xyz;
     }
@@ -230,7 +239,7 @@ fn positive_terms(q: array<SurfacePoint, COLUMN>) -> array<PositiveTerms, COLUMN
 
 fn add_negative(e: ptr<function, vec3<f32>>, point: SurfacePoint, light: IndirectLight, flux_over_pi: vec3<f32>) {
     let a = emitter(point.position.xyz, light);
-    *e += flux_over_pi * (a.factor * max(0.0, dot(point.normal.xyz, a.to_light)));
+    *e += flux_over_pi * (a.emit * max(0.0, dot(point.normal.xyz, a.d)));
 }
 
 // E_n at four points (zero where a point is uncovered), as vec4 (rgb, 0).

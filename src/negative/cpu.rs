@@ -338,24 +338,27 @@ impl Falloff {
     }
 }
 
-/// Irradiance at (p, n) from a Lambertian point light: Φ/π·max(0, n_l·t̂_{l→p})·max(0,
-/// n·t̂_{p→l}) over the falloff's distance term. Returns the emitter factor and t̂_{p→l} apart
-/// so that callers can use either side of the tangent plane.
+/// A Lambertian point light seen from p (the twin of `emitter`): with d = x_l − p, returns
+/// Φ/π·max(0, −n_l·d)/(|d|²·D), D the falloff's distance term, together with d and |d|², so
+/// that the irradiance at a receiver of normal n is that times max(0, n·d) =
+/// Φ/π·max(0, n_l·t̂_{l→p})·max(0, n·t̂_{p→l})/D. The cosines stay unnormalized, as the shader
+/// keeps them (one division a pair, no square root), so that near-grazing ones round alike.
+/// `None` for an inactive light, or one at p (|d|²·D = 0).
 fn light_terms(p: Vec3, light: &IndirectLight, falloff: Falloff) -> Option<(Vec3, Vec3, f32)> {
-    if !light.is_active() {
+    let d = light.position() - p;
+    let d2 = d.length_squared();
+    let scale = d2 * falloff.denominator(d2, light.normal[3]);
+    if !light.is_active() || scale <= 0.0 {
         return None;
     }
-    let to_light = light.position() - p;
-    let d2 = to_light.length_squared();
-    if d2 <= 0.0 {
-        return None;
-    }
-    // One reciprocal, as the shader takes it (`emitter`), so that t̂ rounds alike on both and
-    // near-grazing cosines agree.
-    let t = to_light * (1.0 / d2.sqrt());
-    let cos_l = light.normal().dot(-t).max(0.0);
-    let arriving = light.flux() / PI * cos_l / falloff.denominator(d2, light.normal[3]);
-    Some((arriving, t, cos_l))
+    let emit = light.normal().dot(-d).max(0.0) / scale;
+    Some((light.flux() / PI * emit, d, d2))
+}
+
+/// Whether a light at d from a point of normal n lies behind its tangent plane by more than
+/// `COPLANAR_COS`: −n·t̂ > c, as n·d < 0 and (n·d)² > c²·|d|².
+fn behind_plane(n_dot_d: f32, d2: f32) -> bool {
+    n_dot_d < 0.0 && n_dot_d * n_dot_d > COPLANAR_COS * COPLANAR_COS * d2
 }
 
 /// The CPU twin of `positive_terms` in `negative_view.wgsl` (§A.3, §A.4): E_s, E_neg and the
@@ -369,21 +372,22 @@ pub fn positive_terms(
 ) -> (Vec3, Vec3, Vec3) {
     let (mut e_s, mut e_neg, mut dir) = (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO);
     for light in lights {
-        let Some((arriving, t, _)) = light_terms(p, light, falloff) else {
+        let Some((emitted, d, d2)) = light_terms(p, light, falloff) else {
             continue;
         };
-        let cos_p = n.dot(t);
-        e_s += arriving * cos_p.max(0.0);
-        let behind = if -cos_p > COPLANAR_COS {
-            arriving * -cos_p
+        let n_dot_d = n.dot(d);
+        e_s += emitted * n_dot_d.max(0.0);
+        let behind = if behind_plane(n_dot_d, d2) {
+            emitted * -n_dot_d
         } else {
             Vec3::ZERO
         };
         e_neg += behind;
         dir += match mode {
             WeightMode::Literal => luminance(behind) * light.normal(),
-            WeightMode::Arriving => luminance(arriving) * light.normal(),
-            WeightMode::Propagation => luminance(behind) * -t,
+            // The arriving intensity without the receiver's cosine.
+            WeightMode::Arriving => luminance(emitted * d2.sqrt()) * light.normal(),
+            WeightMode::Propagation => luminance(behind) * -(d / d2.sqrt()),
         };
     }
     (e_s, e_neg, dir)
@@ -413,8 +417,8 @@ pub fn negative_irradiance(
 ) -> Vec3 {
     let mut e = Vec3::ZERO;
     for light in negatives {
-        if let Some((arriving, t, _)) = light_terms(p, light, falloff) {
-            e += arriving * n.dot(t).max(0.0);
+        if let Some((emitted, d, _)) = light_terms(p, light, falloff) {
+            e += emitted * n.dot(d).max(0.0);
         }
     }
     e
