@@ -576,3 +576,121 @@ pub fn final_indirect(rho_d: Vec3, e_s: Vec3, e_n: Vec3) -> (Vec3, Vec3) {
     let clamped = raw.max(Vec3::ZERO);
     (clamped, clamped - raw)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A light at `position` emitting about `normal`, flux Φ = π (so Φ/π = 1) in every channel.
+    fn light(position: Vec3, normal: Vec3, r2: f32) -> IndirectLight {
+        IndirectLight {
+            position: position.extend(1.0).to_array(),
+            normal: normal.normalize().extend(r2).to_array(),
+            flux: [PI, PI, PI, 0.0],
+        }
+    }
+
+    fn near(a: f32, b: f32) -> bool {
+        (a - b).abs() <= 1e-5 * b.abs().max(1e-12)
+    }
+
+    const POINT: Falloff = Falloff::Point { d2_min: 1e-4 };
+
+    /// The closed form of two Lambertian cosines over d² for a light at height h and lateral
+    /// offset x above a receiver at the origin, both facing each other along z.
+    #[test]
+    fn one_light_gives_the_closed_form_in_front_of_and_behind_the_receiver() {
+        let (x, h) = (0.7f32, 1.3f32);
+        let r2 = x * x + h * h;
+        let l = light(Vec3::new(x, 0.0, h), Vec3::NEG_Z, 0.0);
+        // cos_l = cos_p = h/r: E = Φ/π·h²/r⁴.
+        let expected = h * h / (r2 * r2);
+        for mode in [
+            WeightMode::Literal,
+            WeightMode::Arriving,
+            WeightMode::Propagation,
+        ] {
+            let (e_s, e_neg, dir) = positive_terms(Vec3::ZERO, Vec3::Z, &[l], POINT, mode);
+            assert!(near(e_s.x, expected), "{e_s} vs {expected}");
+            assert_eq!(e_neg, Vec3::ZERO);
+            if mode == WeightMode::Arriving {
+                // Y of the arriving intensity without the receiver's cosine: Φ/π·cos_l/d².
+                let y = h / r2.sqrt() / r2;
+                assert!((dir - y * Vec3::NEG_Z).length() <= 1e-5 * y, "{dir}");
+            } else {
+                assert_eq!(dir, Vec3::ZERO, "no light behind the plane");
+            }
+        }
+        // The receiver turned over: the same light now arrives from behind its tangent plane.
+        let (e_s, e_neg, dir) =
+            positive_terms(Vec3::ZERO, Vec3::NEG_Z, &[l], POINT, WeightMode::Literal);
+        assert_eq!(e_s, Vec3::ZERO);
+        assert!(near(e_neg.x, expected), "{e_neg} vs {expected}");
+        assert!((dir - expected * Vec3::NEG_Z).length() <= 1e-5 * expected);
+        let (_, _, dir) = positive_terms(
+            Vec3::ZERO,
+            Vec3::NEG_Z,
+            &[l],
+            POINT,
+            WeightMode::Propagation,
+        );
+        let away = -Vec3::new(x, 0.0, h) / r2.sqrt();
+        assert!((dir - expected * away).length() <= 1e-5 * expected, "{dir}");
+        // E_n takes the front side only, like E_s.
+        let e_n = negative_irradiance(Vec3::ZERO, Vec3::Z, &[l], POINT);
+        assert!(near(e_n.x, expected));
+        assert_eq!(
+            negative_irradiance(Vec3::ZERO, Vec3::NEG_Z, &[l], POINT),
+            Vec3::ZERO
+        );
+    }
+
+    #[test]
+    fn the_falloffs_guard_and_soften_the_distance_term() {
+        // Straight above at h: cos_l = cos_p = 1.
+        let h = 0.005f32;
+        let l = light(Vec3::new(0.0, 0.0, h), Vec3::NEG_Z, 0.02);
+        let (e_s, ..) = positive_terms(Vec3::ZERO, Vec3::Z, &[l], POINT, WeightMode::Literal);
+        assert!(near(e_s.x, 1.0 / 1e-4), "the guard: 1/d²_min, {e_s}");
+        assert_eq!(distance_clamped(Vec3::ZERO, &[l], POINT), 1);
+        let (e_s, ..) = positive_terms(
+            Vec3::ZERO,
+            Vec3::Z,
+            &[l],
+            Falloff::Disc,
+            WeightMode::Literal,
+        );
+        assert!(
+            near(e_s.x, 1.0 / (h * h + 0.02)),
+            "the disc: 1/(d² + r²), {e_s}"
+        );
+        assert_eq!(distance_clamped(Vec3::ZERO, &[l], Falloff::Disc), 0);
+        // A light at the receiver, or one that does not exist, adds nothing.
+        let at = light(Vec3::ZERO, Vec3::NEG_Z, 0.0);
+        let mut gone = light(Vec3::new(0.0, 0.0, 1.0), Vec3::NEG_Z, 0.0);
+        gone.position[3] = 0.0;
+        for l in [at, gone] {
+            let (e_s, e_neg, dir) =
+                positive_terms(Vec3::ZERO, Vec3::Z, &[l], POINT, WeightMode::Propagation);
+            assert_eq!((e_s, e_neg, dir), (Vec3::ZERO, Vec3::ZERO, Vec3::ZERO));
+        }
+    }
+
+    #[test]
+    fn a_light_in_the_receivers_tangent_plane_is_neither_in_front_nor_behind() {
+        // −cos_p = 0.005 < COPLANAR_COS: not behind; 0.02 > COPLANAR_COS: behind. At 3 m, so
+        // that the test's |d|² matters ((n·d)² = 2.25e-4 > c² = 1e-4 in the first case).
+        for (z, behind) in [(-0.005f32, false), (-0.02, true)] {
+            let position = 3.0 * Vec3::new((1.0 - z * z).sqrt(), 0.0, z);
+            let l = light(position, Vec3::new(-1.0, 0.0, 0.0), 0.0);
+            let (e_s, e_neg, _) =
+                positive_terms(Vec3::ZERO, Vec3::Z, &[l], POINT, WeightMode::Literal);
+            assert_eq!(e_s, Vec3::ZERO);
+            assert_eq!(e_neg.x > 0.0, behind, "z = {z}: {e_neg}");
+            if behind {
+                // cos_l = √(1 − z²), −cos_p = −z, d² = 9.
+                assert!(near(e_neg.x, (1.0 - z * z).sqrt() * -z / 9.0), "{e_neg}");
+            }
+        }
+    }
+}
