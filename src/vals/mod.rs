@@ -10,6 +10,7 @@
 pub mod budget;
 pub mod math;
 pub mod points;
+pub mod recent;
 pub mod scene_cache;
 pub mod sparse;
 pub mod visibility;

@@ -6,16 +6,17 @@
 //! computed here once. Every point gets an occluder-disc radius from its Voronoi region.
 
 use std::cell::OnceCell;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 use std::hash::{Hash, Hasher};
 use std::num::NonZero;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 
 use glam::{Mat3, Mat4, Vec3};
 use kiddo::immutable::float::kdtree::ImmutableKdTree;
 use kiddo::SquaredEuclidean;
 
 use super::math::{link_weights, morton_spread};
+use super::recent::Recent;
 use crate::sampling::Rng;
 use crate::scene::{Mesh, Scene};
 
@@ -445,50 +446,12 @@ fn mesh_key(mesh: &Mesh, count: usize, seed: u64) -> u64 {
 /// alone are 28 MB a count (429 708 vertices × 8 links × 8 bytes).
 pub const PLACEMENT_CACHE_BYTES: usize = 1 << 30;
 
-/// Each mesh's placed points by [`mesh_key`], with when each was last used, and their bytes.
-#[derive(Default)]
-struct PlacementCache {
-    entries: HashMap<u64, (Arc<MeshPoints>, u64)>,
-    bytes: usize,
-    clock: u64,
-}
-
-impl PlacementCache {
-    fn get(&mut self, key: u64) -> Option<Arc<MeshPoints>> {
-        self.clock += 1;
-        let (points, used) = self.entries.get_mut(&key)?;
-        *used = self.clock;
-        Some(points.clone())
-    }
-
-    /// Keeps `points` for `key`, then drops the least recently used entries until the cache
-    /// holds at most `cap_bytes` (the newest entry stays, however large).
-    fn insert(&mut self, key: u64, points: Arc<MeshPoints>, cap_bytes: usize) {
-        self.clock += 1;
-        self.bytes += points.heap_bytes();
-        if let Some((old, _)) = self.entries.insert(key, (points, self.clock)) {
-            self.bytes -= old.heap_bytes();
-        }
-        while self.bytes > cap_bytes && self.entries.len() > 1 {
-            let Some(oldest) = self
-                .entries
-                .iter()
-                .filter(|(k, _)| **k != key)
-                .min_by_key(|(_, (_, used))| *used)
-                .map(|(k, _)| *k)
-            else {
-                break;
-            };
-            if let Some((dropped, _)) = self.entries.remove(&oldest) {
-                self.bytes -= dropped.heap_bytes();
-            }
-        }
-    }
-}
+/// Each mesh's placed points by [`mesh_key`], at their bytes, within [`PLACEMENT_CACHE_BYTES`].
+type PlacementCache = Recent<u64, Arc<MeshPoints>>;
 
 fn cache() -> &'static Mutex<PlacementCache> {
-    static CACHE: OnceLock<Mutex<PlacementCache>> = OnceLock::new();
-    CACHE.get_or_init(|| Mutex::new(PlacementCache::default()))
+    static CACHE: Mutex<PlacementCache> = Mutex::new(Recent::new(PLACEMENT_CACHE_BYTES));
+    &CACHE
 }
 
 /// Whether a mesh is a two-sided sheet: its material says so (glTF `doubleSided`, Mitsuba
@@ -541,14 +504,14 @@ pub fn scene_points_for(
         .map(|(mi, (mesh, &count))| {
             let sides = if is_two_sided(scene, mesh) { 2 } else { 1 };
             let key = mesh_key(mesh, count, seed).wrapping_add(sides);
-            if let Some(hit) = cache().lock().ok().and_then(|mut c| c.get(key)) {
+            if let Some(hit) = cache().lock().ok().and_then(|mut c| c.get(&key).cloned()) {
                 return hit;
             }
             computed += 1;
             let front = place(mesh, count, seed.wrapping_add(mi as u64));
             let placed = Arc::new(if sides == 2 { two_sided(&front) } else { front });
             if let Ok(mut c) = cache().lock() {
-                c.insert(key, placed.clone(), PLACEMENT_CACHE_BYTES);
+                c.insert(key, placed.clone(), placed.heap_bytes());
             }
             placed
         })
@@ -754,40 +717,17 @@ mod tests {
     use super::*;
     use crate::scene::mesh::MeshBuilder;
 
-    /// The placement cache drops the least recently used meshes once it holds more than its
-    /// cap, keeps its byte count exact, and never drops the entry just kept.
+    /// A placement's cost in the cache is the bytes its arrays hold (the store's order and
+    /// bound: `recent::tests`).
     #[test]
-    fn the_placement_cache_drops_the_least_recently_used_beyond_its_cap() {
-        let points = |n: usize| {
-            Arc::new(MeshPoints {
-                positions: vec![Vec3::ZERO; n],
-                normals: vec![Vec3::Y; n],
-                disc_radius: vec![0.1; n],
-                links: vec![[Link::default(); LINKS]; n],
-            })
+    fn a_placement_costs_the_bytes_of_its_arrays() {
+        let points = MeshPoints {
+            positions: vec![Vec3::ZERO; 10],
+            normals: vec![Vec3::Y; 10],
+            disc_radius: vec![0.1; 10],
+            links: vec![[Link::default(); LINKS]; 10],
         };
-        let each = points(10).heap_bytes();
-        assert_eq!(each, 10 * (12 + 12 + 4 + LINKS * 8));
-        let mut cache = PlacementCache::default();
-        let cap = 3 * each;
-        for key in 0..3 {
-            cache.insert(key, points(10), cap);
-        }
-        assert_eq!((cache.entries.len(), cache.bytes), (3, 3 * each));
-        // Mesh 0 used again: the fourth entry drops mesh 1, the least recently used.
-        assert!(cache.get(0).is_some());
-        cache.insert(3, points(10), cap);
-        assert!(cache.get(1).is_none());
-        for key in [0, 2, 3] {
-            assert!(cache.get(key).is_some(), "{key}");
-        }
-        assert_eq!(cache.bytes, 3 * each);
-        // Replacing an entry counts its bytes once; one larger than the cap stays alone.
-        cache.insert(2, points(10), cap);
-        assert_eq!((cache.entries.len(), cache.bytes), (3, 3 * each));
-        cache.insert(9, points(40), cap);
-        assert_eq!(cache.entries.len(), 1);
-        assert_eq!(cache.bytes, points(40).heap_bytes());
+        assert_eq!(points.heap_bytes(), 10 * (12 + 12 + 4 + LINKS * 8));
     }
 
     fn plane(max_edge: f32) -> Mesh {

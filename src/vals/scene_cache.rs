@@ -12,6 +12,7 @@ use crate::scene::Scene;
 use crate::trace::Tracer;
 
 use super::points::{self, LinkCut, MeshPoints};
+use super::recent::Recent;
 
 /// A point count's preprocessing: the placed points with their links cut, what the cut did,
 /// and how many meshes' points were computed rather than taken from the process-wide cache.
@@ -148,42 +149,26 @@ pub const KEPT_LINK_CUTS: usize = 4;
 /// (scene content, point count, seed).
 type LinkCutKey = (u64, usize, u64);
 
-/// Link-tested point sets by [`LinkCutKey`], the most recently used last, at most
-/// [`KEPT_LINK_CUTS`].
-#[derive(Default)]
-struct KeptLinkCuts(Vec<(LinkCutKey, PreparedPoints)>);
+/// Link-tested point sets by [`LinkCutKey`], at most [`KEPT_LINK_CUTS`] (each costs 1).
+type KeptLinkCuts = Recent<LinkCutKey, PreparedPoints>;
 
-impl KeptLinkCuts {
-    /// The set kept for `key`, now the most recently used; counted as computed nowhere.
-    fn take(&mut self, key: LinkCutKey) -> Option<PreparedPoints> {
-        let at = self.0.iter().position(|(k, _)| *k == key)?;
-        let entry = self.0.remove(at);
-        let found = PreparedPoints {
-            meshes_computed: 0,
-            ..entry.1.clone()
-        };
-        self.0.push(entry);
-        Some(found)
-    }
+static LINK_CUTS: Mutex<KeptLinkCuts> = Mutex::new(Recent::new(KEPT_LINK_CUTS));
 
-    /// Keeps `prepared` for `key`, dropping the least recently used beyond the bound.
-    fn keep(&mut self, key: LinkCutKey, prepared: &PreparedPoints) {
-        self.0.retain(|(k, _)| *k != key);
-        self.0.push((key, prepared.clone()));
-        let excess = self.0.len().saturating_sub(KEPT_LINK_CUTS);
-        self.0.drain(..excess);
-    }
+/// The set `kept` holds for `key`, now the most recently used; counted as computed nowhere.
+fn take(kept: &mut KeptLinkCuts, key: LinkCutKey) -> Option<PreparedPoints> {
+    kept.get(&key).map(|prepared| PreparedPoints {
+        meshes_computed: 0,
+        ..prepared.clone()
+    })
 }
 
-static LINK_CUTS: Mutex<KeptLinkCuts> = Mutex::new(KeptLinkCuts(Vec::new()));
-
 fn kept_link_cut(key: LinkCutKey) -> Option<PreparedPoints> {
-    LINK_CUTS.lock().ok()?.take(key)
+    take(&mut *LINK_CUTS.lock().ok()?, key)
 }
 
 fn keep_link_cut(key: LinkCutKey, prepared: &PreparedPoints) {
     if let Ok(mut kept) = LINK_CUTS.lock() {
-        kept.keep(key, prepared);
+        kept.insert(key, prepared.clone(), 1);
     }
 }
 
@@ -207,20 +192,23 @@ mod tests {
     /// kept one back as computed nowhere.
     #[test]
     fn the_kept_link_cuts_are_the_most_recently_used_few() {
-        let mut kept = KeptLinkCuts::default();
+        let mut kept = KeptLinkCuts::new(KEPT_LINK_CUTS);
         let key = |i: usize| (7, 1024 * i, 3);
         for i in 0..KEPT_LINK_CUTS {
-            kept.keep(key(i), &prepared(i));
+            kept.insert(key(i), prepared(i), 1);
         }
-        let first = kept.take(key(0)).expect("kept");
+        let first = take(&mut kept, key(0)).expect("kept");
         assert_eq!((first.link_cut.links, first.meshes_computed), (0, 0));
         // Set 0 was just used: one more set drops set 1, the least recently used.
-        kept.keep(key(KEPT_LINK_CUTS), &prepared(KEPT_LINK_CUTS));
-        assert!(kept.take(key(1)).is_none());
+        kept.insert(key(KEPT_LINK_CUTS), prepared(KEPT_LINK_CUTS), 1);
+        assert!(take(&mut kept, key(1)).is_none());
         for i in (0..KEPT_LINK_CUTS + 1).filter(|&i| i != 1) {
-            assert_eq!(kept.take(key(i)).map(|p| p.link_cut.links), Some(i));
+            assert_eq!(take(&mut kept, key(i)).map(|p| p.link_cut.links), Some(i));
         }
-        assert!(kept.take((8, 0, 3)).is_none(), "another scene's content");
-        assert_eq!(kept.0.len(), KEPT_LINK_CUTS);
+        assert!(
+            take(&mut kept, (8, 0, 3)).is_none(),
+            "another scene's content"
+        );
+        assert_eq!(kept.len(), KEPT_LINK_CUTS);
     }
 }
